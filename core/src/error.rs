@@ -1,0 +1,30 @@
+//! The core's one error type. Rich on purpose: the FFI layer folds it into a small public enum.
+
+use thiserror::Error as ThisError;
+
+/// Everything that can go wrong in the core. "No face found" is never an error (it is an empty
+/// result), and non-convergence of a fit is a status in the fit report, not an error.
+#[derive(Debug, ThisError, Clone, PartialEq)]
+pub enum Error {
+    /// A frame whose description does not match its bytes (size, stride, format, zero size).
+    #[error("invalid frame: {0}")]
+    InvalidFrame(String),
+    /// Camera intrinsics that are not finite and positive.
+    #[error("invalid camera: {0}")]
+    InvalidCamera(String),
+    /// Any other caller input that cannot be used (wrong number of landmarks, NaN coordinates, ...).
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+    /// A configuration value out of its documented range.
+    #[error("invalid config: {0}")]
+    InvalidConfig(String),
+    /// An embedded or supplied model (network weights, face model data) that cannot be loaded.
+    #[error("model load: {0}")]
+    ModelLoad(String),
+    /// A broken internal invariant; a bug if it ever surfaces.
+    #[error("internal: {0}")]
+    Internal(String),
+}
+
+/// Shorthand used across the core.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

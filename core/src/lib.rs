@@ -1,0 +1,17 @@
+//! # monotrack-core
+//!
+//! The pure-Rust core of the monotrack SDK: frames in, faces (box, 68 landmarks, metric head pose,
+//! shape and expression units, gestures, gaze) and bodies out. It knows nothing of any FFI; the
+//! `bindings` crate is the only foreign-function layer.
+//!
+//! Conventions (pixels, camera axes, pose, Euler angles, landmark order) are fixed once in
+//! `../shared/CONTRACT.md` and restated in [`camera`]; every module refers to them.
+//!
+//! Modules follow the pipeline (see `ARCHITECTURE.md`):
+//! [`image`] → `detect` → `landmarks` → `track` → [`model`] / [`fit`] → results; and apart from
+//! faces, `body` and `motion`.
+
+pub mod camera;
+pub mod error;
+
+pub use error::{Error, Result};
