@@ -13,5 +13,6 @@
 
 pub mod camera;
 pub mod error;
+pub mod image;
 
 pub use error::{Error, Result};
