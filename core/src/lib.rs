@@ -13,6 +13,9 @@
 
 pub mod camera;
 pub mod error;
+pub mod fit;
 pub mod image;
+pub mod metrics;
+pub mod model;
 
 pub use error::{Error, Result};
