@@ -64,8 +64,8 @@ def build(mean):
             for i in eye:
                 t = (x[i] - xi) / (xo - xi)  # 0 at inner corner, 1 at outer
                 d[i, 0] += s * (2.0 * t - 1.0 * (1 - t))
-    def face_length(d):  # everything below the eyes stretches down: 9 mm at the chin
-        y_eyes, y_chin = y[36:48].mean(), y[8]
+    def face_length(d):  # everything below the lowest eye point stretches down: 9 mm at the chin
+        y_eyes, y_chin = y[36:48].max(), y[8]
         for i in range(68):
             if y[i] > y_eyes:
                 d[i, 1] += 9.0 * (y[i] - y_eyes) / (y_chin - y_eyes)

@@ -82,7 +82,7 @@ impl LeastSquares<NP> for WeakProblem<'_> {
     fn cost(&self, x: &SVector<f64, NP>) -> f64 {
         let r = rotation_from_angles(&Vector3::new(x[0], x[1], x[2]));
         let s = x[3];
-        let mut c = self.priors(x);
+        let mut c = 0.0;
         for i in 0..N_LANDMARKS {
             if self.w[i] > 0.0 {
                 let p = r * self.vertex(x, i);
@@ -91,7 +91,7 @@ impl LeastSquares<NP> for WeakProblem<'_> {
                 c += self.w[i] * (du * du + dv * dv);
             }
         }
-        0.5 * c
+        0.5 * c + self.priors(x)
     }
 
     fn normal_equations(
@@ -231,13 +231,21 @@ impl Ffbp {
         let s = x[3];
         let f = 0.5 * (camera.fx + camera.fy);
         let tz = f / s;
+        let translation = Vector3::new(
+            (pos[0] - camera.cx) * tz / camera.fx,
+            (pos[1] - camera.cy) * tz / camera.fy,
+            tz,
+        );
+        // Weak perspective sees the face along its line of sight, not along the optical axis: turn
+        // the fitted rotation by the rotation taking the optical axis onto that ray, or off-centre
+        // faces come out rotated towards the image centre.
+        let ray = translation.normalize();
+        let line_of_sight = nalgebra::Rotation3::rotation_between(&Vector3::z(), &ray)
+            .map(|r| *r.matrix())
+            .unwrap_or_else(Matrix3::identity);
         let pose = Pose {
-            rotation: rotation_from_angles(&Vector3::new(x[0], x[1], x[2])),
-            translation: Vector3::new(
-                (pos[0] - camera.cx) * tz / camera.fx,
-                (pos[1] - camera.cy) * tz / camera.fy,
-                tz,
-            ),
+            rotation: line_of_sight * rotation_from_angles(&Vector3::new(x[0], x[1], x[2])),
+            translation,
         };
         let shape: [f64; N_SHAPE] = std::array::from_fn(|k| x[4 + k]);
         let anim: [f64; N_ANIM] = std::array::from_fn(|k| x[4 + N_SHAPE + k]);
