@@ -1,7 +1,12 @@
 //! `monotrack`: the desktop command line of the SDK. Its JSON in and out follows
 //! `../shared/CONTRACT.md` exactly; it is how the SDK is measured from outside.
 
+mod fit;
+mod json;
+
 use clap::{Parser, Subcommand};
+use std::io::{BufRead, BufWriter, Write};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -12,9 +17,69 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Fit the deformable 3D face model to given 68-point landmarks (no image needed).
+    Fit {
+        /// Input JSON lines: {"width", "height", "camera"?, "faces": [{"landmarks68": [[x, y] x68]}]}.
+        input: PathBuf,
+        /// Output JSON lines (default: stdout).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Fitting method.
+        #[arg(long, value_enum, default_value = "msbp")]
+        method: fit::Method,
+    },
+}
+
+/// Non-empty input lines with their 1-based line numbers.
+pub(crate) fn read_lines(path: &Path) -> Result<Vec<(usize, String)>, String> {
+    let f = std::fs::File::open(path).map_err(|e| format!("cannot open {}: {e}", path.display()))?;
+    let mut out = Vec::new();
+    for (i, line) in std::io::BufReader::new(f).lines().enumerate() {
+        let line = line.map_err(|e| format!("{}:{}: {e}", path.display(), i + 1))?;
+        if !line.trim().is_empty() {
+            out.push((i + 1, line));
+        }
+    }
+    Ok(out)
+}
+
+/// Writes one JSON value per line to a file or stdout.
+pub(crate) struct LineSink(Box<dyn Write>);
+
+impl LineSink {
+    pub(crate) fn new(out: Option<&Path>) -> Result<Self, String> {
+        Ok(Self(match out {
+            Some(p) => Box::new(BufWriter::new(
+                std::fs::File::create(p).map_err(|e| format!("cannot create {}: {e}", p.display()))?,
+            )),
+            None => Box::new(BufWriter::new(std::io::stdout().lock())),
+        }))
+    }
+
+    pub(crate) fn write(&mut self, v: &serde_json::Value) -> Result<(), String> {
+        serde_json::to_writer(&mut self.0, v).map_err(|e| e.to_string())?;
+        self.0.write_all(b"\n").map_err(|e| e.to_string())
+    }
+}
+
+impl Drop for LineSink {
+    fn drop(&mut self) {
+        let _ = self.0.flush();
+    }
+}
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    match cli.command {}
+    let result = match cli.command {
+        Command::Fit { input, out, method } => fit::run(&input, out.as_deref(), method),
+    };
+    match result {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::from(1),
+        Err(e) => {
+            eprintln!("monotrack: {e}");
+            ExitCode::from(2)
+        }
+    }
 }

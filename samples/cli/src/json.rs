@@ -1,0 +1,68 @@
+//! JSON pieces shared by the subcommands: camera parsing and the CONTRACT's FACE fields.
+
+use monotrack_core::camera::Intrinsics;
+use monotrack_core::fit::FaceFit;
+use monotrack_core::model::{ANIM_UNIT_NAMES, SHAPE_UNIT_NAMES};
+use serde::Deserialize;
+use serde_json::{Map, Value, json};
+
+/// `"camera": {"fx", "fy", "cx", "cy"}` as in CONTRACT.md.
+#[derive(Debug, Clone, Copy, Deserialize)]
+pub struct CameraJson {
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+}
+
+/// The caller's camera, or the CONTRACT default for a `width`×`height` image.
+pub fn intrinsics(
+    camera: Option<CameraJson>,
+    width: u32,
+    height: u32,
+) -> monotrack_core::Result<Intrinsics> {
+    match camera {
+        Some(c) => Intrinsics::new(c.fx, c.fy, c.cx, c.cy),
+        None => Intrinsics::default_for(width, height),
+    }
+}
+
+fn round(v: f64, digits: i32) -> f64 {
+    let p = 10f64.powi(digits);
+    (v * p).round() / p
+}
+
+/// Adds `pose`, `shape_units`, `action_units`, `fit_rms_px` (and `fit_report`) to a FACE object.
+pub fn put_fit(face: &mut Map<String, Value>, fit: &FaceFit) {
+    let r = &fit.pose.rotation;
+    let t = &fit.pose.translation;
+    let (yaw, pitch, roll) = fit.pose.euler_deg();
+    face.insert(
+        "pose".into(),
+        json!({
+            "rotation": (0..3).map(|i| (0..3).map(|j| round(r[(i, j)], 6)).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "translation_mm": [round(t.x, 2), round(t.y, 2), round(t.z, 2)],
+            "yaw_deg": round(yaw, 3), "pitch_deg": round(pitch, 3), "roll_deg": round(roll, 3),
+        }),
+    );
+    let units = |names: &[&str], vals: &[f64]| {
+        Value::Object(
+            names
+                .iter()
+                .zip(vals)
+                .map(|(n, v)| (n.to_string(), json!(round(*v, 4))))
+                .collect(),
+        )
+    };
+    face.insert("shape_units".into(), units(&SHAPE_UNIT_NAMES, &fit.shape));
+    face.insert("action_units".into(), units(&ANIM_UNIT_NAMES, &fit.animation));
+    face.insert("fit_rms_px".into(), json!(round(fit.report.rms_px, 3)));
+    face.insert(
+        "fit_report".into(),
+        json!({
+            "iterations": fit.report.iterations,
+            "termination": format!("{:?}", fit.report.termination),
+            "converged": fit.report.converged,
+        }),
+    );
+}
