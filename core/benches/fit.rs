@@ -41,7 +41,11 @@ fn bench(c: &mut Criterion) {
     });
     tracking.set_fixed_shape(Some(prev.shape));
     c.bench_function("msbp_tracking_frame", |b| {
-        b.iter(|| tracking.fit(black_box(&obs), None, &cam, Some(&prev)).unwrap())
+        b.iter(|| {
+            tracking
+                .fit(black_box(&obs), None, &cam, Some(&prev))
+                .unwrap()
+        })
     });
     let mut ffbp = Ffbp::new(FfbpConfig::default());
     c.bench_function("ffbp", |b| {

@@ -203,7 +203,10 @@ mod tests {
         ] {
             let kr = k.rotated(w, h, rot);
             let (ur, vr) = kr.project(cam.0, cam.1, p.2);
-            assert!((ur - expect.0).abs() < 1e-9 && (vr - expect.1).abs() < 1e-9, "{rot:?}");
+            assert!(
+                (ur - expect.0).abs() < 1e-9 && (vr - expect.1).abs() < 1e-9,
+                "{rot:?}"
+            );
         }
         assert_eq!(Rotation::from_degrees(-90).unwrap(), Rotation::R270);
         assert!(Rotation::from_degrees(45).is_err());

@@ -13,7 +13,11 @@ pub const NOSE_BASE: usize = 33;
 /// Normalised mean error: mean point-to-point distance over the given indices divided by the
 /// ground truth's outer-eye-corner distance (points 36/45; CONTRACT.md). `None` when the inter-ocular
 /// distance is zero or no index is given.
-pub fn nme(pred: &[[f64; 2]], truth: &[[f64; 2]], indices: impl IntoIterator<Item = usize>) -> Option<f64> {
+pub fn nme(
+    pred: &[[f64; 2]],
+    truth: &[[f64; 2]],
+    indices: impl IntoIterator<Item = usize>,
+) -> Option<f64> {
     let d = ((truth[LEFT_OUTER_EYE][0] - truth[RIGHT_OUTER_EYE][0]).powi(2)
         + (truth[LEFT_OUTER_EYE][1] - truth[RIGHT_OUTER_EYE][1]).powi(2))
     .sqrt();
@@ -45,7 +49,10 @@ pub fn face_frame(points: &[Vector3<f64>; N_LANDMARKS]) -> Matrix3<f64> {
 /// The thesis' rotation error (degrees): the angle of the Rodrigues vector of the rotation between
 /// the estimated and true face frames ([`face_frame`]), each built from 3D landmark positions in
 /// the camera frame.
-pub fn rotation_error_deg(est: &[Vector3<f64>; N_LANDMARKS], truth: &[Vector3<f64>; N_LANDMARKS]) -> f64 {
+pub fn rotation_error_deg(
+    est: &[Vector3<f64>; N_LANDMARKS],
+    truth: &[Vector3<f64>; N_LANDMARKS],
+) -> f64 {
     let r = face_frame(est) * face_frame(truth).transpose();
     crate::fit::pose::rotation_angle_deg(&r)
 }
@@ -74,7 +81,10 @@ pub fn procrustes_shape_error(est: &[Vector3<f64>], truth: &[Vector3<f64>]) -> f
     }
     let r = u * d * vt;
     let scale = if var_e > 0.0 {
-        (svd.singular_values.component_mul(&Vector3::new(1.0, 1.0, d[(2, 2)]))).sum() / var_e
+        (svd.singular_values
+            .component_mul(&Vector3::new(1.0, 1.0, d[(2, 2)])))
+        .sum()
+            / var_e
     } else {
         1.0
     };
@@ -115,7 +125,10 @@ mod tests {
     fn procrustes_ignores_similarity() {
         let g = FaceModel::builtin().mean();
         let p = Pose::from_euler_deg(20.0, -10.0, 30.0, Vector3::new(5.0, 6.0, 7.0));
-        let moved: Vec<Vector3<f64>> = g.iter().map(|x| (p.rotation * x) * 1.7 + p.translation).collect();
+        let moved: Vec<Vector3<f64>> = g
+            .iter()
+            .map(|x| (p.rotation * x) * 1.7 + p.translation)
+            .collect();
         assert!(procrustes_shape_error(&moved, g) < 1e-9);
         let mut bent = g.to_vec();
         bent[30].z -= 10.0;

@@ -62,7 +62,8 @@ fn msbp_on_real_landmarks() {
         for (k, face) in line.faces.iter().enumerate() {
             let pts: [[f64; 2]; N_LANDMARKS] = std::array::from_fn(|j| face.landmarks68[j]);
             let fit = msbp.fit(&pts, None, &cam, None).unwrap();
-            let iod = ((pts[45][0] - pts[36][0]).powi(2) + (pts[45][1] - pts[36][1]).powi(2)).sqrt();
+            let iod =
+                ((pts[45][0] - pts[36][0]).powi(2) + (pts[45][1] - pts[36][1]).powi(2)).sqrt();
             rms_px.push(fit.report.rms_px);
             rms_rel.push(fit.report.rms_px / iod);
             unit_abs.extend(fit.shape.iter().chain(&fit.animation).map(|v| v.abs()));
@@ -81,7 +82,10 @@ fn msbp_on_real_landmarks() {
     let m_yaw = median(&mut yaw_diff);
     let m_front = median(&mut frontal_yaw);
     println!("MSBP on faces68 validation split: {n} faces");
-    println!("  median reprojection RMS {m_px:.2} px = {:.2}% of inter-ocular distance", m_rel * 100.0);
+    println!(
+        "  median reprojection RMS {m_px:.2} px = {:.2}% of inter-ocular distance",
+        m_rel * 100.0
+    );
     println!(
         "  yaw vs MediaPipe teacher ({} faces): median |diff| {m_yaw:.2} deg; teacher-frontal (|yaw| < 10 deg, {} faces): median |yaw| {m_front:.2} deg",
         yaw_diff.len(),

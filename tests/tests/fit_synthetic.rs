@@ -47,7 +47,14 @@ fn cases(cam: &Intrinsics) -> Vec<Case> {
             let anim: [f64; N_ANIM] =
                 std::array::from_fn(|_| unit.sample(&mut rng).clamp(-1.0, 1.0));
             let mut obs = [[0.0; 2]; N_LANDMARKS];
-            model.project_into(&shape, &anim, &truth.rotation, &truth.translation, cam, &mut obs);
+            model.project_into(
+                &shape,
+                &anim,
+                &truth.rotation,
+                &truth.translation,
+                cam,
+                &mut obs,
+            );
             for p in obs.iter_mut() {
                 p[0] += noise.sample(&mut rng);
                 p[1] += noise.sample(&mut rng);

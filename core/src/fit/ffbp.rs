@@ -9,7 +9,7 @@
 //! The metric pose follows from s = f / tz: tz = f̄ / s, (tx, ty) = ((a, b) − (cx, cy)) / s.
 
 use super::pose::{Pose, angles_from_rotation, rotation_and_derivatives, rotation_from_angles};
-use super::solver::{LeastSquares, LevenbergMarquardt, Termination};
+use super::solver::{LeastSquares, LevenbergMarquardt, Termination, accumulate_row, symmetrize};
 use super::{FaceFit, FitReport, LandmarkWeights, validate_inputs};
 use crate::camera::Intrinsics;
 use crate::error::{Error, Result};
@@ -116,23 +116,33 @@ impl LeastSquares<NP> for WeakProblem<'_> {
                 s * p.x + self.pos[0] - self.obs[i][0],
                 s * p.y + self.pos[1] - self.obs[i][1],
             ];
+            let sw = w.sqrt();
+            let dg = [dr[0] * g, dr[1] * g, dr[2] * g];
             for (k, &rk) in res.iter().enumerate() {
+                // Most unit columns are zero for a given landmark; accumulate_row skips them.
                 let mut j = SVector::<f64, NP>::zeros();
                 for a in 0..3 {
-                    j[a] = s * (dr[a] * g)[k];
+                    j[a] = s * dg[a][k] * sw;
                 }
-                j[3] = p[k];
-                for (q, u) in self.model.shape_units().iter().enumerate() {
-                    j[4 + q] = s * (r * u.displacement[i])[k];
+                j[3] = p[k] * sw;
+                let rk_row = r.row(k);
+                for (q, u) in self
+                    .model
+                    .shape_units()
+                    .iter()
+                    .chain(self.model.animation_units())
+                    .enumerate()
+                {
+                    let d = &u.displacement[i];
+                    if d.x != 0.0 || d.y != 0.0 || d.z != 0.0 {
+                        j[4 + q] = s * rk_row.dot(&d.transpose()) * sw;
+                    }
                 }
-                for (q, u) in self.model.animation_units().iter().enumerate() {
-                    j[4 + N_SHAPE + q] = s * (r * u.displacement[i])[k];
-                }
-                *jtj += j * j.transpose() * w;
-                *jtr += j * (rk * w);
+                accumulate_row(jtj, jtr, &j, rk * sw);
                 cost += w * rk * rk;
             }
         }
+        symmetrize(jtj);
         // Priors as residuals sqrt(2λ)·τ, so that ½ r² = λ τ².
         for k in 0..N_SHAPE + N_ANIM {
             let lam = if k < N_SHAPE {
@@ -171,10 +181,15 @@ fn pos_init(
         .ok_or_else(|| Error::InvalidInput("landmarks too degenerate for POS".into()))?;
     let m1 = chol.solve(&atu);
     let m2 = chol.solve(&atv);
-    let (v1, v2) = (m1.fixed_rows::<3>(0).into_owned(), m2.fixed_rows::<3>(0).into_owned());
+    let (v1, v2) = (
+        m1.fixed_rows::<3>(0).into_owned(),
+        m2.fixed_rows::<3>(0).into_owned(),
+    );
     let (s1, s2) = (v1.norm(), v2.norm());
     if !(s1 > 0.0 && s2 > 0.0) {
-        return Err(Error::InvalidInput("landmarks too degenerate for POS".into()));
+        return Err(Error::InvalidInput(
+            "landmarks too degenerate for POS".into(),
+        ));
     }
     let r1 = v1 / s1;
     let r3 = r1.cross(&(v2 / s2)).normalize();
@@ -280,7 +295,14 @@ mod tests {
         let cam = Intrinsics::default_for(640, 480).unwrap();
         let truth = Pose::from_euler_deg(25.0, -10.0, 6.0, Vector3::new(10.0, 5.0, 600.0));
         let mut obs = [[0.0; 2]; N_LANDMARKS];
-        m.project_into(&[0.2; N_SHAPE], &[0.1; N_ANIM], &truth.rotation, &truth.translation, &cam, &mut obs);
+        m.project_into(
+            &[0.2; N_SHAPE],
+            &[0.1; N_ANIM],
+            &truth.rotation,
+            &truth.translation,
+            &cam,
+            &mut obs,
+        );
         let w = super::super::ffbp_default_weights();
         let p = WeakProblem {
             model: m,
@@ -306,7 +328,11 @@ mod tests {
             a[k] += h;
             b[k] -= h;
             let fd = (p.cost(&a) - p.cost(&b)) / (2.0 * h);
-            assert!((fd - jtr[k]).abs() <= 1e-4 * jtr[k].abs().max(1.0), "k={k}: {fd} vs {}", jtr[k]);
+            assert!(
+                (fd - jtr[k]).abs() <= 1e-4 * jtr[k].abs().max(1.0),
+                "k={k}: {fd} vs {}",
+                jtr[k]
+            );
         }
     }
 
@@ -316,9 +342,22 @@ mod tests {
         let cam = Intrinsics::default_for(1280, 720).unwrap();
         let truth = Pose::from_euler_deg(-30.0, 15.0, 10.0, Vector3::new(-50.0, 30.0, 1200.0));
         let mut obs = [[0.0; 2]; N_LANDMARKS];
-        m.project_into(&[0.0; N_SHAPE], &[0.0; N_ANIM], &truth.rotation, &truth.translation, &cam, &mut obs);
-        let fit = Ffbp::new(FfbpConfig::default()).fit(&obs, None, &cam).unwrap();
-        assert!(fit.pose.rotation_angle_to(&truth) < 3.0, "{:?}", fit.pose.euler_deg());
+        m.project_into(
+            &[0.0; N_SHAPE],
+            &[0.0; N_ANIM],
+            &truth.rotation,
+            &truth.translation,
+            &cam,
+            &mut obs,
+        );
+        let fit = Ffbp::new(FfbpConfig::default())
+            .fit(&obs, None, &cam)
+            .unwrap();
+        assert!(
+            fit.pose.rotation_angle_to(&truth) < 3.0,
+            "{:?}",
+            fit.pose.euler_deg()
+        );
         assert!((fit.pose.translation.z / truth.translation.z - 1.0).abs() < 0.05);
     }
 }

@@ -110,7 +110,14 @@ pub fn rms_reprojection(
     weights: &LandmarkWeights,
 ) -> f64 {
     let mut proj = [[0.0; 2]; N_LANDMARKS];
-    model.project_into(shape, anim, &pose.rotation, &pose.translation, camera, &mut proj);
+    model.project_into(
+        shape,
+        anim,
+        &pose.rotation,
+        &pose.translation,
+        camera,
+        &mut proj,
+    );
     let (mut s, mut n) = (0.0, 0usize);
     for i in 0..N_LANDMARKS {
         if weights[i] > 0.0 {
@@ -213,16 +220,31 @@ mod tests {
         let mut lm = [[100.0; 2]; N_LANDMARKS];
         lm[3][0] = f64::NAN;
         let mut msbp = Msbp::new(MsbpConfig::default());
-        assert!(matches!(msbp.fit(&lm, None, &cam, None), Err(Error::InvalidInput(_))));
+        assert!(matches!(
+            msbp.fit(&lm, None, &cam, None),
+            Err(Error::InvalidInput(_))
+        ));
         // The NaN point is fine when its weight is 0.
         let mut w = [1.0; N_LANDMARKS];
         w[3] = 0.0;
         assert!(msbp.fit(&lm, Some(&w), &cam, None).is_ok());
-        let bad_cam = Intrinsics { fx: f64::NAN, ..cam };
-        assert!(matches!(msbp.fit(&lm, Some(&w), &bad_cam, None), Err(Error::InvalidCamera(_))));
+        let bad_cam = Intrinsics {
+            fx: f64::NAN,
+            ..cam
+        };
+        assert!(matches!(
+            msbp.fit(&lm, Some(&w), &bad_cam, None),
+            Err(Error::InvalidCamera(_))
+        ));
         let few = [0.0; N_LANDMARKS];
-        assert!(matches!(msbp.fit(&lm, Some(&few), &cam, None), Err(Error::InvalidInput(_))));
+        assert!(matches!(
+            msbp.fit(&lm, Some(&few), &cam, None),
+            Err(Error::InvalidInput(_))
+        ));
         let mut ffbp = Ffbp::new(FfbpConfig::default());
-        assert!(matches!(ffbp.fit(&lm, None, &cam), Err(Error::InvalidInput(_))));
+        assert!(matches!(
+            ffbp.fit(&lm, None, &cam),
+            Err(Error::InvalidInput(_))
+        ));
     }
 }

@@ -15,7 +15,10 @@
 //! With a previous pose (tracking) it starts from that pose alone.
 
 use super::pose::{Pose, angles_from_rotation, rotation_and_derivatives};
-use super::solver::{Bfgs, LeastSquares, LevenbergMarquardt, Objective, SolverReport, Termination};
+use super::solver::{
+    Bfgs, LeastSquares, LevenbergMarquardt, Objective, SolverReport, Termination, accumulate_row,
+    symmetrize,
+};
 use super::{FaceFit, FitReport, LandmarkWeights, validate_inputs};
 use crate::camera::Intrinsics;
 use crate::error::Result;
@@ -103,7 +106,10 @@ const ANGLE_HALF_RANGE: f64 = std::f64::consts::PI;
 
 impl PoseProblem<'_> {
     fn denormalise(&self, x: &SVector<f64, 6>) -> (Vector3<f64>, Vector3<f64>) {
-        let t = self.t_center + self.t_half.component_mul(&x.fixed_rows::<3>(0).into_owned());
+        let t = self.t_center
+            + self
+                .t_half
+                .component_mul(&x.fixed_rows::<3>(0).into_owned());
         let th = x.fixed_rows::<3>(3).into_owned() * ANGLE_HALF_RANGE;
         (t, th)
     }
@@ -149,18 +155,19 @@ impl LeastSquares<6> for PoseProblem<'_> {
             }
             let (p, dp) = project_with_jacobian(self.cam, &c);
             let dc = [dr[0] * self.g[i], dr[1] * self.g[i], dr[2] * self.g[i]];
+            let sw = w.sqrt();
             for k in 0..2 {
                 let res = p[k] - self.obs[i][k];
                 let mut j = SVector::<f64, 6>::zeros();
                 for a in 0..3 {
-                    j[a] = dp[k][a] * self.t_half[a];
-                    j[3 + a] = dp[k].dot(&dc[a]) * ANGLE_HALF_RANGE;
+                    j[a] = dp[k][a] * self.t_half[a] * sw;
+                    j[3 + a] = dp[k].dot(&dc[a]) * ANGLE_HALF_RANGE * sw;
                 }
-                *jtj += j * j.transpose() * w;
-                *jtr += j * (res * w);
+                accumulate_row(jtj, jtr, &j, res * sw);
                 cost += w * res * res;
             }
         }
+        symmetrize(jtj);
         0.5 * cost
     }
 }
@@ -220,6 +227,30 @@ impl<const N: usize> Objective<N> for UnitsProblem<'_, N> {
     }
     fn value_and_gradient(&self, x: &SVector<f64, N>, grad: &mut SVector<f64, N>) -> f64 {
         self.eval(x, Some(grad))
+    }
+    /// Gauss–Newton: 2λI + 2 Σ w JᵢᵀJᵢ with Jᵢ = ∂(u, v)/∂c · R · Sᵢ.
+    fn hessian_approximation(&self, x: &SVector<f64, N>, hess: &mut SMatrix<f64, N, N>) -> bool {
+        *hess = SMatrix::identity() * (2.0 * self.prior);
+        for &i in self.pairs {
+            let w = self.w[i];
+            if w <= 0.0 {
+                continue;
+            }
+            let mut p = self.base[i];
+            for (u, &tau) in self.units.iter().zip(x.iter()) {
+                p += u.displacement[i] * tau;
+            }
+            let c = self.r * p + self.t;
+            if c.z <= 1.0 {
+                return false;
+            }
+            let (_, dp) = project_with_jacobian(self.cam, &c);
+            let (gu, gv) = (self.r.transpose() * dp[0], self.r.transpose() * dp[1]);
+            let ju = SVector::<f64, N>::from_fn(|k, _| gu.dot(&self.units[k].displacement[i]));
+            let jv = SVector::<f64, N>::from_fn(|k, _| gv.dot(&self.units[k].displacement[i]));
+            *hess += (ju * ju.transpose() + jv * jv.transpose()) * (2.0 * w);
+        }
+        true
     }
 }
 
@@ -301,10 +332,7 @@ impl Msbp {
         let mut iterations = 0u32;
         let mut last: SolverReport;
         let mut x = match init {
-            Some(f) => normalise(
-                &f.pose.translation,
-                &angles_from_rotation(&f.pose.rotation),
-            ),
+            Some(f) => normalise(&f.pose.translation, &angles_from_rotation(&f.pose.rotation)),
             None => {
                 let t0 = initial_translation(&g, landmarks, &w, camera, &cfg);
                 let mut best: Option<(f64, SVector<f64, 6>)> = None;
@@ -474,14 +502,26 @@ fn initial_translation(
 mod tests {
     use super::*;
 
-    fn setup() -> (Intrinsics, [[f64; 2]; N_LANDMARKS], [f64; N_LANDMARKS], [Vector3<f64>; N_LANDMARKS]) {
+    fn setup() -> (
+        Intrinsics,
+        [[f64; 2]; N_LANDMARKS],
+        [f64; N_LANDMARKS],
+        [Vector3<f64>; N_LANDMARKS],
+    ) {
         let cam = Intrinsics::default_for(1280, 720).unwrap();
         let pose = Pose::from_euler_deg(20.0, -10.0, 5.0, Vector3::new(30.0, -20.0, 700.0));
         let m = FaceModel::builtin();
         let shape = [0.3, -0.2, 0.1, 0.0, 0.5, -0.4, 0.2, 0.1, -0.3, 0.2, 0.4];
         let anim = [0.4, 0.1, 0.0, -0.2, 0.3, 0.1];
         let mut obs = [[0.0; 2]; N_LANDMARKS];
-        m.project_into(&shape, &anim, &pose.rotation, &pose.translation, &cam, &mut obs);
+        m.project_into(
+            &shape,
+            &anim,
+            &pose.rotation,
+            &pose.translation,
+            &cam,
+            &mut obs,
+        );
         for (i, o) in obs.iter_mut().enumerate() {
             o[0] += ((i * 7) % 5) as f64 * 0.3 - 0.6;
             o[1] += ((i * 3) % 5) as f64 * 0.3 - 0.6;
@@ -552,7 +592,10 @@ mod tests {
             a[k] += h;
             b[k] -= h;
             let fd = (p.value(&a) - p.value(&b)) / (2.0 * h);
-            assert!((fd - grad[k]).abs() <= 1e-4 * grad[k].abs().max(1.0), "k={k}");
+            assert!(
+                (fd - grad[k]).abs() <= 1e-4 * grad[k].abs().max(1.0),
+                "k={k}"
+            );
         }
     }
 
@@ -562,9 +605,22 @@ mod tests {
         let truth = Pose::from_euler_deg(-35.0, 12.0, -8.0, Vector3::new(-40.0, 25.0, 600.0));
         let m = FaceModel::builtin();
         let mut obs = [[0.0; 2]; N_LANDMARKS];
-        m.project_into(&[0.0; N_SHAPE], &[0.0; N_ANIM], &truth.rotation, &truth.translation, &cam, &mut obs);
-        let fit = Msbp::new(MsbpConfig::default()).fit(&obs, None, &cam, None).unwrap();
-        assert!(fit.pose.rotation_angle_to(&truth) < 0.05, "{:?}", fit.pose.euler_deg());
+        m.project_into(
+            &[0.0; N_SHAPE],
+            &[0.0; N_ANIM],
+            &truth.rotation,
+            &truth.translation,
+            &cam,
+            &mut obs,
+        );
+        let fit = Msbp::new(MsbpConfig::default())
+            .fit(&obs, None, &cam, None)
+            .unwrap();
+        assert!(
+            fit.pose.rotation_angle_to(&truth) < 0.05,
+            "{:?}",
+            fit.pose.euler_deg()
+        );
         assert!((fit.pose.translation - truth.translation).norm() < 1.0);
         assert!(fit.report.rms_px < 0.01 && fit.report.converged);
     }

@@ -57,11 +57,7 @@ pub fn rotation_from_angles(th: &Vector3<f64>) -> Matrix3<f64> {
 pub fn rotation_and_derivatives(th: &Vector3<f64>) -> (Matrix3<f64>, [Matrix3<f64>; 3]) {
     let (x, y, z) = (rx(th.x), ry(th.y), rz(th.z));
     let r = z * y * x;
-    let d = [
-        z * y * drx(th.x),
-        z * dry(th.y) * x,
-        drz(th.z) * y * x,
-    ];
+    let d = [z * y * drx(th.x), z * dry(th.y) * x, drz(th.z) * y * x];
     (r, d)
 }
 
@@ -104,7 +100,10 @@ impl Pose {
 
 /// Angle (degrees) of a rotation matrix, i.e. the norm of its Rodrigues vector.
 pub fn rotation_angle_deg(r: &Matrix3<f64>) -> f64 {
-    ((r.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees()
+    ((r.trace() - 1.0) / 2.0)
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees()
 }
 
 #[cfg(test)]
@@ -113,7 +112,12 @@ mod tests {
 
     #[test]
     fn euler_round_trip_and_convention() {
-        for &(y, p, r) in &[(10.0, -20.0, 5.0), (-60.0, 30.0, -25.0), (0.0, 0.0, 0.0), (85.0, 1.0, 2.0)] {
+        for &(y, p, r) in &[
+            (10.0, -20.0, 5.0),
+            (-60.0, 30.0, -25.0),
+            (0.0, 0.0, 0.0),
+            (85.0, 1.0, 2.0),
+        ] {
             let pose = Pose::from_euler_deg(y, p, r, Vector3::zeros());
             let (y2, p2, r2) = pose.euler_deg();
             assert!((y - y2).abs() < 1e-9 && (p - p2).abs() < 1e-9 && (r - r2).abs() < 1e-9);

@@ -156,12 +156,19 @@ impl FaceModel {
                 raw.format, raw.version
             )));
         }
-        if raw.triangles.iter().flatten().any(|&i| usize::from(i) >= N_LANDMARKS) {
+        if raw
+            .triangles
+            .iter()
+            .flatten()
+            .any(|&i| usize::from(i) >= N_LANDMARKS)
+        {
             return Err(Error::ModelLoad("triangle index out of range".into()));
         }
         let shape = to_units(raw.shape_units, &SHAPE_UNIT_NAMES, "shape")?;
-        let mut shape_landmarks: Vec<usize> =
-            shape.iter().flat_map(|u| u.landmarks.iter().copied()).collect();
+        let mut shape_landmarks: Vec<usize> = shape
+            .iter()
+            .flat_map(|u| u.landmarks.iter().copied())
+            .collect();
         shape_landmarks.sort_unstable();
         shape_landmarks.dedup();
         Ok(Self {
@@ -206,7 +213,12 @@ impl FaceModel {
         out: &mut [Vector3<f64>; N_LANDMARKS],
     ) {
         *out = self.mean;
-        for (u, &t) in self.shape.iter().zip(shape).chain(self.anim.iter().zip(anim)) {
+        for (u, &t) in self
+            .shape
+            .iter()
+            .zip(shape)
+            .chain(self.anim.iter().zip(anim))
+        {
             if t != 0.0 {
                 for &i in &u.landmarks {
                     out[i] += u.displacement[i] * t;
@@ -281,7 +293,8 @@ mod tests {
     fn units_are_semantic() {
         let m = FaceModel::builtin();
         let s = |n: &str| &m.shape_units()[SHAPE_UNIT_NAMES.iter().position(|x| *x == n).unwrap()];
-        let a = |n: &str| &m.animation_units()[ANIM_UNIT_NAMES.iter().position(|x| *x == n).unwrap()];
+        let a =
+            |n: &str| &m.animation_units()[ANIM_UNIT_NAMES.iter().position(|x| *x == n).unwrap()];
         // +mouth width: corners apart, only mouth points move.
         let u = s("mouth_width");
         assert!(u.displacement[54].x > 3.0 && u.displacement[48].x < -3.0);

@@ -55,7 +55,10 @@ pub fn put_fit(face: &mut Map<String, Value>, fit: &FaceFit) {
         )
     };
     face.insert("shape_units".into(), units(&SHAPE_UNIT_NAMES, &fit.shape));
-    face.insert("action_units".into(), units(&ANIM_UNIT_NAMES, &fit.animation));
+    face.insert(
+        "action_units".into(),
+        units(&ANIM_UNIT_NAMES, &fit.animation),
+    );
     face.insert("fit_rms_px".into(), json!(round(fit.report.rms_px, 3)));
     face.insert(
         "fit_report".into(),

@@ -33,7 +33,8 @@ enum Command {
 
 /// Non-empty input lines with their 1-based line numbers.
 pub(crate) fn read_lines(path: &Path) -> Result<Vec<(usize, String)>, String> {
-    let f = std::fs::File::open(path).map_err(|e| format!("cannot open {}: {e}", path.display()))?;
+    let f =
+        std::fs::File::open(path).map_err(|e| format!("cannot open {}: {e}", path.display()))?;
     let mut out = Vec::new();
     for (i, line) in std::io::BufReader::new(f).lines().enumerate() {
         let line = line.map_err(|e| format!("{}:{}: {e}", path.display(), i + 1))?;
@@ -51,7 +52,8 @@ impl LineSink {
     pub(crate) fn new(out: Option<&Path>) -> Result<Self, String> {
         Ok(Self(match out {
             Some(p) => Box::new(BufWriter::new(
-                std::fs::File::create(p).map_err(|e| format!("cannot create {}: {e}", p.display()))?,
+                std::fs::File::create(p)
+                    .map_err(|e| format!("cannot create {}: {e}", p.display()))?,
             )),
             None => Box::new(BufWriter::new(std::io::stdout().lock())),
         }))

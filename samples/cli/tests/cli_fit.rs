@@ -19,7 +19,11 @@ fn monotrack(args: &[&str]) -> std::process::Output {
 fn fit_example_recovers_the_known_poses() {
     let input = root().join("examples/fit_example.jsonl");
     let out = monotrack(&["fit", input.to_str().unwrap()]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let text = String::from_utf8(out.stdout).unwrap();
     let truth_lines = std::fs::read_to_string(&input).unwrap();
     for (got, want) in text.lines().zip(truth_lines.lines()) {
@@ -27,7 +31,10 @@ fn fit_example_recovers_the_known_poses() {
         let want: serde_json::Value = serde_json::from_str(want).unwrap();
         let face = &got["faces"][0];
         for key in ["yaw_deg", "pitch_deg", "roll_deg"] {
-            let (g, w) = (face["pose"][key].as_f64().unwrap(), want["truth"][key].as_f64().unwrap());
+            let (g, w) = (
+                face["pose"][key].as_f64().unwrap(),
+                want["truth"][key].as_f64().unwrap(),
+            );
             assert!((g - w).abs() < 1.5, "{key}: {g} vs {w}");
         }
         let z = face["pose"]["translation_mm"][2].as_f64().unwrap();
@@ -48,7 +55,11 @@ fn malformed_lines_are_reported_not_panicked() {
     let input = dir.join("bad.jsonl");
     let good = std::fs::read_to_string(root().join("examples/fit_example.jsonl")).unwrap();
     let good = good.lines().next().unwrap();
-    let nan_cam = good.replacen("{\"width\"", "{\"camera\": {\"fx\": -1, \"fy\": 500, \"cx\": 1, \"cy\": 1}, \"width\"", 1);
+    let nan_cam = good.replacen(
+        "{\"width\"",
+        "{\"camera\": {\"fx\": -1, \"fy\": 500, \"cx\": 1, \"cy\": 1}, \"width\"",
+        1,
+    );
     std::fs::write(
         &input,
         format!(
@@ -59,12 +70,19 @@ fn malformed_lines_are_reported_not_panicked() {
     let out = monotrack(&["fit", input.to_str().unwrap(), "--method", "ffbp"]);
     assert_eq!(out.status.code(), Some(1));
     let stdout = String::from_utf8(out.stdout).unwrap();
-    let lines: Vec<serde_json::Value> =
-        stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines: Vec<serde_json::Value> = stdout
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
     assert_eq!(lines.len(), 4, "one output line per input line");
     assert!(lines[0]["faces"].is_array());
     assert_eq!(lines[1]["line"], 2);
-    assert!(lines[1]["error"].as_str().unwrap().contains("malformed JSON"));
+    assert!(
+        lines[1]["error"]
+            .as_str()
+            .unwrap()
+            .contains("malformed JSON")
+    );
     assert!(lines[2]["error"].as_str().unwrap().contains("expected 68"));
     assert!(lines[3]["error"].as_str().unwrap().contains("camera"));
     let stderr = String::from_utf8(out.stderr).unwrap();
