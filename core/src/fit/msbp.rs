@@ -330,7 +330,12 @@ impl Msbp {
         };
 
         let mut iterations = 0u32;
-        let mut last: SolverReport;
+        // Overwritten by the first round's step 1 (there is always at least one round).
+        let mut last = SolverReport {
+            iterations: 0,
+            cost: f64::INFINITY,
+            termination: Termination::MaxIterations,
+        };
         let mut x = match init {
             Some(f) => normalise(&f.pose.translation, &angles_from_rotation(&f.pose.rotation)),
             None => {
@@ -421,17 +426,20 @@ impl Msbp {
             }
             model.shape_into(&shape, &anim, &mut g);
         }
-        // Final pose refinement with the final deformation, so pose and units agree.
-        let problem = PoseProblem {
-            g: &g,
-            obs: landmarks,
-            w: &w,
-            cam: camera,
-            t_center,
-            t_half,
-        };
-        last = cfg.lm.minimize(&problem, &mut x);
-        iterations += last.iterations;
+        // Final pose refinement with the final deformation, so pose and units agree. Skipped when
+        // tracking: the next frame's step 1 does it, and it would cost a third of the frame's fit.
+        if init.is_none() {
+            let problem = PoseProblem {
+                g: &g,
+                obs: landmarks,
+                w: &w,
+                cam: camera,
+                t_center,
+                t_half,
+            };
+            last = cfg.lm.minimize(&problem, &mut x);
+            iterations += last.iterations;
+        }
         let t = t_center + t_half.component_mul(&x.fixed_rows::<3>(0).into_owned());
         let th = x.fixed_rows::<3>(3).into_owned() * ANGLE_HALF_RANGE;
         let pose = Pose {
@@ -502,12 +510,15 @@ fn initial_translation(
 mod tests {
     use super::*;
 
-    fn setup() -> (
+    /// Camera, noisy observations, weights, a deformed model shape.
+    type Setup = (
         Intrinsics,
         [[f64; 2]; N_LANDMARKS],
         [f64; N_LANDMARKS],
         [Vector3<f64>; N_LANDMARKS],
-    ) {
+    );
+
+    fn setup() -> Setup {
         let cam = Intrinsics::default_for(1280, 720).unwrap();
         let pose = Pose::from_euler_deg(20.0, -10.0, 5.0, Vector3::new(30.0, -20.0, 700.0));
         let m = FaceModel::builtin();

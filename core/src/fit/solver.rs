@@ -295,17 +295,23 @@ impl Bfgs {
             }
             let mut alpha = 1.0;
             let mut accepted = None;
-            for _ in 0..20 {
+            for trial in 0..20 {
                 let mut cand = *x + dir * alpha;
                 clamp(&mut cand);
-                let fc = problem.value(&cand);
+                // The full step is usually accepted (the seeded Hessian makes it nearly Newton's),
+                // so evaluate the gradient with it and save a second pass.
+                let fc = if trial == 0 {
+                    problem.value_and_gradient(&cand, &mut g_new)
+                } else {
+                    problem.value(&cand)
+                };
                 if fc.is_finite() && fc <= f + 1e-4 * g.dot(&(cand - *x)) {
-                    accepted = Some((cand, fc));
+                    accepted = Some((cand, fc, trial == 0));
                     break;
                 }
                 alpha *= 0.5;
             }
-            let Some((cand, _)) = accepted else {
+            let Some((cand, fc, have_gradient)) = accepted else {
                 return SolverReport {
                     iterations: it,
                     cost: f,
@@ -313,7 +319,11 @@ impl Bfgs {
                 };
             };
             let s = cand - *x;
-            let f_new = problem.value_and_gradient(&cand, &mut g_new);
+            let f_new = if have_gradient {
+                fc
+            } else {
+                problem.value_and_gradient(&cand, &mut g_new)
+            };
             let y = g_new - g;
             let sy = s.dot(&y);
             let rel = (f - f_new) / f.abs().max(1e-300);
