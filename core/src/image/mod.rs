@@ -4,6 +4,10 @@
 //! Pixel convention: see [`crate::camera`] — pixel (i, j) covers [i, i+1)×[j, j+1), its centre is
 //! (i + 0.5, j + 0.5).
 
+pub mod frame;
+
+pub use frame::{Frame, FrameDesc, PixelFormat};
+
 /// An owned, tightly packed (stride = width) 8-bit grayscale image. Buffers are reused across
 /// frames: [`GrayImage::resize`] only reallocates when the image grows beyond its capacity.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]

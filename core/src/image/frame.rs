@@ -1,0 +1,456 @@
+//! Camera frames as the app hands them over (borrowed bytes + a description) and their conversion
+//! to the upright 8-bit luma image the pipeline works on.
+//!
+//! Byte layout of one buffer, by format (`row_stride` ≥ width × bytes per pixel; the last row may be
+//! shorter than the stride, as Android's planes are):
+//! - `Rgba8`, `Bgra8` (4 bytes/pixel), `Rgb8` (3), `Gray8` (1): `height` rows of `row_stride` bytes.
+//!   `Gray8` is also how a YUV frame's Y plane alone is passed (zero copy from CameraX plane 0 or a
+//!   CVPixelBuffer's plane 0), since tracking needs only luma.
+//! - `Nv21` / `Nv12`: the Y plane (`height` rows of `row_stride`), then at offset
+//!   `row_stride × height` one interleaved chroma plane of ⌈height/2⌉ rows of `chroma_row_stride`
+//!   bytes, ⌈width/2⌉ samples per row `chroma_pixel_stride` (2) bytes apart (V first for NV21).
+//! - `I420`: the Y plane, then the U plane at `row_stride × height` and the V plane
+//!   `chroma_row_stride × ⌈height/2⌉` after it, samples `chroma_pixel_stride` (1) apart.
+//!
+//! Only the Y plane is read, but the whole description is validated against the buffer, so a
+//! caller's stride bug surfaces as [`Error::InvalidFrame`] rather than as garbage.
+//!
+//! RGB → luma uses BT.601 full-range weights in 8-bit fixed point,
+//! `(77 R + 150 G + 29 B + 128) >> 8`, within ±1 of `round(0.299 R + 0.587 G + 0.114 B)`.
+
+use super::GrayImage;
+use crate::camera::Rotation;
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+
+/// Pixel formats a frame may arrive in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum PixelFormat {
+    /// 8-bit R, G, B, A.
+    Rgba8,
+    /// 8-bit B, G, R, A (iOS `kCVPixelFormatType_32BGRA`).
+    Bgra8,
+    /// 8-bit R, G, B.
+    Rgb8,
+    /// 8-bit luma (or a YUV frame's Y plane alone).
+    Gray8,
+    /// Y plane + interleaved V/U (Android camera default).
+    Nv21,
+    /// Y plane + interleaved U/V (iOS bi-planar).
+    Nv12,
+    /// Y plane + U plane + V plane.
+    I420,
+}
+
+impl PixelFormat {
+    /// Bytes per pixel of the first (or only) plane.
+    pub fn luma_bytes_per_pixel(self) -> usize {
+        match self {
+            Self::Rgba8 | Self::Bgra8 => 4,
+            Self::Rgb8 => 3,
+            Self::Gray8 | Self::Nv21 | Self::Nv12 | Self::I420 => 1,
+        }
+    }
+
+    fn is_yuv(self) -> bool {
+        matches!(self, Self::Nv21 | Self::Nv12 | Self::I420)
+    }
+}
+
+/// Describes the bytes of one frame. See the module docs for the layouts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FrameDesc {
+    /// Buffer width in pixels (before rotation).
+    pub width: u32,
+    /// Buffer height in pixels (before rotation).
+    pub height: u32,
+    /// Pixel format.
+    pub format: PixelFormat,
+    /// Bytes from one row of the first plane to the next.
+    pub row_stride: usize,
+    /// Bytes from one chroma row to the next (YUV formats only).
+    pub chroma_row_stride: usize,
+    /// Bytes between consecutive chroma samples of one plane (2 interleaved, 1 planar).
+    pub chroma_pixel_stride: usize,
+    /// Clockwise rotation that makes the buffer upright.
+    pub rotation: Rotation,
+    /// Mirror the upright image left–right (front cameras' preview convention).
+    pub mirrored: bool,
+}
+
+impl FrameDesc {
+    /// A tightly packed frame of `format` (strides from the width), upright, not mirrored.
+    pub fn packed(width: u32, height: u32, format: PixelFormat) -> Self {
+        let w = width as usize;
+        let (crs, cps) = match format {
+            PixelFormat::Nv21 | PixelFormat::Nv12 => (w.div_ceil(2) * 2, 2),
+            PixelFormat::I420 => (w.div_ceil(2), 1),
+            _ => (0, 0),
+        };
+        Self {
+            width,
+            height,
+            format,
+            row_stride: w * format.luma_bytes_per_pixel(),
+            chroma_row_stride: crs,
+            chroma_pixel_stride: cps,
+            rotation: Rotation::R0,
+            mirrored: false,
+        }
+    }
+
+    /// Size of the upright image (width and height swap for 90° and 270°).
+    pub fn upright_size(&self) -> (usize, usize) {
+        let (w, h) = (self.width as usize, self.height as usize);
+        if self.rotation.swaps_axes() {
+            (h, w)
+        } else {
+            (w, h)
+        }
+    }
+
+    /// Bytes a buffer must hold for this description (the last row of each plane may be short).
+    ///
+    /// # Errors
+    /// [`Error::InvalidFrame`] for a zero size, a stride too small for the width, or sizes that
+    /// overflow.
+    pub fn required_len(&self) -> Result<usize> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        if w == 0 || h == 0 {
+            return Err(Error::InvalidFrame(format!(
+                "zero-size frame {}x{}",
+                self.width, self.height
+            )));
+        }
+        let row = w * self.format.luma_bytes_per_pixel();
+        if self.row_stride < row {
+            return Err(Error::InvalidFrame(format!(
+                "row stride {} is smaller than width {} x {} bytes per pixel",
+                self.row_stride,
+                w,
+                self.format.luma_bytes_per_pixel()
+            )));
+        }
+        let overflow = || Error::InvalidFrame("frame size overflows".into());
+        let y_plane = self
+            .row_stride
+            .checked_mul(h - 1)
+            .and_then(|v| v.checked_add(row))
+            .ok_or_else(overflow)?;
+        if !self.format.is_yuv() {
+            return Ok(y_plane);
+        }
+        let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
+        let (crs, cps) = (self.chroma_row_stride, self.chroma_pixel_stride);
+        let interleaved = matches!(self.format, PixelFormat::Nv21 | PixelFormat::Nv12);
+        let min_cps = if interleaved { 2 } else { 1 };
+        if cps < min_cps {
+            return Err(Error::InvalidFrame(format!(
+                "chroma pixel stride {cps} must be at least {min_cps} for {:?}",
+                self.format
+            )));
+        }
+        // Bytes one chroma row needs: the last sample's offset plus its size.
+        let chroma_row = (cw - 1) * cps + if interleaved { 2 } else { 1 };
+        if crs < chroma_row {
+            return Err(Error::InvalidFrame(format!(
+                "chroma row stride {crs} is smaller than the {chroma_row} bytes a chroma row needs"
+            )));
+        }
+        let y_full = self.row_stride.checked_mul(h).ok_or_else(overflow)?;
+        let plane = crs
+            .checked_mul(ch - 1)
+            .and_then(|v| v.checked_add(chroma_row))
+            .ok_or_else(overflow)?;
+        let total = if interleaved {
+            y_full.checked_add(plane)
+        } else {
+            crs.checked_mul(ch)
+                .and_then(|u| y_full.checked_add(u))
+                .and_then(|v| v.checked_add(plane))
+        };
+        total.ok_or_else(overflow)
+    }
+}
+
+/// Borrowed frame bytes with their description.
+#[derive(Debug, Clone, Copy)]
+pub struct Frame<'a> {
+    data: &'a [u8],
+    desc: FrameDesc,
+}
+
+impl<'a> Frame<'a> {
+    /// Wraps `data` after checking it against `desc`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidFrame`] when the description is inconsistent or `data` is too short for it.
+    pub fn new(data: &'a [u8], desc: FrameDesc) -> Result<Self> {
+        let need = desc.required_len()?;
+        if data.len() < need {
+            return Err(Error::InvalidFrame(format!(
+                "{:?} {}x{} (row stride {}) needs {need} bytes, got {}",
+                desc.format,
+                desc.width,
+                desc.height,
+                desc.row_stride,
+                data.len()
+            )));
+        }
+        Ok(Self { data, desc })
+    }
+
+    /// The description.
+    pub fn desc(&self) -> &FrameDesc {
+        &self.desc
+    }
+
+    /// The bytes.
+    pub fn data(&self) -> &'a [u8] {
+        self.data
+    }
+
+    /// Converts to the upright (rotated, optionally mirrored) luma image in `out`, reusing its
+    /// allocation.
+    pub fn to_luma(&self, out: &mut GrayImage) {
+        let d = &self.desc;
+        let (w, h) = (d.width as usize, d.height as usize);
+        let (ow, oh) = d.upright_size();
+        out.resize(ow, oh);
+        let dst = out.data_mut();
+        let bpp = d.format.luma_bytes_per_pixel();
+        // Where source pixel (x, y) lands in the upright image, as (start, step along x, step along y).
+        let (mut start, mut sx, mut sy): (isize, isize, isize) = match d.rotation {
+            Rotation::R0 => (0, 1, ow as isize),
+            // (x, y) → (h - 1 - y, x)
+            Rotation::R90 => ((h - 1) as isize, ow as isize, -1),
+            // (x, y) → (w - 1 - x, h - 1 - y)
+            Rotation::R180 => ((oh * ow - 1) as isize, -1, -(ow as isize)),
+            // (x, y) → (y, w - 1 - x)
+            Rotation::R270 => (((w - 1) * ow) as isize, -(ow as isize), 1),
+        };
+        if d.mirrored {
+            // Mirror the upright image: upright column c ↦ ow - 1 - c.
+            let col = start.rem_euclid(ow as isize);
+            start += (ow as isize - 1) - 2 * col;
+            // The step that moves along upright columns flips: x's for 0°/180°, y's for 90°/270°.
+            if d.rotation.swaps_axes() {
+                sy = -sy;
+            } else {
+                sx = -sx;
+            }
+        }
+        for y in 0..h {
+            let row = &self.data[y * d.row_stride..y * d.row_stride + w * bpp];
+            let mut o = start + sy * y as isize;
+            match d.format {
+                PixelFormat::Gray8 | PixelFormat::Nv21 | PixelFormat::Nv12 | PixelFormat::I420 => {
+                    for &v in row {
+                        dst[o as usize] = v;
+                        o += sx;
+                    }
+                }
+                PixelFormat::Rgba8 | PixelFormat::Bgra8 | PixelFormat::Rgb8 => {
+                    let (ri, bi) = if d.format == PixelFormat::Bgra8 {
+                        (2, 0)
+                    } else {
+                        (0, 2)
+                    };
+                    for px in row.chunks_exact(bpp) {
+                        let l = (77 * u32::from(px[ri])
+                            + 150 * u32::from(px[1])
+                            + 29 * u32::from(px[bi])
+                            + 128)
+                            >> 8;
+                        dst[o as usize] = l as u8;
+                        o += sx;
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A w×h RGB test pattern and its luma by the float formula.
+    fn pattern(w: usize, h: usize) -> (Vec<[u8; 3]>, Vec<u8>) {
+        let rgb: Vec<[u8; 3]> = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                [
+                    (x * 37 % 256) as u8,
+                    (y * 53 % 256) as u8,
+                    ((x + y) * 11 % 256) as u8,
+                ]
+            })
+            .collect();
+        let luma = rgb
+            .iter()
+            .map(|p| {
+                (0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2]))
+                    .round() as u8
+            })
+            .collect();
+        (rgb, luma)
+    }
+
+    fn pack(
+        rgb: &[[u8; 3]],
+        w: usize,
+        h: usize,
+        format: PixelFormat,
+        pad: usize,
+    ) -> (Vec<u8>, FrameDesc) {
+        let mut d = FrameDesc::packed(w as u32, h as u32, format);
+        d.row_stride += pad;
+        let bpp = format.luma_bytes_per_pixel();
+        let mut buf = vec![0xAAu8; d.row_stride * h];
+        for y in 0..h {
+            for x in 0..w {
+                let p = rgb[y * w + x];
+                let o = y * d.row_stride + x * bpp;
+                match format {
+                    PixelFormat::Rgba8 => buf[o..o + 4].copy_from_slice(&[p[0], p[1], p[2], 255]),
+                    PixelFormat::Bgra8 => buf[o..o + 4].copy_from_slice(&[p[2], p[1], p[0], 255]),
+                    PixelFormat::Rgb8 => buf[o..o + 3].copy_from_slice(&p),
+                    _ => unreachable!(),
+                }
+            }
+        }
+        // The last row may stop at the width.
+        buf.truncate(d.row_stride * (h - 1) + w * bpp);
+        (buf, d)
+    }
+
+    #[test]
+    fn rgb_formats_give_bt601_luma_with_padded_strides() {
+        let (w, h) = (13, 7);
+        let (rgb, luma) = pattern(w, h);
+        for format in [PixelFormat::Rgba8, PixelFormat::Bgra8, PixelFormat::Rgb8] {
+            let (buf, d) = pack(&rgb, w, h, format, 5);
+            let mut out = GrayImage::default();
+            Frame::new(&buf, d).unwrap().to_luma(&mut out);
+            assert_eq!((out.width(), out.height()), (w, h));
+            for (a, b) in out.data().iter().zip(&luma) {
+                assert!((i16::from(*a) - i16::from(*b)).abs() <= 1, "{format:?}");
+            }
+        }
+    }
+
+    fn yuv_buffer(
+        luma: &[u8],
+        w: usize,
+        h: usize,
+        format: PixelFormat,
+        pad: usize,
+    ) -> (Vec<u8>, FrameDesc) {
+        let mut d = FrameDesc::packed(w as u32, h as u32, format);
+        d.row_stride += pad;
+        d.chroma_row_stride += pad;
+        let need = d.required_len().unwrap();
+        let mut buf = vec![128u8; need];
+        for y in 0..h {
+            buf[y * d.row_stride..y * d.row_stride + w].copy_from_slice(&luma[y * w..(y + 1) * w]);
+        }
+        (buf, d)
+    }
+
+    #[test]
+    fn yuv_formats_read_the_y_plane_and_validate_chroma() {
+        let (w, h) = (9, 5);
+        let (_, luma) = pattern(w, h);
+        for format in [
+            PixelFormat::Nv21,
+            PixelFormat::Nv12,
+            PixelFormat::I420,
+            PixelFormat::Gray8,
+        ] {
+            let (buf, d) = yuv_buffer(&luma, w, h, format, 3);
+            let mut out = GrayImage::default();
+            Frame::new(&buf, d).unwrap().to_luma(&mut out);
+            assert_eq!(out.data(), &luma[..], "{format:?}");
+            if format != PixelFormat::Gray8 {
+                // One byte short of the chroma plane(s).
+                assert!(matches!(
+                    Frame::new(&buf[..buf.len() - 1], d),
+                    Err(Error::InvalidFrame(_))
+                ));
+                let mut bad = d;
+                bad.chroma_row_stride = 1;
+                assert!(Frame::new(&buf, bad).is_err());
+            }
+        }
+    }
+
+    #[test]
+    fn rotations_and_mirroring_match_a_reference() {
+        for (w, h) in [(5, 3), (1, 4), (4, 1)] {
+            let src: Vec<u8> = (0..(w * h) as u8).collect();
+            let at = |x: usize, y: usize| src[y * w + x];
+            for rot in [Rotation::R0, Rotation::R90, Rotation::R180, Rotation::R270] {
+                for mirrored in [false, true] {
+                    let mut d = FrameDesc::packed(w as u32, h as u32, PixelFormat::Gray8);
+                    d.rotation = rot;
+                    d.mirrored = mirrored;
+                    let mut out = GrayImage::default();
+                    Frame::new(&src, d).unwrap().to_luma(&mut out);
+                    let (ow, oh) = d.upright_size();
+                    assert_eq!((out.width(), out.height()), (ow, oh));
+                    for oy in 0..oh {
+                        for ox in 0..ow {
+                            let cx = if mirrored { ow - 1 - ox } else { ox };
+                            // Invert the clockwise rotation: upright (cx, oy) came from source (x, y).
+                            let (x, y) = match rot {
+                                Rotation::R0 => (cx, oy),
+                                Rotation::R90 => (oy, h - 1 - cx),
+                                Rotation::R180 => (w - 1 - cx, h - 1 - oy),
+                                Rotation::R270 => (w - 1 - oy, cx),
+                            };
+                            assert_eq!(
+                                out.get(ox, oy),
+                                at(x, y),
+                                "{rot:?} mirrored={mirrored} at ({ox},{oy})"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_descriptions_are_typed_errors() {
+        let buf = vec![0u8; 100];
+        let d = FrameDesc::packed(0, 10, PixelFormat::Gray8);
+        assert!(matches!(Frame::new(&buf, d), Err(Error::InvalidFrame(_))));
+        let mut d = FrameDesc::packed(10, 10, PixelFormat::Rgba8);
+        assert!(matches!(Frame::new(&buf, d), Err(Error::InvalidFrame(_)))); // too short
+        d.row_stride = 39; // < 10 × 4
+        assert!(matches!(
+            Frame::new(&vec![0; 1000], d),
+            Err(Error::InvalidFrame(_))
+        ));
+        let mut d = FrameDesc::packed(10, 10, PixelFormat::Nv21);
+        d.chroma_pixel_stride = 1;
+        assert!(Frame::new(&vec![0; 1000], d).is_err());
+        let huge = FrameDesc {
+            row_stride: usize::MAX / 2,
+            ..FrameDesc::packed(u32::MAX, u32::MAX, PixelFormat::Gray8)
+        };
+        assert!(huge.required_len().is_err());
+    }
+
+    #[test]
+    fn the_output_buffer_is_reused() {
+        let src = vec![7u8; 64 * 48];
+        let f = Frame::new(&src, FrameDesc::packed(64, 48, PixelFormat::Gray8)).unwrap();
+        let mut out = GrayImage::default();
+        f.to_luma(&mut out);
+        let p = out.data().as_ptr();
+        f.to_luma(&mut out);
+        assert_eq!(p, out.data().as_ptr());
+    }
+}
