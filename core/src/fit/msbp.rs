@@ -92,19 +92,40 @@ fn project_with_jacobian(cam: &Intrinsics, c: &Vector3<f64>) -> ([f64; 2], [Vect
     )
 }
 
-/// Step 1: pose in normalised coordinates.
-struct PoseProblem<'a> {
-    g: &'a [Vector3<f64>; N_LANDMARKS],
-    obs: &'a [[f64; 2]; N_LANDMARKS],
-    w: &'a [f64; N_LANDMARKS],
-    cam: &'a Intrinsics,
+/// The normalised pose space of eqs. 4.11–4.12: translations map to [-1, 1] over the configured
+/// ranges, angles over [-π, π], so LM's damping treats millimetres and radians alike.
+#[derive(Debug, Clone, Copy)]
+struct PoseSpace {
     t_center: Vector3<f64>,
     t_half: Vector3<f64>,
 }
 
 const ANGLE_HALF_RANGE: f64 = std::f64::consts::PI;
 
-impl PoseProblem<'_> {
+impl PoseSpace {
+    fn new(cfg: &MsbpConfig) -> Self {
+        Self {
+            t_center: Vector3::new(0.0, 0.0, 0.5 * (cfg.z_near_mm + cfg.z_far_mm)),
+            t_half: Vector3::new(
+                cfg.xy_range_mm,
+                cfg.xy_range_mm,
+                0.5 * (cfg.z_far_mm - cfg.z_near_mm),
+            ),
+        }
+    }
+
+    /// Eq. 4.11: (t, θ) → x ∈ [-1, 1]⁶.
+    fn normalise(&self, t: &Vector3<f64>, th: &Vector3<f64>) -> SVector<f64, 6> {
+        SVector::<f64, 6>::from_fn(|i, _| {
+            if i < 3 {
+                (t[i] - self.t_center[i]) / self.t_half[i]
+            } else {
+                th[i - 3] / ANGLE_HALF_RANGE
+            }
+        })
+    }
+
+    /// Eq. 4.12: x → (t, θ).
     fn denormalise(&self, x: &SVector<f64, 6>) -> (Vector3<f64>, Vector3<f64>) {
         let t = self.t_center
             + self
@@ -113,11 +134,36 @@ impl PoseProblem<'_> {
         let th = x.fixed_rows::<3>(3).into_owned() * ANGLE_HALF_RANGE;
         (t, th)
     }
+
+    fn problem<'a>(
+        self,
+        g: &'a [Vector3<f64>; N_LANDMARKS],
+        obs: &'a [[f64; 2]; N_LANDMARKS],
+        w: &'a [f64; N_LANDMARKS],
+        cam: &'a Intrinsics,
+    ) -> PoseProblem<'a> {
+        PoseProblem {
+            g,
+            obs,
+            w,
+            cam,
+            space: self,
+        }
+    }
+}
+
+/// Step 1: pose in normalised coordinates.
+struct PoseProblem<'a> {
+    g: &'a [Vector3<f64>; N_LANDMARKS],
+    obs: &'a [[f64; 2]; N_LANDMARKS],
+    w: &'a [f64; N_LANDMARKS],
+    cam: &'a Intrinsics,
+    space: PoseSpace,
 }
 
 impl LeastSquares<6> for PoseProblem<'_> {
     fn cost(&self, x: &SVector<f64, 6>) -> f64 {
-        let (t, th) = self.denormalise(x);
+        let (t, th) = self.space.denormalise(x);
         let r = super::pose::rotation_from_angles(&th);
         let mut cost = 0.0;
         for i in 0..N_LANDMARKS {
@@ -139,7 +185,7 @@ impl LeastSquares<6> for PoseProblem<'_> {
         jtj: &mut SMatrix<f64, 6, 6>,
         jtr: &mut SVector<f64, 6>,
     ) -> f64 {
-        let (t, th) = self.denormalise(x);
+        let (t, th) = self.space.denormalise(x);
         let (r, dr) = rotation_and_derivatives(&th);
         jtj.fill(0.0);
         jtr.fill(0.0);
@@ -160,7 +206,7 @@ impl LeastSquares<6> for PoseProblem<'_> {
                 let res = p[k] - self.obs[i][k];
                 let mut j = SVector::<f64, 6>::zeros();
                 for a in 0..3 {
-                    j[a] = dp[k][a] * self.t_half[a] * sw;
+                    j[a] = dp[k][a] * self.space.t_half[a] * sw;
                     j[3 + a] = dp[k].dot(&dc[a]) * ANGLE_HALF_RANGE * sw;
                 }
                 accumulate_row(jtj, jtr, &j, res * sw);
@@ -314,20 +360,7 @@ impl Msbp {
         let mut g = [Vector3::zeros(); N_LANDMARKS];
         model.shape_into(&shape, &anim, &mut g);
 
-        let t_center = Vector3::new(0.0, 0.0, 0.5 * (cfg.z_near_mm + cfg.z_far_mm));
-        let t_half = Vector3::new(
-            cfg.xy_range_mm,
-            cfg.xy_range_mm,
-            0.5 * (cfg.z_far_mm - cfg.z_near_mm),
-        );
-        let normalise = |t: &Vector3<f64>, th: &Vector3<f64>| {
-            let mut x = SVector::<f64, 6>::zeros();
-            for a in 0..3 {
-                x[a] = (t[a] - t_center[a]) / t_half[a];
-                x[3 + a] = th[a] / ANGLE_HALF_RANGE;
-            }
-            x
-        };
+        let space = PoseSpace::new(&cfg);
 
         let mut iterations = 0u32;
         // Overwritten by the first round's step 1 (there is always at least one round).
@@ -337,20 +370,15 @@ impl Msbp {
             termination: Termination::MaxIterations,
         };
         let mut x = match init {
-            Some(f) => normalise(&f.pose.translation, &angles_from_rotation(&f.pose.rotation)),
+            Some(f) => {
+                space.normalise(&f.pose.translation, &angles_from_rotation(&f.pose.rotation))
+            }
             None => {
                 let t0 = initial_translation(&g, landmarks, &w, camera, &cfg);
                 let mut best: Option<(f64, SVector<f64, 6>)> = None;
                 for &yaw in &cfg.yaw_seeds_deg {
-                    let mut x = normalise(&t0, &Vector3::new(0.0, yaw.to_radians(), 0.0));
-                    let problem = PoseProblem {
-                        g: &g,
-                        obs: landmarks,
-                        w: &w,
-                        cam: camera,
-                        t_center,
-                        t_half,
-                    };
+                    let mut x = space.normalise(&t0, &Vector3::new(0.0, yaw.to_radians(), 0.0));
+                    let problem = space.problem(&g, landmarks, &w, camera);
                     let rep = cfg.lm.minimize(&problem, &mut x);
                     iterations += rep.iterations;
                     if best.is_none_or(|(c, _)| rep.cost < c) {
@@ -364,18 +392,10 @@ impl Msbp {
         let h_cam = camera;
         for _ in 0..cfg.outer_iterations.max(1) {
             // Step 1: pose.
-            let problem = PoseProblem {
-                g: &g,
-                obs: landmarks,
-                w: &w,
-                cam: camera,
-                t_center,
-                t_half,
-            };
+            let problem = space.problem(&g, landmarks, &w, camera);
             last = cfg.lm.minimize(&problem, &mut x);
             iterations += last.iterations;
-            let t = t_center + t_half.component_mul(&x.fixed_rows::<3>(0).into_owned());
-            let th = x.fixed_rows::<3>(3).into_owned() * ANGLE_HALF_RANGE;
+            let (t, th) = space.denormalise(&x);
             let r = super::pose::rotation_from_angles(&th);
             let h0 = bfgs_h0(h_cam, t.z);
 
@@ -429,19 +449,11 @@ impl Msbp {
         // Final pose refinement with the final deformation, so pose and units agree. Skipped when
         // tracking: the next frame's step 1 does it, and it would cost a third of the frame's fit.
         if init.is_none() {
-            let problem = PoseProblem {
-                g: &g,
-                obs: landmarks,
-                w: &w,
-                cam: camera,
-                t_center,
-                t_half,
-            };
+            let problem = space.problem(&g, landmarks, &w, camera);
             last = cfg.lm.minimize(&problem, &mut x);
             iterations += last.iterations;
         }
-        let t = t_center + t_half.component_mul(&x.fixed_rows::<3>(0).into_owned());
-        let th = x.fixed_rows::<3>(3).into_owned() * ANGLE_HALF_RANGE;
+        let (t, th) = space.denormalise(&x);
         let pose = Pose {
             rotation: super::pose::rotation_from_angles(&th),
             translation: t,
@@ -547,14 +559,7 @@ mod tests {
     fn pose_jacobian_matches_finite_differences() {
         let (cam, obs, w, g) = setup();
         let cfg = MsbpConfig::default();
-        let p = PoseProblem {
-            g: &g,
-            obs: &obs,
-            w: &w,
-            cam: &cam,
-            t_center: Vector3::new(0.0, 0.0, 1575.0),
-            t_half: Vector3::new(cfg.xy_range_mm, cfg.xy_range_mm, 1425.0),
-        };
+        let p = PoseSpace::new(&cfg).problem(&g, &obs, &w, &cam);
         let x = SVector::<f64, 6>::new(0.02, -0.01, -0.6, 0.05, 0.1, -0.03);
         let mut jtj = SMatrix::zeros();
         let mut jtr = SVector::zeros();
