@@ -11,9 +11,9 @@ android {
     compileSdk = 35
 
     defaultConfig {
-        // 24 (Android 7.0, ~97% of active devices): the lowest level with the NDK's full C11/POSIX
-        // surface the Rust std and tract need without shims, and CameraX's minimum is 21 anyway.
-        // Must equal MIN_SDK in ../build-native.sh.
+        // 24 (Android 7.0): not a toolchain limit (Rust's std and CameraX support 21+) but a
+        // support choice: Java 8 library APIs without core-library desugaring, and no 2014-era
+        // devices too slow for real-time tracking. Must equal MIN_SDK in ../build-native.sh.
         minSdk = 24
         consumerProguardFiles("consumer-rules.pro")
         ndk {

@@ -37,6 +37,9 @@ public class FaceTracker(config: TrackerConfig = defaultTrackerConfig()) : Close
     private val native = FfiFaceTracker(config)
     private val timestamps = MonotonicTimestamps()
 
+    // Read once: asking the native object per frame would cross the FFI and allocate a record.
+    private val videoMode = config.runningMode == RunningMode.VIDEO
+
     @Volatile
     private var closed = false
 
@@ -74,7 +77,7 @@ public class FaceTracker(config: TrackerConfig = defaultTrackerConfig()) : Close
      */
     public fun processFrame(bytes: ByteBuffer, desc: io.monotrack.FrameDesc, timestampNs: Long): TrackingResult {
         val tracker = checkOpen()
-        return if (config.runningMode == RunningMode.VIDEO) {
+        return if (videoMode) {
             tracker.processFrame(bytes, desc, timestamps.next(timestampNs))
         } else {
             tracker.processImage(bytes, desc)
