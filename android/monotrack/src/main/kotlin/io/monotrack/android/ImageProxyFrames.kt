@@ -11,7 +11,8 @@ import java.nio.ByteOrder
 /**
  * Pixel bytes together with the description that tells the SDK how to read them.
  *
- * @property bytes a direct buffer positioned at the first pixel.
+ * @property bytes a direct buffer positioned at 0, holding the first pixel there. uniffi 0.32 passes a
+ *   `&[u8]` argument as a borrowed direct `ByteBuffer` (no copy), valid for the call only.
  * @property desc the frame's layout, rotation and mirroring.
  */
 public class Frame(public val bytes: ByteBuffer, public val desc: FrameDesc)
@@ -34,6 +35,8 @@ public fun ImageProxy.lumaFrame(mirrored: Boolean): Frame {
     if (!buffer.isDirect) {
         throw MonotrackException.InvalidFrame("Y plane buffer is not direct")
     }
+    // The native side reads from the buffer's base address; keep position and size in agreement.
+    buffer.rewind()
     val desc = FrameMapping.lumaFrameDesc(
         width = width,
         height = height,
