@@ -50,19 +50,20 @@ android {
 }
 
 kotlin {
+    // Not explicitApi(): it would also apply to the generated bindings compiled in this module. The
+    // wrappers spell out `public` anyway.
     jvmToolchain(17)
-    explicitApi()
 }
 
 dependencies {
-    // api: apps see JNA types only through the generated code, but it must be on their classpath.
-    api("${libs.jna.get()}@aar")
+    // api: apps see JNA only through the generated code, but it must be on their classpath. The AAR
+    // (not the jar) carries libjnidispatch.so for each Android ABI.
+    api(libs.jna) { artifact { type = "aar" } }
     api(libs.androidx.camera.core)
 
+    // The JVM tests touch only the generated records and the wrappers' pure logic, never native code.
     testImplementation(libs.junit.jupiter)
     testRuntimeOnly(libs.junit.platform.launcher)
-    // Unit tests run on the host JVM, where the plain jar provides JNA's classes.
-    testImplementation(libs.jna)
 }
 
 // Cross-builds the native libraries and generates the Kotlin bindings (../build-native.sh). Skip with

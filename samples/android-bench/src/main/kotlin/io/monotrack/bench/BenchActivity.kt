@@ -54,7 +54,7 @@ class BenchActivity : AppCompatActivity() {
     private fun benchmarkAll(): String {
         val sb = StringBuilder()
         sb.append("monotrack ${sdkVersion()} on ${Build.MANUFACTURER} ${Build.MODEL} (${Build.SUPPORTED_ABIS.first()}, API ${Build.VERSION.SDK_INT})\n\n")
-        val images = assets.list("").orEmpty().filter { IMAGE_EXTENSIONS.any(it.lowercase()::endsWith) }.sorted()
+        val images = assets.list("").orEmpty().filter { name -> IMAGE_EXTENSIONS.any { name.lowercase().endsWith(it) } }.sorted()
         for (name in images) {
             val bitmap = assets.open(name).use {
                 BitmapFactory.decodeStream(it, null, BitmapFactory.Options().apply { inPreferredConfig = Bitmap.Config.ARGB_8888 })
