@@ -44,6 +44,9 @@ public struct FrameOrientation: Equatable, Sendable {
     /// Mirror the upright image left–right (front camera, to match its mirrored preview).
     public let mirrored: Bool
 
+    /// Largest |angle| accepted: far beyond any real rotation, far below Int's range.
+    private static let maxAbsDegrees = 1e9
+
     /// The buffer is already upright and not mirrored.
     public static let up = FrameOrientation(uncheckedDegrees: 0, mirrored: false)
 
@@ -57,11 +60,13 @@ public struct FrameOrientation: Equatable, Sendable {
     ///
     /// - Throws: `FrameError.invalidRotation` when `degrees` is not a multiple of 90.
     public init(rotationDegrees degrees: Double, mirrored: Bool) throws {
-        let quarter = (degrees / 90).rounded()
-        // Rotation angles from AVFoundation are exact multiples of 90; allow float noise only.
-        guard degrees.isFinite, abs(quarter * 90 - degrees) < 1e-6 else {
+        // Rotation angles from AVFoundation are exact multiples of 90; allow float noise only. The
+        // magnitude bound keeps Int(quarter) from trapping on absurd input.
+        guard degrees.isFinite, abs(degrees) <= Self.maxAbsDegrees else {
             throw FrameError.invalidRotation(degrees)
         }
+        let quarter = (degrees / 90).rounded()
+        guard abs(quarter * 90 - degrees) < 1e-6 else { throw FrameError.invalidRotation(degrees) }
         let q = ((Int(quarter) % 4) + 4) % 4
         self.init(uncheckedDegrees: UInt32(q * 90), mirrored: mirrored)
     }

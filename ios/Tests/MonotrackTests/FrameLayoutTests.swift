@@ -52,6 +52,7 @@ final class FrameLayoutTests: XCTestCase {
         XCTAssertEqual(try FrameOrientation(rotationDegrees: 450, mirrored: false).rotationDegrees, 90)
         XCTAssertThrowsError(try FrameOrientation(rotationDegrees: 45, mirrored: false))
         XCTAssertThrowsError(try FrameOrientation(rotationDegrees: .nan, mirrored: false))
+        XCTAssertThrowsError(try FrameOrientation(rotationDegrees: 9e18, mirrored: false))
         XCTAssertTrue(try FrameOrientation(rotationDegrees: 270, mirrored: false).uprightSize(width: 640, height: 480) == (480, 640))
     }
 }
