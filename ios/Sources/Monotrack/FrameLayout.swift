@@ -18,6 +18,7 @@ public enum FrameError: Error, Equatable, CustomStringConvertible {
     /// A rotation that is not a multiple of 90 degrees.
     case invalidRotation(Double)
 
+    /// A one-line explanation for logs and UI.
     public var description: String {
         switch self {
         case .unsupportedPixelFormat(let f): return "unsupported pixel format \(fourCC(f))"

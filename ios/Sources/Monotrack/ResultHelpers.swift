@@ -32,9 +32,13 @@ extension CameraIntrinsics {
 
 /// The head's model axes in the image: x towards the subject's left, y down, z away from the camera.
 public struct HeadAxes: Equatable {
+    /// The model origin (the pose's translation), projected.
     public let origin: CGPoint
+    /// Tip of the model x axis (towards the subject's left).
     public let x: CGPoint
+    /// Tip of the model y axis (down the face).
     public let y: CGPoint
+    /// Tip of the model z axis (into the head, away from the camera).
     public let z: CGPoint
 }
 

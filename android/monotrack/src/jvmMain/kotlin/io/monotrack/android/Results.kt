@@ -60,6 +60,11 @@ public fun CameraIntrinsics.project(x: Double, y: Double, z: Double): Point2? {
 /**
  * The head's model axes drawn from the model origin: [x] towards the subject's left, [y] down,
  * [z] away from the camera (the face model frame of CONTRACT), each [HeadPose.axes]' `lengthMm` long.
+ *
+ * @property origin the model origin in image pixels.
+ * @property x tip of the model x axis.
+ * @property y tip of the model y axis.
+ * @property z tip of the model z axis.
  */
 public data class HeadAxes(val origin: Point2, val x: Point2, val y: Point2, val z: Point2)
 
@@ -84,7 +89,12 @@ public fun HeadPose.axes(camera: CameraIntrinsics, lengthMm: Double): HeadAxes? 
     return HeadAxes(origin, tip(0) ?: return null, tip(1) ?: return null, tip(2) ?: return null)
 }
 
-/** A 2D arrow from [from] to [to] in image pixels. */
+/**
+ * A 2D arrow in image pixels.
+ *
+ * @property from the tail (an eye centre for gaze arrows).
+ * @property to the head.
+ */
 public data class Arrow(val from: Point2, val to: Point2)
 
 /** The mean of the given landmarks. */
