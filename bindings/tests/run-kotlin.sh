@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# Builds monotrack-ffi for the host, generates the Kotlin bindings (uniffi library mode), compiles
+# them with the JVM tests in bindings/tests/kotlin, runs the tests on the JVM through JNA, prints
+# "N passed, N failed" and exits non-zero on any failure. Installs what it needs:
+# kotlinc (npm package kotlin-compiler), JNA (Debian libjna-java), JUnit 5 console (Debian junit5).
+set -euo pipefail
+ROOT=$(cd "$(dirname "$0")/../.." && pwd)
+cd "$ROOT"
+WORK=${KOTLIN_WORK_DIR:-$ROOT/target/kotlin-tests}
+TOOLS=${KOTLIN_TOOLS_DIR:-$ROOT/target/kotlin-tools}
+mkdir -p "$WORK" "$TOOLS"
+
+need_apt=()
+[ -f /usr/share/java/jna.jar ] || need_apt+=(libjna-java)
+[ -f /usr/share/java/junit-platform-console-standalone.jar ] || need_apt+=(junit5)
+command -v java >/dev/null || need_apt+=(default-jdk-headless)
+if [ ${#need_apt[@]} -gt 0 ]; then
+  echo "installing ${need_apt[*]}"
+  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need_apt[@]}") >/dev/null
+fi
+KOTLINC="$TOOLS/node_modules/kotlin-compiler/bin/kotlinc"
+if [ ! -x "$KOTLINC" ]; then
+  echo "installing kotlin-compiler (npm)"
+  (cd "$TOOLS" && npm install --silent --no-audit --no-fund kotlin-compiler@2 >/dev/null)
+fi
+KOTLIN_LIB="$TOOLS/node_modules/kotlin-compiler/lib"
+
+echo "== building monotrack-ffi (host)"
+cargo build -q -p monotrack-ffi --lib --release
+LIB="$ROOT/target/release/libmonotrack_ffi.so"
+
+echo "== generating Kotlin"
+rm -rf "$WORK/gen" && mkdir -p "$WORK/gen"
+cargo run -q -p monotrack-uniffi-bindgen --release -- generate --library "$LIB" \
+  --language kotlin --out-dir "$WORK/gen" --no-format
+
+JNA=/usr/share/java/jna.jar
+JUNIT=/usr/share/java/junit-platform-console-standalone.jar
+echo "== compiling Kotlin"
+"$KOTLINC" -jvm-target 17 -nowarn -cp "$JNA:$JUNIT" \
+  $(find "$WORK/gen" -name '*.kt') $(find "$ROOT/bindings/tests/kotlin" -name '*.kt') \
+  -d "$WORK/classes" 2>&1 | grep -v '^warning' || true
+[ -d "$WORK/classes" ] || { echo "kotlinc failed"; echo "0 passed, 1 failed"; exit 1; }
+
+echo "== running JVM tests"
+set +e
+java -Djna.library.path="$ROOT/target/release" -Dmonotrack.root="$ROOT" \
+  -jar "$JUNIT" execute --disable-banner --details=tree \
+  --class-path "$WORK/classes:$JNA:$KOTLIN_LIB/kotlin-stdlib.jar" \
+  --scan-class-path "$WORK/classes" > "$WORK/junit.log" 2>&1
+rc=$?
+set -e
+cat "$WORK/junit.log"
+passed=$(sed -n 's/.*\[ *\([0-9]*\) tests successful.*/\1/p' "$WORK/junit.log" | head -1)
+failed=$(sed -n 's/.*\[ *\([0-9]*\) tests failed.*/\1/p' "$WORK/junit.log" | head -1)
+passed=${passed:-0}; failed=${failed:-0}
+[ "$rc" -ne 0 ] && [ "$failed" -eq 0 ] && failed=1
+[ "$passed" -eq 0 ] && [ "$failed" -eq 0 ] && failed=1
+echo "kotlin: $passed passed, $failed failed"
+[ "$failed" -eq 0 ]

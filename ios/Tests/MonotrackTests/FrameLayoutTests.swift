@@ -1,0 +1,97 @@
+import CoreGraphics
+import ImageIO
+import XCTest
+@testable import Monotrack
+
+final class FrameLayoutTests: XCTestCase {
+    func testNV12PassesTheLumaPlaneAsGray8WithItsStride() throws {
+        let choice = try FrameLayout.choice(for: PixelFormatCode.nv12Full)
+        XCTAssertEqual(choice.format, .gray8)
+        XCTAssertTrue(choice.planar)
+        let orientation = try FrameOrientation(rotationDegrees: 90, mirrored: true)
+        let (desc, count) = try FrameLayout.describe(
+            choice, width: 1920, height: 1080, bytesPerRow: 1984, orientation: orientation)
+        XCTAssertEqual(desc.format, .gray8)
+        XCTAssertEqual(desc.rowStride, 1984)
+        XCTAssertEqual(desc.rotationDegrees, 90)
+        XCTAssertTrue(desc.mirrored)
+        XCTAssertEqual(count, 1984 * 1079 + 1920)
+    }
+
+    func testBGRAIsPackedFourBytesPerPixel() throws {
+        let choice = try FrameLayout.choice(for: PixelFormatCode.bgra)
+        let (desc, count) = try FrameLayout.describe(choice, width: 640, height: 480, bytesPerRow: 2560, orientation: .up)
+        XCTAssertEqual(desc.format, .bgra8)
+        XCTAssertEqual(count, 2560 * 480)
+        XCTAssertThrowsError(try FrameLayout.describe(choice, width: 640, height: 480, bytesPerRow: 2559, orientation: .up))
+        XCTAssertThrowsError(try FrameLayout.describe(choice, width: 0, height: 480, bytesPerRow: 2560, orientation: .up))
+    }
+
+    func testUnsupportedFormatNamesItsFourCC() {
+        XCTAssertThrowsError(try FrameLayout.choice(for: 0x7934_3230)) { error in // 'y420'
+            XCTAssertEqual(error as? FrameError, .unsupportedPixelFormat(0x7934_3230))
+            XCTAssertTrue("\(error)".contains("'y420'"))
+        }
+    }
+
+    func testExifOrientationsMapToRotateThenMirror() {
+        let expected: [(CGImagePropertyOrientation, UInt32, Bool)] = [
+            (.up, 0, false), (.upMirrored, 0, true), (.down, 180, false), (.downMirrored, 180, true),
+            (.right, 90, false), (.rightMirrored, 270, true), (.left, 270, false), (.leftMirrored, 90, true),
+        ]
+        for (exif, degrees, mirrored) in expected {
+            let o = FrameOrientation(exif)
+            XCTAssertEqual(o.rotationDegrees, degrees, "\(exif)")
+            XCTAssertEqual(o.mirrored, mirrored, "\(exif)")
+        }
+    }
+
+    func testRotationAnglesNormaliseAndRejectNonQuarterTurns() throws {
+        XCTAssertEqual(try FrameOrientation(videoRotationAngle: 90, frontCamera: true).rotationDegrees, 90)
+        XCTAssertEqual(try FrameOrientation(rotationDegrees: -90, mirrored: false).rotationDegrees, 270)
+        XCTAssertEqual(try FrameOrientation(rotationDegrees: 450, mirrored: false).rotationDegrees, 90)
+        XCTAssertThrowsError(try FrameOrientation(rotationDegrees: 45, mirrored: false))
+        XCTAssertThrowsError(try FrameOrientation(rotationDegrees: .nan, mirrored: false))
+        XCTAssertThrowsError(try FrameOrientation(rotationDegrees: 9e18, mirrored: false))
+        XCTAssertTrue(try FrameOrientation(rotationDegrees: 270, mirrored: false).uprightSize(width: 640, height: 480) == (480, 640))
+    }
+}
+
+final class ResultHelperTests: XCTestCase {
+    private let identity: [Double] = [1, 0, 0, 0, 1, 0, 0, 0, 1]
+
+    func testDefaultIntrinsicsFollowTheContract() {
+        let k = defaultIntrinsics(width: 640, height: 480)
+        XCTAssertEqual(k.fx, 576, accuracy: 1e-9)
+        XCTAssertEqual(k.cx, 320, accuracy: 1e-9)
+        XCTAssertEqual(k.cy, 240, accuracy: 1e-9)
+    }
+
+    func testFrontalPoseAxesProjectAlongImageAxes() throws {
+        let k = CameraIntrinsics(fx: 500, fy: 500, cx: 320, cy: 240)
+        let pose = HeadPose(rotation: identity, translationMm: Vec3(x: 10, y: -20, z: 500), yawDeg: 0, pitchDeg: 0, rollDeg: 0)
+        let a = try XCTUnwrap(pose.axes(camera: k, lengthMm: 50))
+        XCTAssertEqual(a.origin.x, 330, accuracy: 1e-9)
+        XCTAssertEqual(a.x.x, 380, accuracy: 1e-9)
+        XCTAssertEqual(a.y.y, 270, accuracy: 1e-9)
+        let bad = HeadPose(rotation: [1, 0], translationMm: Vec3(x: 0, y: 0, z: 500), yawDeg: 0, pitchDeg: 0, rollDeg: 0)
+        XCTAssertNil(bad.axes(camera: k, lengthMm: 50))
+    }
+
+    func testViewMappingFillsAndFits() throws {
+        let fill = try XCTUnwrap(ViewMapping(imageSize: CGSize(width: 480, height: 640), viewSize: CGSize(width: 360, height: 640), fill: true))
+        XCTAssertEqual(fill.scale, 1, accuracy: 1e-9)
+        XCTAssertEqual(fill.offset.x, -60, accuracy: 1e-9)
+        let fit = try XCTUnwrap(ViewMapping(imageSize: CGSize(width: 480, height: 640), viewSize: CGSize(width: 360, height: 640), fill: false))
+        XCTAssertEqual(fit.scale, 0.75, accuracy: 1e-9)
+        XCTAssertEqual(fit.offset.y, 80, accuracy: 1e-9)
+        XCTAssertNil(ViewMapping(imageSize: .zero, viewSize: CGSize(width: 1, height: 1), fill: true))
+    }
+
+    func testBenchTableIsInMilliseconds() {
+        let r = BenchReport(device: "t", iterations: 3, stages: [StageStat(name: "landmarks", medianUs: 1234, p90Us: 2000, meanUs: 1300)])
+        let lines = r.table.split(separator: "\n")
+        XCTAssertEqual(lines.count, 2)
+        XCTAssertEqual(lines[1].split(separator: " ").map(String.init), ["landmarks", "1.23", "2.00"])
+    }
+}

@@ -1,0 +1,140 @@
+package io.monotrack.sample
+
+import android.Manifest
+import android.content.pm.PackageManager
+import android.os.Bundle
+import android.util.Log
+import android.widget.TextView
+import androidx.activity.result.contract.ActivityResultContracts
+import androidx.appcompat.app.AppCompatActivity
+import androidx.camera.core.CameraSelector
+import androidx.camera.core.ImageAnalysis
+import androidx.camera.core.Preview
+import androidx.camera.core.resolutionselector.ResolutionSelector
+import androidx.camera.core.resolutionselector.ResolutionStrategy
+import androidx.camera.lifecycle.ProcessCameraProvider
+import androidx.camera.view.PreviewView
+import androidx.core.content.ContextCompat
+import io.monotrack.MonotrackException
+import io.monotrack.android.FaceTracker
+import java.util.concurrent.ExecutorService
+import java.util.concurrent.Executors
+import java.util.concurrent.TimeUnit
+
+/**
+ * Front camera preview with the tracker's results drawn on top. The tracker runs on CameraX's
+ * analysis executor (one thread), only ever on the newest frame (STRATEGY_KEEP_ONLY_LATEST), so a
+ * slow frame drops frames instead of queueing latency.
+ */
+class MainActivity : AppCompatActivity() {
+    private lateinit var previewView: PreviewView
+    private lateinit var overlay: OverlayView
+    private lateinit var status: TextView
+    private lateinit var analysisExecutor: ExecutorService
+    private var tracker: FaceTracker? = null
+    private val fps = FpsMeter()
+
+    private val requestCamera = registerForActivityResult(ActivityResultContracts.RequestPermission()) { granted ->
+        if (granted) startCamera() else status.setText(R.string.camera_denied)
+    }
+
+    override fun onCreate(savedInstanceState: Bundle?) {
+        super.onCreate(savedInstanceState)
+        setContentView(R.layout.activity_main)
+        previewView = findViewById(R.id.preview)
+        overlay = findViewById(R.id.overlay)
+        status = findViewById(R.id.status)
+        analysisExecutor = Executors.newSingleThreadExecutor()
+
+        if (ContextCompat.checkSelfPermission(this, Manifest.permission.CAMERA) == PackageManager.PERMISSION_GRANTED) {
+            startCamera()
+        } else {
+            requestCamera.launch(Manifest.permission.CAMERA)
+        }
+    }
+
+    private fun startCamera() {
+        val tracker = try {
+            FaceTracker()
+        } catch (e: MonotrackException) {
+            status.text = getString(R.string.tracker_failed, e.message)
+            return
+        }
+        this.tracker = tracker
+        val providerFuture = ProcessCameraProvider.getInstance(this)
+        providerFuture.addListener({
+            val provider = providerFuture.get()
+            val front = provider.hasCamera(CameraSelector.DEFAULT_FRONT_CAMERA)
+            val selector = if (front) CameraSelector.DEFAULT_FRONT_CAMERA else CameraSelector.DEFAULT_BACK_CAMERA
+
+            val preview = Preview.Builder().build().also { it.setSurfaceProvider(previewView.surfaceProvider) }
+            val analysis = ImageAnalysis.Builder()
+                .setResolutionSelector(
+                    ResolutionSelector.Builder()
+                        // 640x480 is plenty for faces at arm's length and keeps the frame cheap.
+                        .setResolutionStrategy(
+                            ResolutionStrategy(ANALYSIS_SIZE, ResolutionStrategy.FALLBACK_RULE_CLOSEST_HIGHER_THEN_LOWER),
+                        )
+                        .build(),
+                )
+                .setBackpressureStrategy(ImageAnalysis.STRATEGY_KEEP_ONLY_LATEST)
+                .setOutputImageFormat(ImageAnalysis.OUTPUT_IMAGE_FORMAT_YUV_420_888)
+                .build()
+            analysis.setAnalyzer(analysisExecutor) { image ->
+                image.use {
+                    try {
+                        // The front preview is mirrored; mirror the results the same way.
+                        val result = tracker.process(it, mirrored = front)
+                        val rate = fps.tick(System.nanoTime())
+                        overlay.post { overlay.show(result, rate) }
+                    } catch (e: MonotrackException) {
+                        Log.w(TAG, "frame skipped", e)
+                    } catch (e: IllegalStateException) {
+                        // The tracker was closed while this frame was in flight (activity finishing).
+                    }
+                }
+            }
+            provider.unbindAll()
+            provider.bindToLifecycle(this, selector, preview, analysis)
+        }, ContextCompat.getMainExecutor(this))
+    }
+
+    override fun onDestroy() {
+        super.onDestroy()
+        // Let the in-flight frame finish before freeing the native tracker it is using.
+        analysisExecutor.shutdown()
+        analysisExecutor.awaitTermination(EXECUTOR_DRAIN_MS, TimeUnit.MILLISECONDS)
+        tracker?.close()
+        tracker = null
+    }
+
+    private companion object {
+        const val TAG = "monotrack"
+        val ANALYSIS_SIZE = android.util.Size(640, 480)
+
+        /** Longer than any frame takes; the executor only ever holds one. */
+        const val EXECUTOR_DRAIN_MS = 500L
+    }
+}
+
+/** Frames per second as an exponential moving average of frame intervals. */
+class FpsMeter {
+    private var lastNs = 0L
+    private var avgIntervalNs = 0.0
+
+    /** Records a frame at [nowNs] and returns the smoothed rate (0 until two frames were seen). */
+    fun tick(nowNs: Long): Double {
+        if (lastNs != 0L) {
+            val dt = (nowNs - lastNs).toDouble()
+            avgIntervalNs = if (avgIntervalNs == 0.0) dt else avgIntervalNs + SMOOTHING * (dt - avgIntervalNs)
+        }
+        lastNs = nowNs
+        return if (avgIntervalNs > 0.0) NS_PER_S / avgIntervalNs else 0.0
+    }
+
+    private companion object {
+        /** Weight of the newest interval: about a 10-frame memory, steady yet responsive. */
+        const val SMOOTHING = 0.1
+        const val NS_PER_S = 1e9
+    }
+}

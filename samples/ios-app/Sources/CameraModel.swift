@@ -1,0 +1,123 @@
+import AVFoundation
+import Monotrack
+import SwiftUI
+
+/// Owns the capture session and the tracker. Frames arrive on `frameQueue` (a serial queue), are
+/// tracked there synchronously and the results are published on the main queue. Late frames are
+/// dropped (`alwaysDiscardsLateVideoFrames`), so a slow frame costs frames, not latency.
+final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSampleBufferDelegate {
+    @Published private(set) var result: TrackingResult?
+    @Published private(set) var fps: Double = 0
+    @Published private(set) var message: String?
+    @Published private(set) var previewRotationAngle: CGFloat = 90
+
+    let session = AVCaptureSession()
+    private let frameQueue = DispatchQueue(label: "io.monotrack.sample.frames")
+    private var tracker: Monotrack.FaceTracker?
+    private var coordinator: AVCaptureDevice.RotationCoordinator?
+    private var observations: [NSKeyValueObservation] = []
+    private var isFront = true
+
+    // Written on the main queue by KVO, read on frameQueue.
+    private let angleLock = NSLock()
+    private var captureAngle: CGFloat = 90
+
+    private var lastFrameTime: CFTimeInterval = 0
+    private var meanInterval: Double = 0
+
+    /// Weight of the newest frame interval in the fps average: about a 10-frame memory.
+    private static let fpsSmoothing = 0.1
+
+    @MainActor
+    func start() async {
+        guard await AVCaptureDevice.requestAccess(for: .video) else {
+            message = "Camera access is off: enable it in Settings to track your face."
+            return
+        }
+        do {
+            tracker = try Monotrack.FaceTracker()
+            try configureSession()
+        } catch {
+            message = "Could not start: \(error)"
+            return
+        }
+        frameQueue.async { [session] in session.startRunning() }
+    }
+
+    func stop() {
+        frameQueue.async { [session] in session.stopRunning() }
+    }
+
+    @MainActor
+    private func configureSession() throws {
+        let device = AVCaptureDevice.default(.builtInWideAngleCamera, for: .video, position: .front)
+            ?? AVCaptureDevice.default(for: .video)
+        guard let device else { throw FrameError.invalidLayout("no camera") }
+        isFront = device.position == .front
+
+        session.beginConfiguration()
+        defer { session.commitConfiguration() }
+        // 640x480 is plenty for faces at arm's length and keeps each frame cheap.
+        if session.canSetSessionPreset(.vga640x480) { session.sessionPreset = .vga640x480 }
+        let input = try AVCaptureDeviceInput(device: device)
+        guard session.canAddInput(input) else { throw FrameError.invalidLayout("camera input refused") }
+        session.addInput(input)
+
+        let output = AVCaptureVideoDataOutput()
+        // NV12 full range, the camera's native format: the tracker reads its luma plane in place.
+        output.videoSettings = [kCVPixelBufferPixelFormatTypeKey as String: kCVPixelFormatType_420YpCbCr8BiPlanarFullRange]
+        output.alwaysDiscardsLateVideoFrames = true
+        output.setSampleBufferDelegate(self, queue: frameQueue)
+        guard session.canAddOutput(output) else { throw FrameError.invalidLayout("video output refused") }
+        session.addOutput(output)
+        // The connection is left unrotated: the SDK rotates while converting, which avoids a copy.
+
+        let coordinator = AVCaptureDevice.RotationCoordinator(device: device, previewLayer: nil)
+        self.coordinator = coordinator
+        setCaptureAngle(coordinator.videoRotationAngleForHorizonLevelCapture)
+        previewRotationAngle = coordinator.videoRotationAngleForHorizonLevelPreview
+        observations = [
+            coordinator.observe(\.videoRotationAngleForHorizonLevelCapture, options: [.new]) { [weak self] c, _ in
+                self?.setCaptureAngle(c.videoRotationAngleForHorizonLevelCapture)
+            },
+            coordinator.observe(\.videoRotationAngleForHorizonLevelPreview, options: [.new]) { [weak self] c, _ in
+                let angle = c.videoRotationAngleForHorizonLevelPreview
+                DispatchQueue.main.async { self?.previewRotationAngle = angle }
+            },
+        ]
+    }
+
+    private func setCaptureAngle(_ angle: CGFloat) {
+        angleLock.lock()
+        captureAngle = angle
+        angleLock.unlock()
+    }
+
+    func captureOutput(_ output: AVCaptureOutput, didOutput sampleBuffer: CMSampleBuffer, from connection: AVCaptureConnection) {
+        guard let tracker else { return }
+        angleLock.lock()
+        let angle = captureAngle
+        angleLock.unlock()
+        do {
+            let orientation = try FrameOrientation(videoRotationAngle: angle, frontCamera: isFront)
+            let result = try tracker.process(sampleBuffer, orientation: orientation)
+            let rate = tick()
+            DispatchQueue.main.async {
+                self.result = result
+                self.fps = rate
+            }
+        } catch {
+            // A bad frame is skipped; the next one is tracked (or re-detected) as usual.
+            DispatchQueue.main.async { self.message = "\(error)" }
+        }
+    }
+
+    private func tick() -> Double {
+        let now = CACurrentMediaTime()
+        defer { lastFrameTime = now }
+        guard lastFrameTime > 0 else { return 0 }
+        let dt = now - lastFrameTime
+        meanInterval = meanInterval == 0 ? dt : meanInterval + Self.fpsSmoothing * (dt - meanInterval)
+        return meanInterval > 0 ? 1 / meanInterval : 0
+    }
+}

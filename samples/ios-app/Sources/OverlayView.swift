@@ -1,0 +1,56 @@
+import Monotrack
+import SwiftUI
+
+/// Draws a result over the aspect-fill preview: landmarks, head axes (x red, y green, z blue), gaze
+/// arrows, the most probable mouth and brow gestures, and the frame rate.
+struct OverlayView: View {
+    let result: TrackingResult?
+    let fps: Double
+
+    /// Axis length: about half a face width, so the gizmo stays inside the head.
+    private static let axisLengthMm = 70.0
+    /// Gaze arrow length in result-image pixels: visible at 640x480 without covering the face.
+    private static let gazeArrowPx: CGFloat = 60
+
+    var body: some View {
+        Canvas { context, size in
+            guard let result else { return }
+            let ms = Double(result.timings.totalUs) / 1000
+            context.draw(Text(String(format: "%.1f fps  %.1f ms", fps, ms)).font(.headline).foregroundColor(.white),
+                         at: CGPoint(x: 16, y: 60), anchor: .topLeading)
+            let w = Int(result.frameWidth), h = Int(result.frameHeight)
+            guard let m = ViewMapping(imageSize: CGSize(width: w, height: h), viewSize: size, fill: true) else { return }
+            let camera = defaultIntrinsics(width: w, height: h)
+
+            for face in result.faces {
+                for p in face.landmarkPoints {
+                    let v = m.map(p)
+                    context.fill(Path(ellipseIn: CGRect(x: v.x - 2, y: v.y - 2, width: 4, height: 4)), with: .color(.cyan))
+                }
+                if let a = face.pose.axes(camera: camera, lengthMm: Self.axisLengthMm) {
+                    for (tip, color) in [(a.x, Color.red), (a.y, .green), (a.z, .blue)] {
+                        context.stroke(line(m.map(a.origin), m.map(tip)), with: .color(color), lineWidth: 3)
+                    }
+                }
+                if let g = face.gazeArrows(lengthPx: Self.gazeArrowPx) {
+                    for (from, to) in [g.right, g.left] {
+                        context.stroke(line(m.map(from), m.map(to)), with: .color(.yellow), lineWidth: 2)
+                    }
+                }
+                let mouth = face.gestures.mouth, brows = face.gestures.brows
+                let label = String(format: "%@ %.2f  brows %@ %.2f  yaw %.0f°",
+                                   mouth.name, mouth.probability, brows.name, brows.probability, face.pose.yawDeg)
+                let corner = m.map(CGPoint(x: CGFloat(face.bbox.x), y: CGFloat(face.bbox.y)))
+                context.draw(Text(label).font(.caption).foregroundColor(.white), at: corner, anchor: .bottomLeading)
+            }
+        }
+        .allowsHitTesting(false)
+    }
+
+    private func line(_ a: CGPoint, _ b: CGPoint) -> Path {
+        var p = Path()
+        p.move(to: a)
+        p.addLine(to: b)
+        return p
+    }
+}
