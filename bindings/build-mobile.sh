@@ -32,7 +32,8 @@ command -v llvm-ar >/dev/null || { for v in 19 18 17 16 15 14; do
 status=0
 for t in $TARGETS; do
   echo "== $t"
-  if cargo build -p monotrack-ffi --lib --profile "$PROFILE" --target "$t"; then
+  # Only the staticlib: the crate's cdylib would need the platform linker (NDK / Xcode).
+  if cargo rustc -p monotrack-ffi --lib --profile "$PROFILE" --target "$t" --crate-type staticlib; then
     lib="target/$t/$PROFILE/libmonotrack_ffi.a"
     printf '%s: %s (%s bytes)\n' "$t" "$lib" "$(stat -c %s "$lib")"
   else

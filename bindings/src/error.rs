@@ -38,9 +38,9 @@ impl From<CoreError> for MonotrackError {
         let msg = e.to_string();
         match e {
             CoreError::InvalidFrame(_) => Self::InvalidFrame { msg },
-            CoreError::InvalidCamera(_) | CoreError::InvalidInput(_) | CoreError::InvalidConfig(_) => {
-                Self::InvalidConfig { msg }
-            }
+            CoreError::InvalidCamera(_)
+            | CoreError::InvalidInput(_)
+            | CoreError::InvalidConfig(_) => Self::InvalidConfig { msg },
             CoreError::ModelLoad(_) => Self::ModelLoad { msg },
             CoreError::Internal(_) => Self::Internal { msg },
         }

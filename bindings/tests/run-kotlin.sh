@@ -39,13 +39,14 @@ JUNIT=/usr/share/java/junit-platform-console-standalone.jar
 echo "== compiling Kotlin"
 "$KOTLINC" -jvm-target 17 -nowarn -cp "$JNA:$JUNIT" \
   $(find "$WORK/gen" -name '*.kt') $(find "$ROOT/bindings/tests/kotlin" -name '*.kt') \
+  $(find "$ROOT/android/monotrack/src/jvmMain" "$ROOT/android/monotrack/src/jvmTest" -name 'FrameMapping*.kt') \
   -d "$WORK/classes" 2>&1 | grep -v '^warning' || true
 [ -d "$WORK/classes" ] || { echo "kotlinc failed"; echo "0 passed, 1 failed"; exit 1; }
 
 echo "== running JVM tests"
 set +e
 java -Djna.library.path="$ROOT/target/release" -Dmonotrack.root="$ROOT" \
-  -jar "$JUNIT" execute --disable-banner --details=tree \
+  -jar "$JUNIT" --disable-banner --disable-ansi-colors --details=tree \
   --class-path "$WORK/classes:$JNA:$KOTLIN_LIB/kotlin-stdlib.jar" \
   --scan-class-path "$WORK/classes" > "$WORK/junit.log" 2>&1
 rc=$?

@@ -1,0 +1,241 @@
+//! The records and enums Kotlin and Swift see, and their conversions to and from core types.
+//! Conversions live here only; the core knows nothing of them.
+
+use crate::MonotrackError;
+use monotrack_core::camera::{Intrinsics, Rotation};
+use monotrack_core::fit::{FaceFit, Pose};
+use monotrack_core::image::{FrameDesc as CoreFrameDesc, PixelFormat as CorePixelFormat};
+use monotrack_core::model::{ANIM_UNIT_NAMES, SHAPE_UNIT_NAMES};
+
+/// Pixel formats a frame may arrive in (see `FrameDesc`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum PixelFormat {
+    /// 8-bit R, G, B, A.
+    Rgba8,
+    /// 8-bit B, G, R, A (iOS 32BGRA).
+    Bgra8,
+    /// 8-bit R, G, B.
+    Rgb8,
+    /// 8-bit luma, or a YUV frame's Y plane alone (zero copy from CameraX / CVPixelBuffer plane 0).
+    Gray8,
+    /// Y plane then interleaved V/U in one buffer.
+    Nv21,
+    /// Y plane then interleaved U/V in one buffer.
+    Nv12,
+    /// Y plane, U plane, V plane in one buffer.
+    I420,
+}
+
+/// Describes a frame's bytes. Packed formats: `row_stride` bytes per row (the last row may be
+/// short). YUV in one buffer: Y rows of `row_stride`, then chroma rows of `uv_row_stride` with
+/// samples `uv_pixel_stride` apart. `rotation_degrees`: clockwise rotation that makes the buffer
+/// upright (CameraX `rotationDegrees`); `mirrored`: mirror the upright image (front camera).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Record)]
+pub struct FrameDesc {
+    /// Buffer width, pixels.
+    pub width: u32,
+    /// Buffer height, pixels.
+    pub height: u32,
+    /// Pixel format.
+    pub format: PixelFormat,
+    /// Bytes per row of the first plane.
+    pub row_stride: u32,
+    /// Bytes per chroma row (YUV only, else 0).
+    pub uv_row_stride: u32,
+    /// Bytes between chroma samples (2 interleaved, 1 planar; YUV only, else 0).
+    pub uv_pixel_stride: u32,
+    /// 0, 90, 180 or 270.
+    pub rotation_degrees: u32,
+    /// Mirror the upright image left–right.
+    pub mirrored: bool,
+}
+
+impl TryFrom<FrameDesc> for CoreFrameDesc {
+    type Error = MonotrackError;
+    fn try_from(d: FrameDesc) -> Result<Self, MonotrackError> {
+        let rotation = i32::try_from(d.rotation_degrees)
+            .ok()
+            .filter(|r| r % 90 == 0 && *r < 360)
+            .ok_or_else(|| MonotrackError::InvalidFrame {
+                msg: format!(
+                    "rotation_degrees must be 0, 90, 180 or 270, got {}",
+                    d.rotation_degrees
+                ),
+            })?;
+        Ok(CoreFrameDesc {
+            width: d.width,
+            height: d.height,
+            format: match d.format {
+                PixelFormat::Rgba8 => CorePixelFormat::Rgba8,
+                PixelFormat::Bgra8 => CorePixelFormat::Bgra8,
+                PixelFormat::Rgb8 => CorePixelFormat::Rgb8,
+                PixelFormat::Gray8 => CorePixelFormat::Gray8,
+                PixelFormat::Nv21 => CorePixelFormat::Nv21,
+                PixelFormat::Nv12 => CorePixelFormat::Nv12,
+                PixelFormat::I420 => CorePixelFormat::I420,
+            },
+            row_stride: d.row_stride as usize,
+            chroma_row_stride: d.uv_row_stride as usize,
+            chroma_pixel_stride: d.uv_pixel_stride as usize,
+            rotation: Rotation::from_degrees(rotation)?,
+            mirrored: d.mirrored,
+        })
+    }
+}
+
+/// Pinhole intrinsics in pixels.
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct CameraIntrinsics {
+    /// Focal length x.
+    pub fx: f64,
+    /// Focal length y.
+    pub fy: f64,
+    /// Principal point x.
+    pub cx: f64,
+    /// Principal point y.
+    pub cy: f64,
+}
+
+impl From<CameraIntrinsics> for Intrinsics {
+    fn from(c: CameraIntrinsics) -> Self {
+        Intrinsics {
+            fx: c.fx,
+            fy: c.fy,
+            cx: c.cx,
+            cy: c.cy,
+        }
+    }
+}
+
+impl From<Intrinsics> for CameraIntrinsics {
+    fn from(c: Intrinsics) -> Self {
+        Self {
+            fx: c.fx,
+            fy: c.fy,
+            cx: c.cx,
+            cy: c.cy,
+        }
+    }
+}
+
+/// A 2D point, pixels.
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct Point2 {
+    /// x, right.
+    pub x: f32,
+    /// y, down.
+    pub y: f32,
+}
+
+/// A 3D vector.
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct Vec3 {
+    /// x.
+    pub x: f64,
+    /// y.
+    pub y: f64,
+    /// z.
+    pub z: f64,
+}
+
+/// Head pose: X_cam = R·X_model + t (mm); Euler angles per CONTRACT (R = Rz(roll)·Ry(yaw)·Rx(pitch)).
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct HeadPose {
+    /// R, 9 values row-major.
+    pub rotation: Vec<f64>,
+    /// t, millimetres.
+    pub translation_mm: Vec3,
+    /// Yaw, degrees.
+    pub yaw_deg: f64,
+    /// Pitch, degrees.
+    pub pitch_deg: f64,
+    /// Roll, degrees.
+    pub roll_deg: f64,
+}
+
+impl From<&Pose> for HeadPose {
+    fn from(p: &Pose) -> Self {
+        let (yaw, pitch, roll) = p.euler_deg();
+        Self {
+            rotation: (0..9).map(|k| p.rotation[(k / 3, k % 3)]).collect(),
+            translation_mm: Vec3 {
+                x: p.translation.x,
+                y: p.translation.y,
+                z: p.translation.z,
+            },
+            yaw_deg: yaw,
+            pitch_deg: pitch,
+            roll_deg: roll,
+        }
+    }
+}
+
+/// A named unit value (shape or action unit).
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct NamedValue {
+    /// snake_case name, as in the CLI's JSON.
+    pub name: String,
+    /// Value; ±1 spans the plausible range.
+    pub value: f64,
+}
+
+/// Which 3D fit to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum FitMethod {
+    /// Full perspective multi-step fit.
+    Msbp,
+    /// Weak perspective, ultra-light.
+    Ffbp,
+}
+
+/// A fitted face model.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct FitResult {
+    /// Head pose.
+    pub pose: HeadPose,
+    /// The 11 shape units.
+    pub shape_units: Vec<NamedValue>,
+    /// The 6 animation (action) units.
+    pub action_units: Vec<NamedValue>,
+    /// RMS reprojection error, pixels.
+    pub fit_rms_px: f64,
+    /// Solver iterations.
+    pub iterations: u32,
+    /// Whether the solver ended at a minimum.
+    pub converged: bool,
+}
+
+fn named(names: &[&str], values: &[f64]) -> Vec<NamedValue> {
+    names
+        .iter()
+        .zip(values)
+        .map(|(n, v)| NamedValue {
+            name: (*n).to_string(),
+            value: *v,
+        })
+        .collect()
+}
+
+impl From<&FaceFit> for FitResult {
+    fn from(f: &FaceFit) -> Self {
+        Self {
+            pose: HeadPose::from(&f.pose),
+            shape_units: named(&SHAPE_UNIT_NAMES, &f.shape),
+            action_units: named(&ANIM_UNIT_NAMES, &f.animation),
+            fit_rms_px: f.report.rms_px,
+            iterations: f.report.iterations,
+            converged: f.report.converged,
+        }
+    }
+}
+
+/// An upright 8-bit luma image (what the pipeline sees of a frame).
+#[derive(Debug, Clone, PartialEq, Eq, uniffi::Record)]
+pub struct LumaImage {
+    /// Width after rotation.
+    pub width: u32,
+    /// Height after rotation.
+    pub height: u32,
+    /// Row-major pixels, `width * height` bytes.
+    pub pixels: Vec<u8>,
+}

@@ -1,0 +1,168 @@
+// JVM tests of the generated Kotlin bindings against the host libmonotrack_ffi.so (through JNA).
+// Frames come from the committed public-domain image samples/data/astronaut.jpg, packed as RGBA
+// and NV21 with padded strides, through every rotation; bad input must raise the typed exception.
+package io.monotrack.tests
+
+import io.monotrack.CameraIntrinsics
+import io.monotrack.FitMethod
+import io.monotrack.FrameDesc
+import io.monotrack.MonotrackException
+import io.monotrack.PixelFormat
+import io.monotrack.Point2
+import io.monotrack.fitLandmarks
+import io.monotrack.lumaImage
+import io.monotrack.sdkVersion
+import java.io.File
+import java.nio.ByteBuffer
+import javax.imageio.ImageIO
+import org.junit.jupiter.api.Assertions.assertArrayEquals
+import org.junit.jupiter.api.Assertions.assertEquals
+import org.junit.jupiter.api.Assertions.assertThrows
+import org.junit.jupiter.api.Assertions.assertTrue
+import org.junit.jupiter.api.Test
+
+private val root = File(System.getProperty("monotrack.root") ?: ".")
+
+/** The test image: width, height, and RGB per pixel. */
+private class Rgb(val width: Int, val height: Int, val rgb: IntArray)
+
+private val image: Rgb by lazy {
+    val img = ImageIO.read(File(root, "samples/data/astronaut.jpg"))
+    Rgb(img.width, img.height, img.getRGB(0, 0, img.width, img.height, null, 0, img.width))
+}
+
+/** The SDK's documented luma: BT.601 full range in 8-bit fixed point. */
+private fun luma(p: Int): Int {
+    val r = (p shr 16) and 0xff
+    val g = (p shr 8) and 0xff
+    val b = p and 0xff
+    return (77 * r + 150 * g + 29 * b + 128) shr 8
+}
+
+/** Reference upright luma after a clockwise rotation (then optional mirroring). */
+private fun reference(rot: Int, mirrored: Boolean): Triple<Int, Int, ByteArray> {
+    val (w, h) = image.width to image.height
+    val (ow, oh) = if (rot % 180 == 0) w to h else h to w
+    val out = ByteArray(ow * oh)
+    for (y in 0 until h) for (x in 0 until w) {
+        var (ox, oy) = when (rot) {
+            0 -> x to y
+            90 -> (h - 1 - y) to x
+            180 -> (w - 1 - x) to (h - 1 - y)
+            else -> y to (w - 1 - x)
+        }
+        if (mirrored) ox = ow - 1 - ox
+        out[oy * ow + ox] = luma(image.rgb[y * w + x]).toByte()
+    }
+    return Triple(ow, oh, out)
+}
+
+private fun direct(bytes: ByteArray): ByteBuffer =
+    ByteBuffer.allocateDirect(bytes.size).put(bytes).also { it.rewind() }
+
+private const val PAD = 24
+
+private fun rgbaFrame(): Pair<ByteBuffer, Int> {
+    val stride = image.width * 4 + PAD
+    val bytes = ByteArray(stride * (image.height - 1) + image.width * 4)
+    for (y in 0 until image.height) for (x in 0 until image.width) {
+        val p = image.rgb[y * image.width + x]
+        val o = y * stride + x * 4
+        bytes[o] = (p shr 16).toByte(); bytes[o + 1] = (p shr 8).toByte()
+        bytes[o + 2] = p.toByte(); bytes[o + 3] = 0xff.toByte()
+    }
+    return direct(bytes) to stride
+}
+
+private fun nv21Frame(): Pair<ByteBuffer, Int> {
+    val (w, h) = image.width to image.height
+    val stride = w + PAD
+    val chroma = stride * ((h + 1) / 2)
+    val bytes = ByteArray(stride * h + chroma) { 128.toByte() }
+    for (y in 0 until h) for (x in 0 until w) bytes[y * stride + x] = luma(image.rgb[y * w + x]).toByte()
+    return direct(bytes) to stride
+}
+
+private fun desc(format: PixelFormat, stride: Int, rot: Int, mirrored: Boolean = false, uvRowStride: Int = 0, uvPixelStride: Int = 0) =
+    FrameDesc(image.width.toUInt(), image.height.toUInt(), format, stride.toUInt(), uvRowStride.toUInt(), uvPixelStride.toUInt(), rot.toUInt(), mirrored)
+
+/** Reads the n-th line's landmarks68 from examples/fit_example.jsonl (a flat list of numbers). */
+private fun exampleLandmarks(line: Int): List<Point2> {
+    val text = File(root, "examples/fit_example.jsonl").readLines()[line]
+    val body = text.substringAfter("\"landmarks68\": [").substringBefore("]]")
+    val nums = Regex("-?[0-9.]+").findAll(body).map { it.value.toFloat() }.toList()
+    return nums.chunked(2).map { Point2(it[0], it[1]) }
+}
+
+class BindingsTest {
+    @Test
+    fun versionIsTheCrateVersion() {
+        assertTrue(sdkVersion().matches(Regex("\\d+\\.\\d+\\.\\d+")))
+    }
+
+    @Test
+    fun rgbaFramesWithPaddedStridesInEveryRotation() {
+        val (buf, stride) = rgbaFrame()
+        for (rot in listOf(0, 90, 180, 270)) for (mirrored in listOf(false, true)) {
+            val out = lumaImage(buf, desc(PixelFormat.RGBA8, stride, rot, mirrored))
+            val (ow, oh, want) = reference(rot, mirrored)
+            assertEquals(ow.toUInt(), out.width, "rot $rot")
+            assertEquals(oh.toUInt(), out.height, "rot $rot")
+            assertArrayEquals(want, out.pixels, "rot $rot mirrored $mirrored")
+        }
+    }
+
+    @Test
+    fun nv21FramesReadTheYPlaneInEveryRotation() {
+        val (buf, stride) = nv21Frame()
+        for (rot in listOf(0, 90, 180, 270)) {
+            val out = lumaImage(buf, desc(PixelFormat.NV21, stride, rot, uvRowStride = stride, uvPixelStride = 2))
+            assertArrayEquals(reference(rot, false).third, out.pixels, "rot $rot")
+        }
+    }
+
+    @Test
+    fun badFramesRaiseInvalidFrame() {
+        val (buf, stride) = rgbaFrame()
+        val short = direct(ByteArray(buf.capacity() - 1))
+        val e = assertThrows(MonotrackException.InvalidFrame::class.java) {
+            lumaImage(short, desc(PixelFormat.RGBA8, stride, 0))
+        }
+        assertTrue(e.msg.contains("needs"), e.msg)
+        assertThrows(MonotrackException.InvalidFrame::class.java) {
+            lumaImage(buf, desc(PixelFormat.RGBA8, image.width * 4 - 1, 0))
+        }
+        assertThrows(MonotrackException.InvalidFrame::class.java) {
+            lumaImage(buf, desc(PixelFormat.RGBA8, stride, 45))
+        }
+        val (nv, nvStride) = nv21Frame()
+        assertThrows(MonotrackException.InvalidFrame::class.java) {
+            lumaImage(nv, desc(PixelFormat.NV21, nvStride, 0, uvRowStride = nvStride, uvPixelStride = 1))
+        }
+        val zero = FrameDesc(0u, 10u, PixelFormat.GRAY8, 0u, 0u, 0u, 0u, false)
+        assertThrows(MonotrackException.InvalidFrame::class.java) { lumaImage(buf, zero) }
+    }
+
+    @Test
+    fun fitRecoversTheExamplePoses() {
+        val frontal = fitLandmarks(exampleLandmarks(0), 640u, 480u, null, FitMethod.MSBP)
+        assertEquals(0.0, frontal.pose.yawDeg, 1.5)
+        assertEquals(600.0, frontal.pose.translationMm.z, 18.0)
+        assertEquals(11, frontal.shapeUnits.size)
+        assertEquals("smile", frontal.actionUnits[4].name)
+        val turned = fitLandmarks(exampleLandmarks(1), 640u, 480u, null, FitMethod.FFBP)
+        assertEquals(-35.0, turned.pose.yawDeg, 5.0)
+        assertTrue(turned.fitRmsPx < 5.0)
+    }
+
+    @Test
+    fun badFitInputRaisesInvalidConfig() {
+        assertThrows(MonotrackException.InvalidConfig::class.java) {
+            fitLandmarks(exampleLandmarks(0).take(10), 640u, 480u, null, FitMethod.MSBP)
+        }
+        val nanCamera = CameraIntrinsics(Double.NaN, 500.0, 320.0, 240.0)
+        assertThrows(MonotrackException.InvalidConfig::class.java) {
+            fitLandmarks(exampleLandmarks(0), 640u, 480u, nanCamera, FitMethod.MSBP)
+        }
+    }
+}
