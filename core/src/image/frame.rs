@@ -257,8 +257,15 @@ impl<'a> Frame<'a> {
                         } else {
                             (0, 2)
                         };
-                        for (o, px) in dst_row.iter_mut().zip(row.chunks_exact(bpp)) {
-                            *o = luma(px[ri], px[1], px[bi]);
+                        // A compile-time chunk size lets the compiler vectorise the loop.
+                        if bpp == 4 {
+                            for (o, px) in dst_row.iter_mut().zip(row.chunks_exact(4)) {
+                                *o = luma(px[ri], px[1], px[bi]);
+                            }
+                        } else {
+                            for (o, px) in dst_row.iter_mut().zip(row.chunks_exact(3)) {
+                                *o = luma(px[ri], px[1], px[bi]);
+                            }
                         }
                     }
                     _ => dst_row.copy_from_slice(row),
