@@ -15,6 +15,7 @@ pub mod camera;
 pub mod error;
 pub mod fit;
 pub mod image;
+pub mod landmarks;
 pub mod metrics;
 pub mod model;
 

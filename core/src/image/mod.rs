@@ -79,3 +79,56 @@ impl GrayImage {
         self.data[y * self.width + x]
     }
 }
+
+/// An axis-aligned box in image pixels: top-left corner (x, y), width and height (CONTRACT's
+/// `[x, y, w, h]`). Face boxes from the detector, the tracker and callers all use it; M3 turns any box
+/// into the square of side `max(w, h)` around its centre (`models/M3_IO.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct Rect {
+    /// Left edge, pixels.
+    pub x: f32,
+    /// Top edge, pixels.
+    pub y: f32,
+    /// Width, pixels.
+    pub w: f32,
+    /// Height, pixels.
+    pub h: f32,
+}
+
+impl Rect {
+    /// A box from its corner and size.
+    pub const fn new(x: f32, y: f32, w: f32, h: f32) -> Self {
+        Self { x, y, w, h }
+    }
+
+    /// Centre point.
+    pub fn center(&self) -> [f32; 2] {
+        [self.x + 0.5 * self.w, self.y + 0.5 * self.h]
+    }
+
+    /// Area (0 for degenerate boxes).
+    pub fn area(&self) -> f32 {
+        self.w.max(0.0) * self.h.max(0.0)
+    }
+
+    /// Intersection over union with another box (0 when either is empty).
+    pub fn iou(&self, other: &Rect) -> f32 {
+        let x0 = self.x.max(other.x);
+        let y0 = self.y.max(other.y);
+        let x1 = (self.x + self.w).min(other.x + other.w);
+        let y1 = (self.y + self.h).min(other.y + other.h);
+        let inter = (x1 - x0).max(0.0) * (y1 - y0).max(0.0);
+        let union = self.area() + other.area() - inter;
+        if union > 0.0 { inter / union } else { 0.0 }
+    }
+
+    /// Whether every field is finite and the size positive.
+    pub fn is_valid(&self) -> bool {
+        self.x.is_finite()
+            && self.y.is_finite()
+            && self.w.is_finite()
+            && self.h.is_finite()
+            && self.w > 0.0
+            && self.h > 0.0
+    }
+}

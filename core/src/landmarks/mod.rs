@@ -1,0 +1,69 @@
+//! Landmarks: M3, the multi-level, multi-task landmark and gesture networks (thesis section 3.3).
+//!
+//! Level 1 runs on the face crop and gives 32 landmarks, a 5-class head yaw and a face confidence;
+//! level-2 zone networks (brows, eye — one model, the left eye mirrored — and mouth) run on
+//! similarity-normalised patches plus the level-1 yaw and give their zone's landmarks, gestures and
+//! gaze; the two are merged into the 68-point iBUG order. The preprocessing contract shared with the
+//! training scripts is `models/M3_IO.md`.
+
+/// Number of landmarks in the merged output (iBUG 68).
+pub const N_POINTS: usize = 68;
+
+/// Yaw classes of level 1, degrees (−60: < −60°, −30: −60..−30°, 0: −30..30°, 30: 30..60°,
+/// 60: > 60°).
+pub const YAW_CLASSES_DEG: [i32; 5] = [-60, -30, 0, 30, 60];
+
+/// Mouth gesture names, in [`FaceLandmarks::mouth`] order.
+pub const MOUTH_GESTURES: [&str; 4] = ["smile", "frown", "kiss", "neutral"];
+
+/// Brow gesture names, in [`FaceLandmarks::brows`] order.
+pub const BROW_GESTURES: [&str; 3] = ["raise", "frown", "neutral"];
+
+/// Everything M3 says about one face. Filled in place by the detector (no allocation per call).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FaceLandmarks {
+    /// 68 points in image pixels (CONTRACT pixel convention), iBUG order.
+    pub points: [[f32; 2]; N_POINTS],
+    /// Level-1 yaw class probabilities, [`YAW_CLASSES_DEG`] order.
+    pub yaw_probs: [f32; 5],
+    /// Level-1 face/not-face probability of the crop.
+    pub face_prob: f32,
+    /// Mouth gesture probabilities, [`MOUTH_GESTURES`] order.
+    pub mouth: [f32; 4],
+    /// Brow gesture probabilities, [`BROW_GESTURES`] order.
+    pub brows: [f32; 3],
+    /// Unit gaze vector of the subject's left eye (points 42–47), camera frame.
+    pub gaze_left: [f32; 3],
+    /// Unit gaze vector of the subject's right eye (points 36–41), camera frame.
+    pub gaze_right: [f32; 3],
+    /// Normalised sum of both eyes' gaze vectors, camera frame.
+    pub gaze_combined: [f32; 3],
+}
+
+impl Default for FaceLandmarks {
+    fn default() -> Self {
+        Self {
+            points: [[0.0; 2]; N_POINTS],
+            yaw_probs: [0.0; 5],
+            face_prob: 0.0,
+            mouth: [0.0; 4],
+            brows: [0.0; 3],
+            gaze_left: [0.0, 0.0, 1.0],
+            gaze_right: [0.0, 0.0, 1.0],
+            gaze_combined: [0.0, 0.0, 1.0],
+        }
+    }
+}
+
+impl FaceLandmarks {
+    /// The most probable yaw class, degrees.
+    pub fn yaw_class_deg(&self) -> i32 {
+        let mut best = 0;
+        for i in 1..5 {
+            if self.yaw_probs[i] > self.yaw_probs[best] {
+                best = i;
+            }
+        }
+        YAW_CLASSES_DEG[best]
+    }
+}
