@@ -57,15 +57,16 @@ class M3:
             # patch u -> W - u: sample at A(W - u, v)
             A = A @ np.array([[-1.0, 0, W], [0, 1, 0], [0, 0, 1]])
         patch = D.zone_filter(z, D.sample(gray, A, W, H))
-        lm, extra = sess.run(None, {"patch": (patch / 255.0).astype(np.float32)[None, None],
-                                    "yaw": yaw[None].astype(np.float32)})
-        pts = D.apply(A, lm.reshape(-1, 2) * [W, H])
-        return pts, extra[0], A
+        outs = sess.run(None, {"patch": (patch / 255.0).astype(np.float32)[None, None],
+                               "yaw": yaw[None].astype(np.float32)})
+        pts = D.apply(A, outs[0].reshape(-1, 2) * [W, H])
+        return pts, outs[-1][0], A
 
     def run(self, gray, box):
         pts32, yaw, face = self.l1.run(gray, box)
         out68 = np.zeros((68, 2))
         out68[self.cfg["level1"]["indices68"]] = pts32
+        l1 = out68.copy()  # zone reference points always come from level 1 (M3_IO.md)
         res = {"yaw_probs": yaw, "face_prob": face}
         for name, (z, sess) in self.zones.items():
             r = z["ref68"]
@@ -73,7 +74,7 @@ class M3:
                 gazes = {}
                 for side, refs, idx, mirror in (("right", z["ref68"], z["indices68"], False),
                                                 ("left", z["mirror_ref68"], z["mirror_indices68"], True)):
-                    pts, g, A = self._zone(z, sess, gray, out68[refs[0]], out68[refs[1]], yaw, mirror)
+                    pts, g, A = self._zone(z, sess, gray, l1[refs[0]], l1[refs[1]], yaw, mirror)
                     out68[idx] = pts
                     phi = np.arctan2(A[1, 0], A[0, 0]) if not mirror else np.arctan2(-A[1, 0], -A[0, 0])
                     gx, gy = (-g[0], g[1]) if mirror else (g[0], g[1])
@@ -84,8 +85,9 @@ class M3:
                 res["gaze"] = {"left": gazes["left"], "right": gazes["right"],
                                "combined": comb / max(np.linalg.norm(comb), 1e-9)}
             else:
-                pts, g, _ = self._zone(z, sess, gray, out68[r[0]], out68[r[1]], yaw, False)
+                pts, g, _ = self._zone(z, sess, gray, l1[r[0]], l1[r[1]], yaw, False)
                 out68[z["indices68"]] = pts
-                res[name] = dict(zip(z["gestures"], softmax(g).tolist()))
+                if z.get("gestures"):
+                    res[name] = dict(zip(z["gestures"], softmax(g).tolist()))
         res["landmarks68"] = out68
         return res

@@ -58,8 +58,11 @@ class Level2(nn.Module):
 
     def forward(self, patch, yaw):
         h = self.fc2(torch.cat([self.fc1(self.trunk(patch)), yaw], dim=1))
-        extra = self.gestures(h) if self.gestures is not None else self.gaze(h)
-        return self.landmarks(h), extra
+        if self.gestures is not None:
+            return self.landmarks(h), self.gestures(h)
+        if self.gaze is not None:
+            return self.landmarks(h), self.gaze(h)
+        return (self.landmarks(h),)
 
 
 def n_params(m):

@@ -200,7 +200,7 @@ def zone_batch(name, data, rng, weights, genki=None):
             G[k] = f["mouth"]
         elif name == "brows":
             G[k] = f["brows"]
-        elif f["gaze"] is not None:
+        elif name == "eye" and f["gaze"] is not None:
             g = f["gaze"][0]  # the right eye's (the mirrored faces carry the other eye here)
             # camera frame -> patch frame: undo the patch's in-plane rotation
             phi = np.arctan2(A[1, 0], A[0, 0])
@@ -256,13 +256,13 @@ def train_level1(data, steps, fh):
 def train_zone(name, data, steps, fh, genki=None):
     zone = D.ZONES[name]
     gest = len(zone.get("gestures", []))
-    channels = (8, 16, 32) if name == "eye" else (8, 16, 32, 48)
+    channels = {"eye": (8, 16, 32), "face": (8, 16, 32, 64)}.get(name, (8, 16, 32, 48))
     model = Level2(zone["width"], zone["height"], len(zone["indices68"]), gest, bool(zone.get("gaze")),
                    channels=channels)
     log(fh, f"{name}: {n_params(model)} parameters, {steps} steps of {BATCH}")
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=WEIGHT_DECAY)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=3e-3, total_steps=steps, pct_start=0.1)
-    rng = np.random.default_rng(SEED + {"brows": 2, "eye": 3, "mouth": 4}[name])
+    rng = np.random.default_rng(SEED + {"brows": 2, "eye": 3, "mouth": 4, "face": 5}[name])
     if gest:
         labels = [f[name] for f in data.faces]
         weights = balanced_weights(labels, gest)
@@ -277,7 +277,8 @@ def train_zone(name, data, steps, fh, genki=None):
     model.train()
     for step in range(steps):
         X, Y, YAW, G, GZ, GZM, SM, LM = zone_batch(name, data, rng, weights, genki)
-        lm, extra = model(X, YAW)
+        out = model(X, YAW)
+        lm, extra = out[0], out[-1]
         l_lm = (point_loss(lm, Y) * LM).sum() / LM.sum().clamp(min=1)
         l_x = lm.sum() * 0
         if gest:
@@ -290,6 +291,8 @@ def train_zone(name, data, steps, fh, genki=None):
                 p = F.softmax(extra[s], dim=1)[:, 0].clamp(1e-6, 1 - 1e-6)
                 l_x = l_x + F.binary_cross_entropy(p, SM[s])
             loss = l_lm + GESTURE_WEIGHT * l_x
+        elif not zone.get("gaze"):
+            loss = l_lm
         else:
             g = F.normalize(extra, dim=1)
             l_x = ((1 - (g * GZ).sum(1)) * GZM).sum() / GZM.sum().clamp(min=1)
@@ -334,7 +337,7 @@ def genki_with_refs(level1_path, split):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps-scale", type=float, default=1.0)
-    ap.add_argument("--only", default="level1,brows,eye,mouth")
+    ap.add_argument("--only", default="level1,brows,eye,mouth,face")
     a = ap.parse_args()
     random.seed(SEED)
     np.random.seed(SEED)
@@ -347,11 +350,11 @@ def main():
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}")
     data = Data("train")
     log(fh, f"train faces (with mirrors): {len(data.faces)} from {len(data.imgs)} images")
-    steps = {k: int(v * a.steps_scale) for k, v in {"level1": 6000, "brows": 2000, "eye": 2000, "mouth": 2500}.items()}
+    steps = {k: int(v * a.steps_scale) for k, v in {"level1": 6000, "brows": 2000, "eye": 2000, "mouth": 2500, "face": 3000}.items()}
     if "level1" in only:
         m = train_level1(data, steps["level1"], fh)
         export(m, os.path.join(OUT, "level1.onnx"), ["image"], [(1, 1, 64, 64)], ["landmarks", "yaw_logits", "face_logit"])
-    for name in ("brows", "eye", "mouth"):
+    for name in ("brows", "eye", "mouth", "face"):
         if name not in only:
             continue
         z = D.ZONES[name]
@@ -359,7 +362,7 @@ def main():
         if genki is not None:
             log(fh, f"GENKI-4K train crops for the mouth smile head: {len(genki)}")
         m = train_zone(name, data, steps[name], fh, genki)
-        outs = ["landmarks", "gaze" if z.get("gaze") else "gesture_logits"]
+        outs = ["landmarks"] + (["gaze"] if z.get("gaze") else ["gesture_logits"] if z.get("gestures") else [])
         export(m, os.path.join(OUT, f"{name}.onnx"), ["patch", "yaw"], [(1, 1, z["height"], z["width"]), (1, 5)], outs)
     write_config()
     log(fh, f"done {only}")
