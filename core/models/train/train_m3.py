@@ -23,8 +23,9 @@ import torch.nn.functional as F
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import m3data as D  # noqa: E402
 from m3nets import Level1, Level2, n_params  # noqa: E402
+import onnx_f16  # noqa: E402
 
-OUT = os.path.join(D.REPO, "core", "models", "m3")
+OUT = os.environ.get("MONOTRACK_M3_OUT", os.path.join(D.REPO, "core", "models", "m3"))
 SEED = 20261122
 # Landmark coordinates (crop/patch units 0..1) are scaled by this before the landmark loss so its size
 # is comparable with the cross-entropy terms (eq. 3.3's weighting). The loss is the point-to-point
@@ -313,6 +314,7 @@ def export(model, path, names_in, shapes_in, names_out):
     args = tuple(torch.zeros(s) for s in shapes_in)
     torch.onnx.export(model, args, path, input_names=names_in, output_names=names_out, opset_version=17,
                       dynamo=False, do_constant_folding=True)
+    onnx_f16.to_f16(path)
 
 
 def genki_with_refs(level1_path, split):
