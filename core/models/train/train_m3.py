@@ -352,7 +352,7 @@ def main():
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}")
     data = Data("train")
     log(fh, f"train faces (with mirrors): {len(data.faces)} from {len(data.imgs)} images")
-    steps = {k: int(v * a.steps_scale) for k, v in {"level1": 6000, "brows": 2000, "eye": 2000, "mouth": 2500, "face": 3000}.items()}
+    steps = {k: int(v * a.steps_scale) for k, v in {"level1": 6000, "brows": 4000, "eye": 4000, "mouth": 5000, "face": 6000}.items()}
     if "level1" in only:
         m = train_level1(data, steps["level1"], fh)
         export(m, os.path.join(OUT, "level1.onnx"), ["image"], [(1, 1, 64, 64)], ["landmarks", "yaw_logits", "face_logit"])
