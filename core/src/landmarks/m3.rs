@@ -8,19 +8,26 @@ use super::{BROW_GESTURES, FaceLandmarks, MOUTH_GESTURES, N_POINTS, YAW_CLASSES_
 use crate::error::{Error, Result};
 use crate::image::{GrayImage, Rect};
 use serde::Deserialize;
+use std::collections::BTreeMap;
 
-/// The shipped weights, trained by `models/train/train_m3.py`.
-const EMBEDDED_JSON: &[u8] = include_bytes!("../../models/m3/m3.json");
-const EMBEDDED_LEVEL1: &[u8] = include_bytes!("../../models/m3/level1.onnx");
-const EMBEDDED_BROWS: &[u8] = include_bytes!("../../models/m3/brows.onnx");
-const EMBEDDED_EYE: &[u8] = include_bytes!("../../models/m3/eye.onnx");
-const EMBEDDED_MOUTH: &[u8] = include_bytes!("../../models/m3/mouth.onnx");
+/// The shipped weights and configuration, trained by `models/train/train_m3.py`, by file name
+/// (the names `m3.json` refers to). A new zone network needs one line here.
+pub const EMBEDDED_FILES: &[(&str, &[u8])] = &[
+    ("m3.json", include_bytes!("../../models/m3/m3.json")),
+    ("level1.onnx", include_bytes!("../../models/m3/level1.onnx")),
+    ("brows.onnx", include_bytes!("../../models/m3/brows.onnx")),
+    ("eye.onnx", include_bytes!("../../models/m3/eye.onnx")),
+    ("mouth.onnx", include_bytes!("../../models/m3/mouth.onnx")),
+];
 
 /// Number of level-1 landmarks (`M3_IO.md`).
 const N_LEVEL1: usize = 32;
 /// Largest crop or patch side accepted from `m3.json`: far above any sensible network input, it
 /// only stops a corrupt configuration from asking for huge buffers.
 const MAX_INPUT_SIDE: usize = 1024;
+/// Largest bilateral diameter accepted from `m3.json` (a corrupt value must not ask for a huge
+/// kernel; the zones use 5).
+const MAX_BILATERAL_D: i32 = 31;
 /// Floor of a vector norm before normalising (the Python reference uses the same).
 const NORM_EPS: f64 = 1e-9;
 
@@ -85,17 +92,6 @@ pub struct ZoneConfig {
     pub gaze: bool,
 }
 
-/// `zones` of `m3.json`.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-pub struct ZonesConfig {
-    /// Both brows in one patch.
-    pub brows: ZoneConfig,
-    /// The subject's right eye; the left eye runs mirrored through the same net.
-    pub eye: ZoneConfig,
-    /// Mouth, inner lips included.
-    pub mouth: ZoneConfig,
-}
-
 /// `m3.json`: everything the inference needs besides the weights (`models/M3_IO.md`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 pub struct M3Config {
@@ -103,8 +99,10 @@ pub struct M3Config {
     pub version: u32,
     /// Level-1 network.
     pub level1: Level1Config,
-    /// Level-2 networks.
-    pub zones: ZonesConfig,
+    /// Level-2 networks by zone name. `brows` (brow gestures), `eye` (gaze; the left eye runs
+    /// mirrored) and `mouth` (mouth gestures) are required; further zones (e.g. `face`) give
+    /// landmarks only.
+    pub zones: BTreeMap<String, ZoneConfig>,
 }
 
 fn bad(msg: String) -> Error {
@@ -130,40 +128,88 @@ fn check_indices(what: &str, idx: &[usize], n: usize, covered: &mut [bool; N_POI
     Ok(())
 }
 
+/// What a zone's outputs mean to [`FaceLandmarks`] besides its points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ZoneKind {
+    /// Brow gesture logits ([`BROW_GESTURES`]).
+    Brows,
+    /// Mouth gesture logits ([`MOUTH_GESTURES`]).
+    Mouth,
+    /// Gaze; run twice, the left eye mirrored.
+    Eye,
+    /// Landmarks only (e.g. the `face` zone refining jaw and nose).
+    Plain,
+}
+
+impl ZoneKind {
+    fn of(name: &str) -> Self {
+        match name {
+            "brows" => Self::Brows,
+            "mouth" => Self::Mouth,
+            "eye" => Self::Eye,
+            _ => Self::Plain,
+        }
+    }
+
+    /// Required landmark count and gesture names of the thesis' zones.
+    fn contract(self) -> (Option<usize>, Option<&'static [&'static str]>) {
+        match self {
+            Self::Brows => (Some(10), Some(&BROW_GESTURES)),
+            Self::Mouth => (Some(20), Some(&MOUTH_GESTURES)),
+            Self::Eye => (Some(6), None),
+            Self::Plain => (None, None),
+        }
+    }
+}
+
 impl ZoneConfig {
-    fn validate(
-        &self,
-        name: &str,
-        n_points: usize,
-        gestures: Option<&[&str]>,
-        covered: &mut [bool; N_POINTS],
-    ) -> Result<()> {
+    fn validate(&self, name: &str, covered: &mut [bool; N_POINTS]) -> Result<()> {
+        let kind = ZoneKind::of(name);
         check_side(&format!("{name}.width"), self.width)?;
         check_side(&format!("{name}.height"), self.height)?;
         let [t0, t1] = self.template;
         if !t0.iter().chain(&t1).all(|v| v.is_finite()) || t0 == t1 {
-            return Err(bad(format!("{name}.template must hold two distinct finite points")));
+            return Err(bad(format!(
+                "{name}.template must hold two distinct finite points"
+            )));
         }
         for r in self.ref68.iter().chain(self.mirror_ref68.iter().flatten()) {
             if *r >= N_POINTS {
                 return Err(bad(format!("{name}: reference index {r} ≥ {N_POINTS}")));
             }
         }
-        check_indices(&format!("{name}.indices68"), &self.indices68, n_points, covered)?;
+        let (n_points, gestures) = kind.contract();
+        let n = n_points.unwrap_or(self.indices68.len().max(1));
+        check_indices(&format!("{name}.indices68"), &self.indices68, n, covered)?;
         if let Some(b) = &self.bilateral {
-            if !(b.sigma_color.is_finite() && b.sigma_space.is_finite()) || b.d > 31 {
+            if !(b.sigma_color.is_finite() && b.sigma_space.is_finite()) || b.d > MAX_BILATERAL_D {
                 return Err(bad(format!("{name}.bilateral out of range: {b:?}")));
             }
         }
-        match (gestures, &self.gestures) {
-            (None, None) => {}
-            (Some(want), Some(got)) if got.iter().map(String::as_str).eq(want.iter().copied()) => {
-            }
-            (want, got) => {
-                return Err(bad(format!("{name}.gestures = {got:?}, expected {want:?}")));
-            }
+        let got = self.gestures.as_deref().filter(|g| !g.is_empty());
+        let same = match (gestures, got) {
+            (None, None) => true,
+            (Some(want), Some(got)) => got.iter().map(String::as_str).eq(want.iter().copied()),
+            _ => false,
+        };
+        if !same {
+            return Err(bad(format!(
+                "{name}.gestures = {got:?}, expected {gestures:?}"
+            )));
         }
-        Ok(())
+        if self.gaze != (kind == ZoneKind::Eye) {
+            return Err(bad(format!("{name}.gaze = {}: only the eye gives gaze", self.gaze)));
+        }
+        match (kind, &self.mirror_ref68, &self.mirror_indices68) {
+            (ZoneKind::Eye, Some(_), Some(mi)) => {
+                check_indices(&format!("{name}.mirror_indices68"), mi, n, covered)
+            }
+            (ZoneKind::Eye, _, _) => Err(bad(format!(
+                "{name} needs mirror_ref68 and mirror_indices68"
+            ))),
+            (_, None, None) => Ok(()),
+            _ => Err(bad(format!("{name}: only the eye zone is mirrored"))),
+        }
     }
 }
 
@@ -172,7 +218,7 @@ impl M3Config {
     ///
     /// # Errors
     /// [`Error::ModelLoad`] for malformed JSON or values that break the `M3_IO.md` contract
-    /// (index counts, gesture order, uncovered points, sizes).
+    /// (index counts, gesture order, missing zones, uncovered points, sizes).
     pub fn from_json(bytes: &[u8]) -> Result<Self> {
         let cfg: Self = serde_json::from_slice(bytes).map_err(|e| bad(e.to_string()))?;
         cfg.validate()?;
@@ -181,7 +227,10 @@ impl M3Config {
 
     fn validate(&self) -> Result<()> {
         if self.version != 1 {
-            return Err(bad(format!("version {} (this build reads 1)", self.version)));
+            return Err(bad(format!(
+                "version {} (this build reads 1)",
+                self.version
+            )));
         }
         let l1 = &self.level1;
         check_side("level1.input_size", l1.input_size)?;
@@ -196,18 +245,13 @@ impl M3Config {
         }
         let mut covered = [false; N_POINTS];
         check_indices("level1.indices68", &l1.indices68, N_LEVEL1, &mut covered)?;
-        let z = &self.zones;
-        z.brows
-            .validate("brows", 10, Some(&BROW_GESTURES), &mut covered)?;
-        z.mouth
-            .validate("mouth", 20, Some(&MOUTH_GESTURES), &mut covered)?;
-        z.eye.validate("eye", 6, None, &mut covered)?;
-        let (Some(_), Some(mi)) = (&z.eye.mirror_ref68, &z.eye.mirror_indices68) else {
-            return Err(bad("eye needs mirror_ref68 and mirror_indices68".into()));
-        };
-        check_indices("eye.mirror_indices68", mi, 6, &mut covered)?;
-        if !z.eye.gaze || z.brows.gaze || z.mouth.gaze {
-            return Err(bad("only the eye zone outputs gaze".into()));
+        for required in ["brows", "eye", "mouth"] {
+            if !self.zones.contains_key(required) {
+                return Err(bad(format!("zone {required:?} missing")));
+            }
+        }
+        for (name, z) in &self.zones {
+            z.validate(name, &mut covered)?;
         }
         if let Some(i) = covered.iter().position(|c| !c) {
             return Err(bad(format!("landmark {i} is produced by no network")));
@@ -216,11 +260,16 @@ impl M3Config {
     }
 }
 
-/// A level-2 zone at run time: its map parameters, network and patch buffers.
+/// A level-2 zone at run time: its configuration, network and patch buffers.
 #[derive(Debug)]
 struct Zone {
+    kind: ZoneKind,
     width: usize,
     height: usize,
+    ref68: [usize; 2],
+    indices68: Vec<usize>,
+    /// The mirrored eye's references and indices.
+    mirror: Option<([usize; 2], Vec<usize>)>,
     /// Template positions in patch pixels.
     q: [[f64; 2]; 2],
     bilateral: Option<Bilateral>,
@@ -231,19 +280,37 @@ struct Zone {
 }
 
 impl Zone {
-    fn new(name: &str, cfg: &ZoneConfig, bytes: &[u8], extra: (&str, usize)) -> Result<Self> {
+    fn new(name: &str, cfg: &ZoneConfig, bytes: &[u8]) -> Result<Self> {
+        let kind = ZoneKind::of(name);
         let (w, h) = (cfg.width, cfg.height);
-        let net = Net::load(
+        let n_gestures = cfg.gestures.as_ref().map_or(0, Vec::len);
+        let mut outputs = vec!["landmarks"];
+        let mut sizes = vec![2 * cfg.indices68.len()];
+        if n_gestures > 0 {
+            outputs.push("gesture_logits");
+            sizes.push(n_gestures);
+        }
+        if cfg.gaze {
+            outputs.push("gaze");
+            sizes.push(3);
+        }
+        let mut net = Net::load(
             name,
             bytes,
             &[("patch", &[1, 1, h, w]), ("yaw", &[1, 5])],
-            &["landmarks", extra.0],
+            &outputs,
         )?;
-        let q = cfg.template.map(|t| [t[0] * w as f64, t[1] * h as f64]);
-        let mut zone = Self {
+        check_outputs(name, &mut net, &sizes)?;
+        Ok(Self {
+            kind,
             width: w,
             height: h,
-            q,
+            ref68: cfg.ref68,
+            indices68: cfg.indices68.clone(),
+            mirror: cfg
+                .mirror_ref68
+                .zip(cfg.mirror_indices68.clone()),
+            q: cfg.template.map(|t| [t[0] * w as f64, t[1] * h as f64]),
             bilateral: cfg
                 .bilateral
                 .map(|b| Bilateral::new(b.d, b.sigma_color, b.sigma_space)),
@@ -251,25 +318,36 @@ impl Zone {
             net,
             patch: Vec::with_capacity(w * h),
             filtered: vec![0; w * h],
+        })
+    }
+
+    /// The patch map from the two reference points (image pixels), `M3_IO.md`.
+    fn map(&self, p0: [f64; 2], p1: [f64; 2], mirror: bool) -> Result<Affine> {
+        let [q0, q1] = self.q;
+        let w = self.width as f64;
+        let (q0, q1) = if mirror {
+            ([w - q0[0], q0[1]], [w - q1[0], q1[1]])
+        } else {
+            (q0, q1)
         };
-        zone.check_outputs(name, 2 * cfg.indices68.len(), extra.1)?;
-        Ok(zone)
+        let map = Affine::similarity(p0, p1, q0, q1).ok_or_else(|| {
+            Error::Internal(format!(
+                "non-finite level-1 reference points {p0:?}, {p1:?}"
+            ))
+        })?;
+        Ok(if mirror { map.mirrored_x(w) } else { map })
     }
 
-    /// Runs the net once on zeros to check the output sizes (and warm the plan up).
-    fn check_outputs(&mut self, name: &str, n_landmarks: usize, n_extra: usize) -> Result<()> {
-        self.net.run()?;
-        let (a, b) = (self.net.output(0)?.len(), self.net.output(1)?.len());
-        if (a, b) != (n_landmarks, n_extra) {
-            return Err(Error::ModelLoad(format!(
-                "{name}: outputs of {a} and {b} values, expected {n_landmarks} and {n_extra}"
-            )));
-        }
-        Ok(())
-    }
-
-    /// Samples, filters and runs the zone for the patch map `map`; outputs stay in the net.
-    fn run(&mut self, image: &GrayImage, map: &Affine, yaw: &[f32; 5]) -> Result<()> {
+    /// Samples, filters and runs the zone for the patch map `map`; writes its points through
+    /// `map` into `pts[indices]`. The other outputs stay in the net.
+    fn run(
+        &mut self,
+        image: &GrayImage,
+        map: &Affine,
+        yaw: &[f32; 5],
+        mirrored: bool,
+        pts: &mut [[f64; 2]; N_POINTS],
+    ) -> Result<()> {
         let (w, h) = (self.width, self.height);
         sample(image, map, w, h, &mut self.patch)?;
         if let Some(b) = &mut self.bilateral {
@@ -283,8 +361,54 @@ impl Zone {
         let src = &self.patch;
         self.net.fill_input(0, |x| to_unit(src, x))?;
         self.net.fill_input(1, |x| x.copy_from_slice(yaw))?;
-        self.net.run()
+        self.net.run()?;
+        let idx = match (&self.mirror, mirrored) {
+            (Some((_, mi)), true) => mi,
+            _ => &self.indices68,
+        };
+        let lm = self.net.output(0)?;
+        let (wf, hf) = (w as f64, h as f64);
+        for (k, &i) in idx.iter().enumerate() {
+            pts[i] = map.apply([f64::from(lm[2 * k]) * wf, f64::from(lm[2 * k + 1]) * hf]);
+        }
+        Ok(())
     }
+
+    /// One eye: runs the zone and returns the unit gaze in the camera frame.
+    fn run_eye(
+        &mut self,
+        image: &GrayImage,
+        refs: &[[f64; 2]; N_POINTS],
+        yaw: &[f32; 5],
+        mirrored: bool,
+        pts: &mut [[f64; 2]; N_POINTS],
+    ) -> Result<[f64; 3]> {
+        let r = match (&self.mirror, mirrored) {
+            (Some((r, _)), true) => *r,
+            _ => self.ref68,
+        };
+        let map = self.map(refs[r[0]], refs[r[1]], mirrored)?;
+        self.run(image, &map, yaw, mirrored, pts)?;
+        let g = self.net.output(1)?;
+        // Patch frame → camera frame: the patch axes as image unit vectors. For the mirrored eye
+        // the u axis points the other way, which is M3_IO.md's "gaze x negated".
+        let xy = map.rotate_unit([f64::from(g[0]), f64::from(g[1])]);
+        Ok(normalized([xy[0], xy[1], f64::from(g[2])]))
+    }
+}
+
+/// Runs `net` once on its zero inputs to check its output sizes (and warm its plan up).
+fn check_outputs(name: &str, net: &mut Net, sizes: &[usize]) -> Result<()> {
+    net.run()?;
+    for (k, &want) in sizes.iter().enumerate() {
+        let got = net.output(k)?.len();
+        if got != want {
+            return Err(Error::ModelLoad(format!(
+                "{name}: output {k} has {got} values, expected {want}"
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// u8 pixels → float32 `pixel / 255` (`M3_IO.md`, network input).
@@ -316,9 +440,7 @@ fn normalized(v: [f64; 3]) -> [f64; 3] {
 pub struct M3 {
     cfg: M3Config,
     level1: Net,
-    brows: Zone,
-    eye: Zone,
-    mouth: Zone,
+    zones: Vec<Zone>,
     crop: Vec<u8>,
     /// The merged 68 points of the face in progress, image pixels.
     pts: [[f64; 2]; N_POINTS],
@@ -333,62 +455,53 @@ struct Level1Out {
 }
 
 impl M3 {
-    /// The detector with the weights embedded in the library (`models/m3/`).
+    /// The detector with the weights embedded in the library ([`EMBEDDED_FILES`], `models/m3/`).
     ///
     /// # Errors
     /// [`Error::ModelLoad`] if the embedded models cannot be loaded (a build defect).
     pub fn new() -> Result<Self> {
-        Self::from_bytes(
-            EMBEDDED_JSON,
-            EMBEDDED_LEVEL1,
-            EMBEDDED_BROWS,
-            EMBEDDED_EYE,
-            EMBEDDED_MOUTH,
-        )
+        let json = EMBEDDED_FILES
+            .iter()
+            .find(|(n, _)| *n == "m3.json")
+            .map(|(_, b)| *b)
+            .ok_or_else(|| Error::ModelLoad("m3.json not embedded".into()))?;
+        Self::from_bytes(json, EMBEDDED_FILES)
     }
 
-    /// The detector from other weights: `m3.json` and the four ONNX files (`models/M3_IO.md`).
+    /// The detector from other weights: `m3.json` and the network files it names, given as
+    /// (file name, ONNX bytes) pairs (`models/M3_IO.md`).
     ///
     /// # Errors
-    /// [`Error::ModelLoad`] for malformed JSON, a configuration that breaks the contract, ONNX
-    /// bytes tract cannot load, or networks whose inputs/outputs do not match the contract.
-    pub fn from_bytes(
-        json: &[u8],
-        level1: &[u8],
-        brows: &[u8],
-        eye: &[u8],
-        mouth: &[u8],
-    ) -> Result<Self> {
+    /// [`Error::ModelLoad`] for malformed JSON, a configuration that breaks the contract, a file
+    /// it names that is not given, ONNX bytes tract cannot load, or networks whose inputs/outputs
+    /// do not match the contract.
+    pub fn from_bytes(json: &[u8], files: &[(&str, &[u8])]) -> Result<Self> {
         let cfg = M3Config::from_json(json)?;
+        let file = |name: &str| {
+            files
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map(|(_, b)| *b)
+                .ok_or_else(|| Error::ModelLoad(format!("model file {name:?} not given")))
+        };
         let s = cfg.level1.input_size;
         let mut level1 = Net::load(
             "level1",
-            level1,
+            file(&cfg.level1.file)?,
             &[("image", &[1, 1, s, s])],
             &["landmarks", "yaw_logits", "face_logit"],
         )?;
-        level1.run()?;
-        let sizes = [
-            level1.output(0)?.len(),
-            level1.output(1)?.len(),
-            level1.output(2)?.len(),
-        ];
-        if sizes != [2 * N_LEVEL1, 5, 1] {
-            return Err(Error::ModelLoad(format!(
-                "level1: outputs of {sizes:?} values, expected [64, 5, 1]"
-            )));
-        }
-        let z = &cfg.zones;
-        let brows = Zone::new("brows", &z.brows, brows, ("gesture_logits", 3))?;
-        let eye = Zone::new("eye", &z.eye, eye, ("gaze", 3))?;
-        let mouth = Zone::new("mouth", &z.mouth, mouth, ("gesture_logits", 4))?;
+        check_outputs("level1", &mut level1, &[2 * N_LEVEL1, 5, 1])?;
+        let zones = cfg
+            .zones
+            .iter()
+            .map(|(name, z)| Zone::new(name, z, file(&z.file)?))
+            .collect::<Result<Vec<_>>>()?;
         Ok(Self {
             crop: Vec::with_capacity(s * s),
             cfg,
             level1,
-            brows,
-            eye,
-            mouth,
+            zones,
             pts: [[0.0; 2]; N_POINTS],
             ref_pts: [[0.0; 2]; N_POINTS],
         })
@@ -453,59 +566,9 @@ impl M3 {
     ///
     /// # Errors
     /// [`Error::InvalidInput`] for an empty image or a non-finite / empty box;
-    /// [`Error::Internal`] if a network fails to run.
+    /// [`Error::Internal`] if the network fails to run.
     pub fn face_confidence(&mut self, image: &GrayImage, face: &Rect) -> Result<f32> {
         Ok(self.run_level1(image, face)?.face_prob)
-    }
-
-    /// The patch map of a zone from two reference points (image pixels).
-    fn zone_map(zone: &Zone, p0: [f64; 2], p1: [f64; 2], mirror: bool) -> Result<Affine> {
-        let [q0, q1] = zone.q;
-        let (q0, q1) = if mirror {
-            let w = zone.width as f64;
-            ([w - q0[0], q0[1]], [w - q1[0], q1[1]])
-        } else {
-            (q0, q1)
-        };
-        let map = Affine::similarity(p0, p1, q0, q1).ok_or_else(|| {
-            Error::Internal(format!("non-finite level-1 reference points {p0:?}, {p1:?}"))
-        })?;
-        Ok(if mirror {
-            map.mirrored_x(zone.width as f64)
-        } else {
-            map
-        })
-    }
-
-    /// Maps a zone net's landmarks (patch units) through `map` into `self.pts[indices]`.
-    fn put_zone_points(pts: &mut [[f64; 2]; N_POINTS], zone: &Zone, map: &Affine, idx: &[usize]) -> Result<()> {
-        let lm = zone.net.output(0)?;
-        let (w, h) = (zone.width as f64, zone.height as f64);
-        for (k, &i) in idx.iter().enumerate() {
-            pts[i] = map.apply([f64::from(lm[2 * k]) * w, f64::from(lm[2 * k + 1]) * h]);
-        }
-        Ok(())
-    }
-
-    /// One eye through the eye net; returns its unit gaze in the camera frame.
-    fn run_eye(&mut self, image: &GrayImage, yaw: &[f32; 5], mirror: bool) -> Result<[f64; 3]> {
-        let cfg = &self.cfg.zones.eye;
-        let (refs, idx) = if mirror {
-            match (&cfg.mirror_ref68, &cfg.mirror_indices68) {
-                (Some(r), Some(i)) => (*r, i.as_slice()),
-                _ => return Err(Error::Internal("eye mirror configuration missing".into())),
-            }
-        } else {
-            (cfg.ref68, cfg.indices68.as_slice())
-        };
-        let map = Self::zone_map(&self.eye, self.ref_pts[refs[0]], self.ref_pts[refs[1]], mirror)?;
-        self.eye.run(image, &map, yaw)?;
-        Self::put_zone_points(&mut self.pts, &self.eye, &map, idx)?;
-        let g = self.eye.net.output(1)?;
-        // Patch frame → camera frame: the patch axes as image unit vectors (for the mirrored eye
-        // the u axis points image-left, which is the x negation of M3_IO.md).
-        let xy = map.rotate_unit([f64::from(g[0]), f64::from(g[1])]);
-        Ok(normalized([xy[0], xy[1], f64::from(g[2])]))
     }
 
     /// Landmarks, yaw, face confidence, gestures and gaze of the face in `face` (one call per
@@ -514,36 +577,158 @@ impl M3 {
     /// # Errors
     /// [`Error::InvalidInput`] for an empty image or a non-finite / empty box;
     /// [`Error::Internal`] if a network fails to run or level 1 gives non-finite points.
-    pub fn estimate(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
+    pub fn estimate(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        out: &mut FaceLandmarks,
+    ) -> Result<()> {
         let l1 = self.run_level1(image, face)?;
         let yaw = l1.yaw;
-        // Zone reference points are level-1 points (M3_IO.md), never another zone's output.
+        // Zone reference points always come from level 1 (M3_IO.md).
         self.ref_pts = self.pts;
-
-        let z = &self.cfg.zones;
-        let (br, mr) = (z.brows.ref68, z.mouth.ref68);
-        let map = Self::zone_map(&self.brows, self.ref_pts[br[0]], self.ref_pts[br[1]], false)?;
-        self.brows.run(image, &map, &yaw)?;
-        Self::put_zone_points(&mut self.pts, &self.brows, &map, &self.cfg.zones.brows.indices68)?;
-        softmax(self.brows.net.output(1)?, &mut out.brows);
-
-        let map = Self::zone_map(&self.mouth, self.ref_pts[mr[0]], self.ref_pts[mr[1]], false)?;
-        self.mouth.run(image, &map, &yaw)?;
-        Self::put_zone_points(&mut self.pts, &self.mouth, &map, &self.cfg.zones.mouth.indices68)?;
-        softmax(self.mouth.net.output(1)?, &mut out.mouth);
-
-        let right = self.run_eye(image, &yaw, false)?;
-        let left = self.run_eye(image, &yaw, true)?;
-        let both = normalized([left[0] + right[0], left[1] + right[1], left[2] + right[2]]);
-
+        let (refs, pts) = (&self.ref_pts, &mut self.pts);
+        for zone in &mut self.zones {
+            if zone.kind == ZoneKind::Eye {
+                let right = zone.run_eye(image, refs, &yaw, false, pts)?;
+                let left = zone.run_eye(image, refs, &yaw, true, pts)?;
+                let both = normalized([left[0] + right[0], left[1] + right[1], left[2] + right[2]]);
+                out.gaze_right = right.map(|v| v as f32);
+                out.gaze_left = left.map(|v| v as f32);
+                out.gaze_combined = both.map(|v| v as f32);
+                continue;
+            }
+            let map = zone.map(refs[zone.ref68[0]], refs[zone.ref68[1]], false)?;
+            zone.run(image, &map, &yaw, false, pts)?;
+            match zone.kind {
+                ZoneKind::Brows => softmax(zone.net.output(1)?, &mut out.brows),
+                ZoneKind::Mouth => softmax(zone.net.output(1)?, &mut out.mouth),
+                ZoneKind::Eye | ZoneKind::Plain => {}
+            }
+        }
         for (o, p) in out.points.iter_mut().zip(&self.pts) {
             *o = [p[0] as f32, p[1] as f32];
         }
         out.yaw_probs = yaw;
         out.face_prob = l1.face_prob;
-        out.gaze_right = right.map(|v| v as f32);
-        out.gaze_left = left.map(|v| v as f32);
-        out.gaze_combined = both.map(|v| v as f32);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::Value;
+
+    fn embedded(name: &str) -> &'static [u8] {
+        EMBEDDED_FILES.iter().find(|(n, _)| *n == name).unwrap().1
+    }
+
+    fn json_with(edit: impl FnOnce(&mut Value)) -> Vec<u8> {
+        let mut v: Value = serde_json::from_slice(embedded("m3.json")).unwrap();
+        edit(&mut v);
+        serde_json::to_vec(&v).unwrap()
+    }
+
+    fn image() -> GrayImage {
+        let (w, h) = (160, 120);
+        let data = (0..w * h)
+            .map(|i| (((i % w) * 3 + (i / w) * 2 + (i * 31) % 17) % 256) as u8)
+            .collect();
+        GrayImage::from_vec(w, h, data).unwrap()
+    }
+
+    #[test]
+    fn m3_is_send() {
+        fn send<T: Send>() {}
+        send::<M3>();
+    }
+
+    #[test]
+    fn embedded_models_load_and_give_finite_consistent_outputs() {
+        let mut m3 = M3::new().unwrap();
+        let img = image();
+        let face = Rect::new(40.0, 20.0, 70.0, 80.0);
+        let mut a = FaceLandmarks::default();
+        m3.estimate(&img, &face, &mut a).unwrap();
+        assert!(a.points.iter().flatten().all(|v| v.is_finite()));
+        for p in [&a.yaw_probs[..], &a.mouth[..], &a.brows[..]] {
+            assert!((p.iter().sum::<f32>() - 1.0).abs() < 1e-4);
+        }
+        for g in [a.gaze_left, a.gaze_right, a.gaze_combined] {
+            let n = g.iter().map(|v| v * v).sum::<f32>().sqrt();
+            assert!((n - 1.0).abs() < 1e-4, "{g:?}");
+        }
+        assert!((0.0..=1.0).contains(&a.face_prob));
+        // A call on another box in between changes nothing: no state leaks between faces.
+        let mut b = FaceLandmarks::default();
+        m3.estimate(&img, &Rect::new(0.0, 0.0, 30.0, 30.0), &mut b)
+            .unwrap();
+        m3.estimate(&img, &face, &mut b).unwrap();
+        assert_eq!(a, b);
+        let conf = m3.face_confidence(&img, &face).unwrap();
+        assert_eq!(conf, a.face_prob);
+    }
+
+    #[test]
+    fn bad_inputs_are_invalid_input() {
+        let mut m3 = M3::new().unwrap();
+        let img = image();
+        let mut out = FaceLandmarks::default();
+        for face in [
+            Rect::new(f32::NAN, 0.0, 10.0, 10.0),
+            Rect::new(0.0, 0.0, 0.0, 10.0),
+            Rect::new(0.0, 0.0, 10.0, f32::INFINITY),
+            Rect::new(0.0, 0.0, -5.0, 10.0),
+        ] {
+            assert!(matches!(
+                m3.estimate(&img, &face, &mut out),
+                Err(Error::InvalidInput(_))
+            ));
+        }
+        assert!(matches!(
+            m3.face_confidence(&GrayImage::new(0, 0), &Rect::new(0.0, 0.0, 5.0, 5.0)),
+            Err(Error::InvalidInput(_))
+        ));
+    }
+
+    #[test]
+    fn broken_models_are_model_load_errors() {
+        let load = |json: &[u8], files: &[(&str, &[u8])]| M3::from_bytes(json, files);
+        let good = embedded("m3.json");
+        let corrupt: &[u8] = b"\x08\x07not an onnx model";
+        let mut files: Vec<(&str, &[u8])> = EMBEDDED_FILES.to_vec();
+        assert!(load(good, &files).is_ok());
+        for bad_json in [
+            b"{not json".to_vec(),
+            json_with(|v| v["version"] = 2.into()),
+            json_with(|v| v["level1"]["indices68"] = serde_json::json!([0, 1, 2])),
+            json_with(|v| v["zones"]["mouth"]["gestures"] = serde_json::json!(["kiss", "smile", "frown", "neutral"])),
+            json_with(|v| {
+                v["zones"].as_object_mut().unwrap().remove("brows");
+            }),
+            json_with(|v| v["zones"]["eye"]["width"] = 0.into()),
+            json_with(|v| v["zones"]["eye"]["mirror_ref68"] = Value::Null),
+            json_with(|v| v["zones"]["mouth"]["template"] = serde_json::json!([[0.5, 0.5], [0.5, 0.5]])),
+        ] {
+            assert!(
+                matches!(load(&bad_json, &files), Err(Error::ModelLoad(_))),
+                "{}",
+                String::from_utf8_lossy(&bad_json)
+            );
+        }
+        for i in 1..files.len() {
+            let saved = files[i].1;
+            files[i].1 = corrupt;
+            assert!(matches!(load(good, &files), Err(Error::ModelLoad(_))));
+            files[i].1 = &saved[..saved.len() / 2];
+            assert!(matches!(load(good, &files), Err(Error::ModelLoad(_))));
+            files[i].1 = saved;
+        }
+        // A zone net in the level-1 slot: wrong input names.
+        files[1].1 = embedded("mouth.onnx");
+        assert!(matches!(load(good, &files), Err(Error::ModelLoad(_))));
+        files.remove(1);
+        assert!(matches!(load(good, &files), Err(Error::ModelLoad(_))));
     }
 }

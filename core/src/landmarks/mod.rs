@@ -17,7 +17,7 @@ mod m3;
 mod net;
 pub mod warp;
 
-pub use m3::{M3, M3Config};
+pub use m3::{BilateralConfig, EMBEDDED_FILES, Level1Config, M3, M3Config, ZoneConfig};
 
 /// Number of landmarks in the merged output (iBUG 68).
 pub const N_POINTS: usize = 68;
