@@ -26,12 +26,12 @@ fi
 KOTLIN_LIB="$TOOLS/node_modules/kotlin-compiler/lib"
 
 echo "== building monotrack-ffi (host)"
-cargo build -q -p monotrack-ffi --lib --release
-LIB="$ROOT/target/release/libmonotrack_ffi.so"
+cargo build -q -p monotrack-ffi --lib
+LIB="$ROOT/target/debug/libmonotrack_ffi.so"
 
 echo "== generating Kotlin"
 rm -rf "$WORK/gen" && mkdir -p "$WORK/gen"
-cargo run -q -p monotrack-uniffi-bindgen --release -- generate --library "$LIB" \
+cargo run -q -p monotrack-uniffi-bindgen -- generate --library "$LIB" \
   --language kotlin --out-dir "$WORK/gen" --no-format
 
 JNA=/usr/share/java/jna.jar
@@ -45,7 +45,7 @@ echo "== compiling Kotlin"
 
 echo "== running JVM tests"
 set +e
-java -Djna.library.path="$ROOT/target/release" -Dmonotrack.root="$ROOT" \
+java -Djna.library.path="$ROOT/target/debug" -Dmonotrack.root="$ROOT" \
   -jar "$JUNIT" --disable-banner --disable-ansi-colors --details=tree \
   --class-path "$WORK/classes:$JNA:$KOTLIN_LIB/kotlin-stdlib.jar" \
   --scan-class-path "$WORK/classes" > "$WORK/junit.log" 2>&1

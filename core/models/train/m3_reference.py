@@ -1,0 +1,93 @@
+"""Reference M3 inference in Python (onnxruntime), following core/models/M3_IO.md step by step.
+
+It is the yardstick for the Rust implementation (`core::landmarks`): the evaluation script and the
+golden-test generators use it. `M3(model_dir).run(gray, box)` returns a dict with the 68 points,
+yaw probabilities, face probability, gestures and gaze.
+"""
+import json
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import m3data as D  # noqa: E402
+
+
+def _session(path):
+    import onnxruntime as ort
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = so.inter_op_num_threads = 1
+    return ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
+
+
+def softmax(x):
+    e = np.exp(x - x.max())
+    return e / e.sum()
+
+
+class Level1Runner:
+    def __init__(self, path, size=64, crop_scale=1.3, indices=None):
+        self.sess = _session(path)
+        self.size, self.crop_scale = size, crop_scale
+
+    def run(self, gray, box):
+        c, s = D.square_of_box(box)
+        A = D.level1_map(c, s, self.size, self.crop_scale)
+        crop = D.sample(gray, A, self.size, self.size)
+        lm, yl, fl = self.sess.run(None, {"image": (crop / 255.0).astype(np.float32)[None, None]})
+        pts = D.apply(A, lm.reshape(-1, 2) * self.size)
+        return pts, softmax(yl[0]), 1.0 / (1.0 + np.exp(-fl[0, 0]))
+
+
+class M3:
+    def __init__(self, model_dir):
+        self.cfg = json.load(open(os.path.join(model_dir, "m3.json")))
+        l1 = self.cfg["level1"]
+        self.l1 = Level1Runner(os.path.join(model_dir, l1["file"]), l1["input_size"], l1["crop_scale"])
+        self.zones = {k: (z, _session(os.path.join(model_dir, z["file"]))) for k, z in self.cfg["zones"].items()}
+
+    def _zone(self, z, sess, gray, r0, r1, yaw, mirror):
+        W, H = z["width"], z["height"]
+        t = np.array(z["template"], float) * [W, H]
+        if mirror:
+            t[:, 0] = W - t[:, 0]
+        A = D.similarity_map(r0, r1, t[0], t[1])
+        if mirror:
+            # patch u -> W - u: sample at A(W - u, v)
+            A = A @ np.array([[-1.0, 0, W], [0, 1, 0], [0, 0, 1]])
+        patch = D.zone_filter(z, D.sample(gray, A, W, H))
+        outs = sess.run(None, {"patch": (patch / 255.0).astype(np.float32)[None, None],
+                               "yaw": yaw[None].astype(np.float32)})
+        pts = D.apply(A, outs[0].reshape(-1, 2) * [W, H])
+        return pts, outs[-1][0], A
+
+    def run(self, gray, box):
+        pts32, yaw, face = self.l1.run(gray, box)
+        out68 = np.zeros((68, 2))
+        out68[self.cfg["level1"]["indices68"]] = pts32
+        l1 = out68.copy()  # zone reference points always come from level 1 (M3_IO.md)
+        res = {"yaw_probs": yaw, "face_prob": face}
+        for name, (z, sess) in self.zones.items():
+            r = z["ref68"]
+            if name == "eye":
+                gazes = {}
+                for side, refs, idx, mirror in (("right", z["ref68"], z["indices68"], False),
+                                                ("left", z["mirror_ref68"], z["mirror_indices68"], True)):
+                    pts, g, A = self._zone(z, sess, gray, l1[refs[0]], l1[refs[1]], yaw, mirror)
+                    out68[idx] = pts
+                    phi = np.arctan2(A[1, 0], A[0, 0]) if not mirror else np.arctan2(-A[1, 0], -A[0, 0])
+                    gx, gy = (-g[0], g[1]) if mirror else (g[0], g[1])
+                    c, s = np.cos(phi), np.sin(phi)
+                    v = np.array([c * gx - s * gy, s * gx + c * gy, g[2]])
+                    gazes[side] = v / max(np.linalg.norm(v), 1e-9)
+                comb = gazes["left"] + gazes["right"]
+                res["gaze"] = {"left": gazes["left"], "right": gazes["right"],
+                               "combined": comb / max(np.linalg.norm(comb), 1e-9)}
+            else:
+                pts, g, _ = self._zone(z, sess, gray, l1[r[0]], l1[r[1]], yaw, False)
+                out68[z["indices68"]] = pts
+                if z.get("gestures"):
+                    res[name] = dict(zip(z["gestures"], softmax(g).tolist()))
+        res["landmarks68"] = out68
+        return res

@@ -1,0 +1,276 @@
+"""M3 training data: faces68 images + landmarks, teacher labels, and the M3_IO.md sampling.
+
+Everything here follows `core/models/M3_IO.md` (the contract with the Rust inference in
+`core::landmarks`): the validation split rule, the face box convention, the affine sampling convention
+(pixel centres at +0.5, bilinear, border replicated) and the patch definitions.
+
+Labels the data lacks come from teachers (see `core/models/MODEL_CARD.md`):
+- head yaw: the MediaPipe teacher's yaw where it found the face, else a PnP fit of the project's mean
+  face (core/models/face_model) to the annotated 68 points (agrees with the teacher: r = 0.96);
+- gestures: thresholds on the teacher's blendshapes (THRESHOLDS below) + GENKI-4K smile labels;
+- gaze: the teacher's eyeLook* blendshapes (eye-in-head angles) composed with its head rotation.
+"""
+import json
+import os
+
+import cv2
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.abspath(os.path.join(HERE, "..", "..", ".."))
+DATA = os.environ.get("MONOTRACK_SHARED_DATA", os.path.join(REPO, "..", "shared", "data"))
+
+YAW_CLASSES = [-60, -30, 0, 30, 60]
+MOUTH_GESTURES = ["smile", "frown", "kiss", "neutral"]
+BROW_GESTURES = ["raise", "frown", "neutral"]
+
+# Teacher thresholds on MediaPipe blendshapes (values 0..1). Chosen from their distribution on
+# faces68 (see MODEL_CARD.md): mean mouthSmile > 0.5 holds for 35 % of faces (visibly smiling in the
+# images); mouthFrown is rare (99th percentile 0.12) so 0.1 keeps only clear frowns; mouthPucker > 0.5
+# with little smile marks kisses (the 95th percentile is 0.73); browInnerUp / browOuterUp above 0.4
+# (90th percentile) marks raised brows and mean browDown above 0.45 frowning brows.
+THRESHOLDS = {
+    "smile": 0.5,
+    "frown": 0.1,
+    "kiss": 0.5,
+    "kiss_max_smile": 0.3,
+    "brow_raise": 0.4,
+    "brow_frown": 0.45,
+}
+# eyeLook* = 1 taken as this many degrees of eye-in-head rotation (the eye's comfortable range).
+GAZE_H_DEG = 35.0
+GAZE_V_DEG = 25.0
+
+# 68-point mirror permutation (image flipped left-right).
+MIRROR68 = np.array(
+    list(range(16, -1, -1))
+    + list(range(26, 16, -1))
+    + [27, 28, 29, 30, 35, 34, 33, 32, 31]
+    + [45, 44, 43, 42, 47, 46, 39, 38, 37, 36, 41, 40]
+    + [54, 53, 52, 51, 50, 49, 48, 59, 58, 57, 56, 55]
+    + [64, 63, 62, 61, 60, 67, 66, 65]
+)
+
+# Level 1: jaw, nose, eye corners, mouth corners (the zone nets give brows, eyes and mouth in full).
+LEVEL1_INDICES = list(range(0, 17)) + list(range(27, 36)) + [36, 39, 42, 45, 48, 54]
+assert len(LEVEL1_INDICES) == 32
+
+ZONES = {
+    "brows": {"width": 64, "height": 32, "ref68": [36, 45], "template": [[0.2, 0.78], [0.8, 0.78]],
+              "indices68": list(range(17, 27)), "gestures": BROW_GESTURES,
+              "bilateral": {"d": 5, "sigma_color": 20.0, "sigma_space": 3.0}, "equalize": False},
+    "eye": {"width": 40, "height": 24, "ref68": [36, 39], "template": [[0.2, 0.55], [0.8, 0.55]],
+            "mirror_ref68": [45, 42], "indices68": list(range(36, 42)),
+            "mirror_indices68": [45, 44, 43, 42, 47, 46], "gaze": True,
+            "bilateral": {"d": 5, "sigma_color": 20.0, "sigma_space": 3.0}, "equalize": True},
+    "mouth": {"width": 48, "height": 48, "ref68": [33, 8], "template": [[0.5, 0.12], [0.5, 0.92]],
+              "indices68": list(range(48, 68)), "gestures": MOUTH_GESTURES,
+              "bilateral": {"d": 5, "sigma_color": 20.0, "sigma_space": 3.0}, "equalize": False},
+    # Level 2 for the jaw contour and the nose (an addition to the thesis' three zones): level 1 sees
+    # the face at any roll and scale; this patch is aligned on the outer eye corners, which halves the
+    # jaw and nose errors of level 1 (see MODEL_CARD.md).
+    "face": {"width": 64, "height": 64, "ref68": [36, 45], "template": [[0.32, 0.3], [0.68, 0.3]],
+             "indices68": list(range(0, 17)) + list(range(27, 36)), "bilateral": None, "equalize": False},
+}
+LEVEL1 = {"input_size": 64, "crop_scale": 1.3}
+
+assert sorted(set(LEVEL1_INDICES) | {i for z in ZONES.values() for i in z["indices68"] + z.get("mirror_indices68", [])}) == list(range(68))
+
+
+def luma(rgb):
+    """BT.601 full-range luma, rounded (M3_IO.md)."""
+    y = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]
+    return np.floor(y + 0.5).clip(0, 255).astype(np.uint8)
+
+
+def load_gray(path):
+    bgr = cv2.imread(path, cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise FileNotFoundError(path)
+    return luma(bgr[..., ::-1].astype(np.float32))
+
+
+def sample(img, A, w, h):
+    """Patch of w x h from `img` by the affine map A (2x3, patch coords -> image coords), with the
+    M3_IO.md convention: patch pixel (u, v) = bilinear sample at A(u + .5, v + .5) - .5 in index space."""
+    L, b = A[:, :2], A[:, 2]
+    M = np.concatenate([L, (L @ np.array([0.5, 0.5]) + b - 0.5)[:, None]], axis=1)
+    return cv2.warpAffine(img, M, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                          borderMode=cv2.BORDER_REPLICATE)
+
+
+def apply(A, pts):
+    return pts @ A[:, :2].T + A[:, 2]
+
+
+def invert(A):
+    L = np.linalg.inv(A[:, :2])
+    return np.concatenate([L, (-L @ A[:, 2])[:, None]], axis=1)
+
+
+def square_of_box(box):
+    x, y, w, h = box
+    return np.array([x + w / 2, y + h / 2]), max(w, h)
+
+
+def level1_map(c, s, size, crop_scale, angle=0.0):
+    """Crop map: patch (0..size)^2 -> image square of side crop_scale*s centred on c (optionally
+    rotated, for augmentation; inference uses angle 0)."""
+    k = crop_scale * s / size
+    ca, sa = np.cos(angle), np.sin(angle)
+    L = k * np.array([[ca, -sa], [sa, ca]])
+    b = c - L @ np.array([size / 2, size / 2])
+    return np.concatenate([L, b[:, None]], axis=1)
+
+
+def similarity_map(p0, p1, q0, q1):
+    """Similarity (patch -> image) sending patch points q0, q1 to image points p0, p1."""
+    dq = np.asarray(q1, float) - q0
+    dp = np.asarray(p1, float) - p0
+    # complex ratio z = dp / dq: rotation + scale
+    zq = complex(*dq)
+    zp = complex(*dp)
+    z = zp / zq
+    L = np.array([[z.real, -z.imag], [z.imag, z.real]])
+    b = np.asarray(p0, float) - L @ q0
+    return np.concatenate([L, b[:, None]], axis=1)
+
+
+def zone_map(zone, p_ref0, p_ref1):
+    W, H = zone["width"], zone["height"]
+    t = np.array(zone["template"], float) * [W, H]
+    return similarity_map(p_ref0, p_ref1, t[0], t[1])
+
+
+def zone_filter(zone, patch):
+    bf = zone.get("bilateral")
+    if bf:
+        patch = cv2.bilateralFilter(patch, bf["d"], bf["sigma_color"], bf["sigma_space"],
+                                    borderType=cv2.BORDER_REFLECT_101)
+    if zone.get("equalize"):
+        patch = cv2.equalizeHist(patch)
+    return patch
+
+
+def box_of(pts):
+    lo, hi = pts.min(0), pts.max(0)
+    return np.array([lo[0], lo[1], hi[0] - lo[0], hi[1] - lo[1]])
+
+
+def rot_from_euler(yaw, pitch, roll):
+    y, p, r = np.radians([yaw, pitch, roll])
+    Rx = np.array([[1, 0, 0], [0, np.cos(p), -np.sin(p)], [0, np.sin(p), np.cos(p)]])
+    Ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
+    Rz = np.array([[np.cos(r), -np.sin(r), 0], [np.sin(r), np.cos(r), 0], [0, 0, 1]])
+    return Rz @ Ry @ Rx
+
+
+def gaze_from_teacher(t):
+    """(right_eye, left_eye) unit gaze vectors, camera frame (towards the camera is -z)."""
+    b = t["blendshapes"]
+    R = rot_from_euler(t["yaw_deg"], t["pitch_deg"], t["roll_deg"])
+    out = []
+    for side in ("Right", "Left"):
+        # Model frame x points to the subject's left: for the right eye "in" (nasal) is +x,
+        # for the left eye "out" (temporal) is +x.
+        inward = b["eyeLookIn" + side] - b["eyeLookOut" + side]
+        h = np.radians(GAZE_H_DEG) * (inward if side == "Right" else -inward)
+        v = np.radians(GAZE_V_DEG) * (b["eyeLookDown" + side] - b["eyeLookUp" + side])
+        g = np.array([np.sin(h) * np.cos(v), np.sin(v), -np.cos(h) * np.cos(v)])
+        g = R @ g
+        out.append(g / np.linalg.norm(g))
+    return out
+
+
+def gestures_from_teacher(t):
+    b = t["blendshapes"]
+    smile = 0.5 * (b["mouthSmileLeft"] + b["mouthSmileRight"])
+    frown = 0.5 * (b["mouthFrownLeft"] + b["mouthFrownRight"])
+    th = THRESHOLDS
+    if smile > th["smile"]:
+        mouth = 0
+    elif b["mouthPucker"] > th["kiss"] and smile < th["kiss_max_smile"]:
+        mouth = 2
+    elif frown > th["frown"]:
+        mouth = 1
+    else:
+        mouth = 3
+    raise_ = max(b["browInnerUp"], 0.5 * (b["browOuterUpLeft"] + b["browOuterUpRight"]))
+    bdown = 0.5 * (b["browDownLeft"] + b["browDownRight"])
+    if bdown > th["brow_frown"] and bdown > raise_:
+        brows = 1
+    elif raise_ > th["brow_raise"]:
+        brows = 0
+    else:
+        brows = 2
+    return mouth, brows
+
+
+def yaw_class(yaw):
+    if yaw < -60:
+        return 0
+    if yaw < -30:
+        return 1
+    if yaw <= 30:
+        return 2
+    if yaw <= 60:
+        return 3
+    return 4
+
+
+_MEAN = None
+
+
+def pnp_yaw(pts, W, H):
+    global _MEAN
+    if _MEAN is None:
+        m = json.load(open(os.path.join(REPO, "core", "models", "face_model", "face_model.json")))
+        _MEAN = np.array(m["mean"], float)
+    f = 0.9 * max(W, H)
+    K = np.array([[f, 0, W / 2], [0, f, H / 2], [0, 0, 1.0]])
+    ok, rv, tv = cv2.solvePnP(_MEAN, pts, K, None, flags=cv2.SOLVEPNP_EPNP)
+    ok, rv, tv = cv2.solvePnP(_MEAN, pts, K, None, rv, tv, True, flags=cv2.SOLVEPNP_ITERATIVE)
+    R = cv2.Rodrigues(rv)[0]
+    return float(np.degrees(-np.arcsin(np.clip(R[2, 0], -1, 1))))
+
+
+def load_faces68(split):
+    """Faces of the faces68 split ('train' | 'val'): dicts with image index, landmarks, labels."""
+    teacher = {}
+    for line in open(os.path.join(DATA, "faces68", "teacher_mediapipe.jsonl")):
+        t = json.loads(line)
+        teacher[(t["image"], t["face_index"])] = t
+    images, faces = [], []
+    for i, line in enumerate(open(os.path.join(DATA, "faces68", "train.jsonl"))):
+        is_val = i % 10 == 0
+        if is_val != (split == "val"):
+            continue
+        r = json.loads(line)
+        img_idx = len(images)
+        images.append(os.path.join(DATA, "faces68", r["image"]))
+        for fi, fc in enumerate(r["faces"]):
+            pts = np.array(fc["landmarks68"], np.float32)
+            t = teacher.get((r["image"], fi))
+            found = bool(t and t.get("found"))
+            yaw = t["yaw_deg"] if found else pnp_yaw(pts.astype(np.float64), r["width"], r["height"])
+            face = {"image": img_idx, "line": i, "path": r["image"], "pts": pts, "yaw": yaw,
+                    "yaw_class": yaw_class(yaw), "mouth": -1, "brows": -1, "gaze": None}
+            if found:
+                face["mouth"], face["brows"] = gestures_from_teacher(t)
+                face["gaze"] = gaze_from_teacher(t)
+            faces.append(face)
+    return images, faces
+
+
+def load_genki(split):
+    """GENKI-4K crops: (gray 64x64, smile 0/1). Our own split: file number % 5 == 0 is held out."""
+    base = os.path.join(DATA, "expression", "genki4k", "train")
+    out = []
+    for label in (0, 1):
+        d = os.path.join(base, str(label))
+        for f in sorted(os.listdir(d)):
+            n = int("".join(ch for ch in f if ch.isdigit()))
+            if (n % 5 == 0) != (split == "test"):
+                continue
+            out.append((load_gray(os.path.join(d, f)), label, f))
+    return out

@@ -1,0 +1,387 @@
+#!/usr/bin/env python3
+"""Trains the four M3 networks and exports them to core/models/m3/ (ONNX opset 17 + m3.json).
+
+    python3 core/models/train/train_m3.py [--steps-scale 1.0] [--only level1,brows,eye,mouth]
+
+Seeds are fixed (numpy, torch, python); one CPU thread by default (MONOTRACK_TRAIN_THREADS).
+Writes next to the weights: train_log.txt (losses per step window) and the validation metrics
+(metrics.json, by eval_m3.py). Data: ../shared/data (faces68, its MediaPipe teacher, GENKI-4K);
+the split rule and the preprocessing are core/models/M3_IO.md's.
+"""
+import argparse
+import json
+import os
+import random
+import sys
+import time
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import m3data as D  # noqa: E402
+from m3nets import Level1, Level2, n_params  # noqa: E402
+
+OUT = os.path.join(D.REPO, "core", "models", "m3")
+SEED = 20261122
+# Landmark coordinates (crop/patch units 0..1) are scaled by this before the landmark loss so its size
+# is comparable with the cross-entropy terms (eq. 3.3's weighting). The loss is the point-to-point
+# (Euclidean) distance rather than eq. 3.3's squared distance: NME averages distances, and the L2 fit
+# measured worse on the validation split (level 1 alone: 8.2 % NME).
+LM_SCALE = 10.0
+YAW_WEIGHT = 0.5
+FACE_WEIGHT = 0.5
+GESTURE_WEIGHT = 0.5
+GAZE_WEIGHT = 1.0
+WEIGHT_DECAY = 1e-4
+BATCH = 64
+LEVEL1_CHANNELS = (16, 32, 48, 64)
+LEVEL1_HIDDEN = 128
+
+
+class Data:
+    """faces68 training images (and their mirror images), faces with labels in both."""
+
+    def __init__(self, split):
+        paths, faces = D.load_faces68(split)
+        self.imgs = [D.load_gray(p) for p in paths]
+        self.faces = []
+        for f in faces:
+            self.faces.append(dict(f, mirror=False))
+            img = self.imgs[f["image"]]
+            W = img.shape[1]
+            m = dict(f, mirror=True)
+            pts = f["pts"].copy()
+            pts[:, 0] = W - pts[:, 0]
+            m["pts"] = pts[D.MIRROR68]
+            m["yaw"] = -f["yaw"]
+            m["yaw_class"] = 4 - f["yaw_class"]
+            if f["gaze"] is not None:
+                r, l = f["gaze"]
+                m["gaze"] = (l * [-1, 1, 1], r * [-1, 1, 1])
+            self.faces.append(m)
+        self.mirrored = [np.ascontiguousarray(im[:, ::-1]) for im in self.imgs]
+
+    def image(self, f):
+        return self.mirrored[f["image"]] if f["mirror"] else self.imgs[f["image"]]
+
+
+def photometric(p, rng, occlude=True):
+    p = p.astype(np.float32)
+    # illumination: contrast, brightness, gamma, a linear gradient
+    p = p * rng.uniform(0.6, 1.4) + rng.uniform(-40, 40)
+    if rng.random() < 0.3:
+        h, w = p.shape
+        gx = np.linspace(-1, 1, w)[None, :] * rng.uniform(-40, 40)
+        gy = np.linspace(-1, 1, h)[:, None] * rng.uniform(-40, 40)
+        p = p + gx + gy
+    p = np.clip(p, 0, 255)
+    if rng.random() < 0.3:
+        p = 255.0 * (p / 255.0) ** rng.uniform(0.6, 1.6)
+    if rng.random() < 0.25:
+        k = rng.choice([3, 5])
+        p = cv2.GaussianBlur(p, (k, k), 0)
+    if rng.random() < 0.4:
+        p = p + rng.normal(0, rng.uniform(2, 10), p.shape)
+    if occlude and rng.random() < 0.1:
+        h, w = p.shape
+        ow, oh = int(w * rng.uniform(0.15, 0.45)), int(h * rng.uniform(0.15, 0.45))
+        x0, y0 = rng.integers(0, w - ow + 1), rng.integers(0, h - oh + 1)
+        p[y0:y0 + oh, x0:x0 + ow] = rng.uniform(0, 255) if rng.random() < 0.5 else rng.uniform(0, 255, (oh, ow))
+    return np.clip(np.floor(p + 0.5), 0, 255).astype(np.uint8)
+
+
+def balanced_weights(labels, n):
+    labels = np.asarray(labels)
+    counts = np.bincount(labels[labels >= 0], minlength=n).astype(float)
+    w = np.ones(len(labels))
+    for c in range(n):
+        if counts[c] > 0:
+            w[labels == c] = 1.0 / counts[c] ** 0.5  # square root: balance without overfitting rare classes
+    return w / w.sum()
+
+
+def level1_batch(data, rng, weights):
+    S, cs = D.LEVEL1["input_size"], D.LEVEL1["crop_scale"]
+    X = np.zeros((BATCH, 1, S, S), np.float32)
+    Y = np.zeros((BATCH, 64), np.float32)
+    yaw = np.zeros(BATCH, np.int64)
+    face = np.zeros(BATCH, np.float32)
+    idx = rng.choice(len(data.faces), BATCH, p=weights)
+    for k, i in enumerate(idx):
+        f = data.faces[i]
+        img = data.image(f)
+        c, s = D.square_of_box(D.box_of(f["pts"]))
+        s *= np.exp(rng.uniform(-0.15, 0.15))
+        c = c + rng.uniform(-0.1, 0.1, 2) * s
+        angle = np.radians(rng.uniform(-25, 25)) if rng.random() < 0.4 else 0.0
+        positive = rng.random() > 0.25
+        if not positive:
+            kind = rng.random()
+            if kind < 0.5:  # shifted off the face
+                th = rng.uniform(0, 2 * np.pi)
+                c = c + rng.uniform(0.5, 1.2) * s * np.array([np.cos(th), np.sin(th)])
+            elif kind < 0.7:  # far too large
+                s *= rng.uniform(2.3, 3.5)
+            elif kind < 0.85:  # a part of the face
+                s *= rng.uniform(0.25, 0.45)
+                c = c + rng.uniform(-0.3, 0.3, 2) * s / 0.35
+            else:  # anywhere in the image, away from this face
+                h, w = img.shape
+                s = rng.uniform(0.3, 1.0) * s
+                c = np.array([rng.uniform(0, w), rng.uniform(0, h)])
+        A = D.level1_map(c, s, S, cs, angle)
+        patch = photometric(D.sample(img, A, S, S), rng)
+        X[k, 0] = patch / 255.0
+        pts = D.apply(D.invert(A), f["pts"][D.LEVEL1_INDICES]) / S
+        Y[k] = pts.reshape(-1)
+        yaw[k] = f["yaw_class"]
+        face[k] = 1.0 if positive else 0.0
+    return torch.from_numpy(X), torch.from_numpy(Y), torch.from_numpy(yaw), torch.from_numpy(face)
+
+
+def soft_yaw(cls, rng):
+    logits = np.zeros(5)
+    logits[cls] = rng.uniform(1.0, 6.0)
+    logits += rng.normal(0, 0.7, 5)
+    e = np.exp(logits - logits.max())
+    return e / e.sum()
+
+
+def zone_sample(zone, img, pts, rng, ref_noise=0.045, aug=True):
+    """Patch of a zone from jittered reference points (level-1 errors are a few % of the
+    inter-ocular distance, so the refs move by that much in training)."""
+    iod = np.linalg.norm(pts[36] - pts[45])
+    r0, r1 = pts[zone["ref68"][0]].astype(float), pts[zone["ref68"][1]].astype(float)
+    if aug:
+        r0 = r0 + rng.normal(0, ref_noise * iod, 2)
+        r1 = r1 + rng.normal(0, ref_noise * iod, 2)
+    A = D.zone_map(zone, r0, r1)
+    W, H = zone["width"], zone["height"]
+    patch = D.sample(img, A, W, H)
+    if aug:
+        patch = photometric(patch, rng, occlude=False)
+    patch = D.zone_filter(zone, patch)
+    tgt = D.apply(D.invert(A), pts[zone["indices68"]]) / [W, H]
+    return patch, tgt, A
+
+
+def zone_batch(name, data, rng, weights, genki=None):
+    zone = D.ZONES[name]
+    W, H = zone["width"], zone["height"]
+    n = len(zone["indices68"])
+    X = np.zeros((BATCH, 1, H, W), np.float32)
+    Y = np.zeros((BATCH, 2 * n), np.float32)
+    YAW = np.zeros((BATCH, 5), np.float32)
+    G = np.full(BATCH, -1, np.int64)
+    GZ = np.zeros((BATCH, 3), np.float32)
+    GZM = np.zeros(BATCH, np.float32)
+    SM = np.full(BATCH, -1.0, np.float32)  # GENKI smile label (mouth only)
+    LM = np.ones(BATCH, np.float32)
+    idx = rng.choice(len(data.faces), BATCH, p=weights)
+    n_genki = BATCH // 4 if genki is not None else 0
+    for k, i in enumerate(idx):
+        if k < n_genki:
+            g_img, g_pts, g_label = genki[rng.integers(len(genki))]
+            patch, _, _ = zone_sample(zone, g_img, g_pts, rng, ref_noise=0.02)
+            X[k, 0] = patch / 255.0
+            LM[k] = 0.0  # predicted refs only: no landmark truth on GENKI
+            SM[k] = g_label
+            YAW[k] = soft_yaw(2, rng)
+            continue
+        f = data.faces[i]
+        patch, tgt, A = zone_sample(zone, data.image(f), f["pts"], rng)
+        X[k, 0] = patch / 255.0
+        Y[k] = tgt.reshape(-1)
+        YAW[k] = soft_yaw(f["yaw_class"], rng)
+        if name == "mouth":
+            G[k] = f["mouth"]
+        elif name == "brows":
+            G[k] = f["brows"]
+        elif name == "eye" and f["gaze"] is not None:
+            g = f["gaze"][0]  # the right eye's (the mirrored faces carry the other eye here)
+            # camera frame -> patch frame: undo the patch's in-plane rotation
+            phi = np.arctan2(A[1, 0], A[0, 0])
+            c, s = np.cos(phi), np.sin(phi)
+            GZ[k] = [c * g[0] + s * g[1], -s * g[0] + c * g[1], g[2]]
+            GZM[k] = 1.0
+    t = torch.from_numpy
+    return t(X), t(Y), t(YAW), t(G), t(GZ), t(GZM), t(SM), t(LM)
+
+
+def point_loss(pred, tgt):
+    """Sum over points of the Euclidean distance (scaled), per sample."""
+    d = ((pred - tgt) * LM_SCALE).view(pred.shape[0], -1, 2)
+    return (d.pow(2).sum(2) + 1e-6).sqrt().sum(1)
+
+
+def log(fh, msg):
+    print(msg, flush=True)
+    fh.write(msg + "\n")
+    fh.flush()
+
+
+def train_level1(data, steps, fh):
+    model = Level1(size=D.LEVEL1["input_size"], channels=LEVEL1_CHANNELS, hidden=LEVEL1_HIDDEN)
+    log(fh, f"level1: {n_params(model)} parameters, {steps} steps of {BATCH}")
+    opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=WEIGHT_DECAY)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=3e-3, total_steps=steps, pct_start=0.1)
+    rng = np.random.default_rng(SEED + 1)
+    weights = balanced_weights([f["yaw_class"] for f in data.faces], 5)
+    yaw_w = torch.ones(5)
+    t0, acc = time.time(), np.zeros(3)
+    model.train()
+    for step in range(steps):
+        X, Y, yaw, face = level1_batch(data, rng, weights)
+        lm, yl, fl = model(X)
+        pos = face > 0.5
+        l_lm = point_loss(lm[pos], Y[pos]).mean() if pos.any() else lm.sum() * 0
+        l_yaw = F.cross_entropy(yl[pos], yaw[pos], weight=yaw_w) if pos.any() else yl.sum() * 0
+        l_face = F.binary_cross_entropy_with_logits(fl[:, 0], face)
+        loss = l_lm + YAW_WEIGHT * l_yaw + FACE_WEIGHT * l_face
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        acc += [l_lm.item(), l_yaw.item(), l_face.item()]
+        if (step + 1) % 200 == 0:
+            a = acc / 200
+            log(fh, f"level1 step {step + 1}: lm {a[0]:.4f} yaw {a[1]:.4f} face {a[2]:.4f} ({time.time() - t0:.0f} s)")
+            acc[:] = 0
+    return model.eval()
+
+
+def train_zone(name, data, steps, fh, genki=None):
+    zone = D.ZONES[name]
+    gest = len(zone.get("gestures", []))
+    channels = {"eye": (8, 16, 32), "face": (8, 16, 32, 64)}.get(name, (8, 16, 32, 48))
+    model = Level2(zone["width"], zone["height"], len(zone["indices68"]), gest, bool(zone.get("gaze")),
+                   channels=channels)
+    log(fh, f"{name}: {n_params(model)} parameters, {steps} steps of {BATCH}")
+    opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=WEIGHT_DECAY)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=3e-3, total_steps=steps, pct_start=0.1)
+    rng = np.random.default_rng(SEED + {"brows": 2, "eye": 3, "mouth": 4, "face": 5}[name])
+    if gest:
+        labels = [f[name] for f in data.faces]
+        weights = balanced_weights(labels, gest)
+        counts = np.bincount([x for x in labels if x >= 0], minlength=gest).astype(np.float32)
+        # Sampling balances by the square root; the loss weight does the other square root.
+        cw = torch.from_numpy((counts.sum() / np.maximum(counts, 1)) ** 0.5)
+        cw = cw / cw.mean()
+    else:
+        weights = np.full(len(data.faces), 1.0 / len(data.faces))
+        cw = None
+    t0, acc = time.time(), np.zeros(3)
+    model.train()
+    for step in range(steps):
+        X, Y, YAW, G, GZ, GZM, SM, LM = zone_batch(name, data, rng, weights, genki)
+        out = model(X, YAW)
+        lm, extra = out[0], out[-1]
+        l_lm = (point_loss(lm, Y) * LM).sum() / LM.sum().clamp(min=1)
+        l_x = lm.sum() * 0
+        if gest:
+            m = G >= 0
+            if m.any():
+                l_x = F.cross_entropy(extra[m], G[m], weight=cw)
+            s = SM >= 0
+            if s.any():
+                # GENKI: smile vs not-smile on the softmax's smile probability
+                p = F.softmax(extra[s], dim=1)[:, 0].clamp(1e-6, 1 - 1e-6)
+                l_x = l_x + F.binary_cross_entropy(p, SM[s])
+            loss = l_lm + GESTURE_WEIGHT * l_x
+        elif not zone.get("gaze"):
+            loss = l_lm
+        else:
+            g = F.normalize(extra, dim=1)
+            l_x = ((1 - (g * GZ).sum(1)) * GZM).sum() / GZM.sum().clamp(min=1)
+            loss = l_lm + GAZE_WEIGHT * 10 * l_x
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        acc += [l_lm.item(), l_x.item(), 0]
+        if (step + 1) % 200 == 0:
+            a = acc / 200
+            log(fh, f"{name} step {step + 1}: lm {a[0]:.4f} {'gest' if gest else 'gaze'} {a[1]:.4f} ({time.time() - t0:.0f} s)")
+            acc[:] = 0
+    return model.eval()
+
+
+def export(model, path, names_in, shapes_in, names_out):
+    args = tuple(torch.zeros(s) for s in shapes_in)
+    torch.onnx.export(model, args, path, input_names=names_in, output_names=names_out, opset_version=17,
+                      dynamo=False, do_constant_folding=True)
+
+
+def genki_with_refs(level1_path, split):
+    """GENKI-4K crops with the mouth references (33, 8) predicted by our level 1 (the crops carry no
+    landmarks). Level 1 runs twice: on the whole crop, then on the box of its own points."""
+    import m3_reference as R
+    l1 = R.Level1Runner(level1_path)
+    out = []
+    for img, label, _ in D.load_genki(split):
+        box = np.array([6.0, 8.0, 52.0, 52.0])
+        pts = None
+        for _ in range(2):
+            pts, _, _ = l1.run(img, box)
+            box = D.box_of(pts)
+        full = np.zeros((68, 2), np.float32)
+        full[D.LEVEL1_INDICES] = pts
+        full[36], full[45] = pts[D.LEVEL1_INDICES.index(36)], pts[D.LEVEL1_INDICES.index(45)]
+        out.append((img, full, float(label)))
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--steps-scale", type=float, default=1.0)
+    ap.add_argument("--only", default="level1,brows,eye,mouth,face")
+    a = ap.parse_args()
+    random.seed(SEED)
+    np.random.seed(SEED)
+    torch.manual_seed(SEED)
+    torch.set_num_threads(int(os.environ.get("MONOTRACK_TRAIN_THREADS", "1")))
+    cv2.setNumThreads(1)
+    os.makedirs(OUT, exist_ok=True)
+    only = a.only.split(",")
+    fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
+    log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}")
+    data = Data("train")
+    log(fh, f"train faces (with mirrors): {len(data.faces)} from {len(data.imgs)} images")
+    steps = {k: int(v * a.steps_scale) for k, v in {"level1": 6000, "brows": 2000, "eye": 2000, "mouth": 2500, "face": 3000}.items()}
+    if "level1" in only:
+        m = train_level1(data, steps["level1"], fh)
+        export(m, os.path.join(OUT, "level1.onnx"), ["image"], [(1, 1, 64, 64)], ["landmarks", "yaw_logits", "face_logit"])
+    for name in ("brows", "eye", "mouth", "face"):
+        if name not in only:
+            continue
+        z = D.ZONES[name]
+        genki = genki_with_refs(os.path.join(OUT, "level1.onnx"), "train") if name == "mouth" else None
+        if genki is not None:
+            log(fh, f"GENKI-4K train crops for the mouth smile head: {len(genki)}")
+        m = train_zone(name, data, steps[name], fh, genki)
+        outs = ["landmarks"] + (["gaze"] if z.get("gaze") else ["gesture_logits"] if z.get("gestures") else [])
+        export(m, os.path.join(OUT, f"{name}.onnx"), ["patch", "yaw"], [(1, 1, z["height"], z["width"]), (1, 5)], outs)
+    write_config()
+    log(fh, f"done {only}")
+
+
+def write_config():
+    cfg = {"version": 1,
+           "level1": {"file": "level1.onnx", "input_size": D.LEVEL1["input_size"], "crop_scale": D.LEVEL1["crop_scale"],
+                      "indices68": D.LEVEL1_INDICES, "yaw_classes_deg": D.YAW_CLASSES},
+           "zones": {}}
+    for name, z in D.ZONES.items():
+        e = {"file": f"{name}.onnx"}
+        e.update({k: v for k, v in z.items()})
+        e.setdefault("bilateral", None)
+        e.setdefault("equalize", False)
+        cfg["zones"][name] = e
+    with open(os.path.join(OUT, "m3.json"), "w") as fh:
+        json.dump(cfg, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
