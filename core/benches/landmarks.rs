@@ -26,10 +26,16 @@ fn bench(c: &mut Criterion) {
     let mut m3 = M3::new().unwrap();
     let mut out = FaceLandmarks::default();
     c.bench_function("m3_per_face", |b| {
-        b.iter(|| m3.estimate(black_box(&img), black_box(&face), &mut out).unwrap())
+        b.iter(|| {
+            m3.estimate(black_box(&img), black_box(&face), &mut out)
+                .unwrap()
+        })
     });
     c.bench_function("m3_level1_face_confidence", |b| {
-        b.iter(|| m3.face_confidence(black_box(&img), black_box(&face)).unwrap())
+        b.iter(|| {
+            m3.face_confidence(black_box(&img), black_box(&face))
+                .unwrap()
+        })
     });
 }
 

@@ -97,7 +97,11 @@ fn m3_matches_the_python_reference() {
             c.image, c.bbox
         );
         assert!(pts <= POINT_TOL_PX, "{}: points off by {pts} px", c.image);
-        assert!(probs <= PROB_TOL, "{}: probabilities off by {probs}", c.image);
+        assert!(
+            probs <= PROB_TOL,
+            "{}: probabilities off by {probs}",
+            c.image
+        );
         assert!(gaze <= GAZE_TOL, "{}: gaze off by {gaze}", c.image);
     }
 }

@@ -41,7 +41,12 @@ fn pgm(name: &str) -> GrayImage {
 /// (max |diff|, fraction of pixels that differ).
 fn compare(got: &[u8], want: &[u8]) -> (u8, f64) {
     assert_eq!(got.len(), want.len());
-    let max = got.iter().zip(want).map(|(a, b)| a.abs_diff(*b)).max().unwrap();
+    let max = got
+        .iter()
+        .zip(want)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap();
     let off = got.iter().zip(want).filter(|(a, b)| a != b).count();
     (max, off as f64 / got.len() as f64)
 }
@@ -75,10 +80,23 @@ fn warps_match_the_contract_exactly_and_opencv_within_one_level() {
         };
         sample(&src, &map, c.width, c.height, &mut out).unwrap();
         let exact = pgm(&format!("warp_{}_exact.pgm", c.name));
-        assert_eq!(out, exact.data(), "{}: differs from the exact contract", c.name);
+        assert_eq!(
+            out,
+            exact.data(),
+            "{}: differs from the exact contract",
+            c.name
+        );
         let (max, off) = compare(&out, pgm(&format!("warp_{}.pgm", c.name)).data());
-        println!("warp {}: vs OpenCV max {max}, {:.3} % off", c.name, 100.0 * off);
-        assert!(max <= 1 && off <= WARP_MAX_OFF_FRACTION, "{}: {max} / {off}", c.name);
+        println!(
+            "warp {}: vs OpenCV max {max}, {:.3} % off",
+            c.name,
+            100.0 * off
+        );
+        assert!(
+            max <= 1 && off <= WARP_MAX_OFF_FRACTION,
+            "{}: {max} / {off}",
+            c.name
+        );
     }
 }
 
@@ -92,11 +110,21 @@ fn bilateral_and_equalize_match_opencv() {
         let mut got = vec![0; w * h];
         bf.apply(patch.data(), w, h, &mut got);
         let (max, off) = compare(&got, want.data());
-        println!("bilateral {tag}: vs OpenCV max {max}, {:.3} % off", 100.0 * off);
-        assert!(max <= 1 && off <= BILATERAL_MAX_OFF_FRACTION, "{tag}: {max} / {off}");
+        println!(
+            "bilateral {tag}: vs OpenCV max {max}, {:.3} % off",
+            100.0 * off
+        );
+        assert!(
+            max <= 1 && off <= BILATERAL_MAX_OFF_FRACTION,
+            "{tag}: {max} / {off}"
+        );
 
         let mut eq = want.data().to_vec();
         equalize_hist(&mut eq);
-        assert_eq!(eq, pgm(&format!("equalize_{tag}.pgm")).data(), "equalize {tag}");
+        assert_eq!(
+            eq,
+            pgm(&format!("equalize_{tag}.pgm")).data(),
+            "equalize {tag}"
+        );
     }
 }

@@ -126,7 +126,10 @@ fn m3_nme_on_the_validation_split() {
         100.0 * all[n * 9 / 10]
     );
     println!("  yaw classes (-60, -30, 0, 30, 60): {yaw_hist:?}");
-    println!("  {:.0} µs per face (this build's profile)", us as f64 / n as f64);
+    println!(
+        "  {:.0} µs per face (this build's profile)",
+        us as f64 / n as f64
+    );
     assert!(n > 100, "only {n} validation faces");
     assert!(mean < MAX_MEAN_NME, "mean NME {mean}");
 }

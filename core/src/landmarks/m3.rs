@@ -116,9 +116,17 @@ fn check_side(what: &str, v: usize) -> Result<()> {
     Ok(())
 }
 
-fn check_indices(what: &str, idx: &[usize], n: usize, covered: &mut [bool; N_POINTS]) -> Result<()> {
+fn check_indices(
+    what: &str,
+    idx: &[usize],
+    n: usize,
+    covered: &mut [bool; N_POINTS],
+) -> Result<()> {
     if idx.len() != n {
-        return Err(bad(format!("{what} has {} indices, expected {n}", idx.len())));
+        return Err(bad(format!(
+            "{what} has {} indices, expected {n}",
+            idx.len()
+        )));
     }
     for &i in idx {
         *covered
@@ -198,7 +206,10 @@ impl ZoneConfig {
             )));
         }
         if self.gaze != (kind == ZoneKind::Eye) {
-            return Err(bad(format!("{name}.gaze = {}: only the eye gives gaze", self.gaze)));
+            return Err(bad(format!(
+                "{name}.gaze = {}: only the eye gives gaze",
+                self.gaze
+            )));
         }
         match (kind, &self.mirror_ref68, &self.mirror_indices68) {
             (ZoneKind::Eye, Some(_), Some(mi)) => {
@@ -307,9 +318,7 @@ impl Zone {
             height: h,
             ref68: cfg.ref68,
             indices68: cfg.indices68.clone(),
-            mirror: cfg
-                .mirror_ref68
-                .zip(cfg.mirror_indices68.clone()),
+            mirror: cfg.mirror_ref68.zip(cfg.mirror_indices68.clone()),
             q: cfg.template.map(|t| [t[0] * w as f64, t[1] * h as f64]),
             bilateral: cfg
                 .bilateral
@@ -431,7 +440,9 @@ fn softmax<const N: usize>(logits: &[f32], out: &mut [f32; N]) {
 }
 
 fn normalized(v: [f64; 3]) -> [f64; 3] {
-    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(NORM_EPS);
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        .sqrt()
+        .max(NORM_EPS);
     [v[0] / n, v[1] / n, v[2] / n]
 }
 
@@ -535,11 +546,7 @@ impl M3 {
         let s = l1.input_size;
         let c = face.center();
         let side = f64::from(face.w.max(face.h));
-        let map = Affine::square_crop(
-            [f64::from(c[0]), f64::from(c[1])],
-            l1.crop_scale * side,
-            s,
-        );
+        let map = Affine::square_crop([f64::from(c[0]), f64::from(c[1])], l1.crop_scale * side, s);
         sample(image, &map, s, s, &mut self.crop)?;
         let crop = &self.crop;
         self.level1.fill_input(0, |x| to_unit(crop, x))?;
@@ -703,13 +710,18 @@ mod tests {
             b"{not json".to_vec(),
             json_with(|v| v["version"] = 2.into()),
             json_with(|v| v["level1"]["indices68"] = serde_json::json!([0, 1, 2])),
-            json_with(|v| v["zones"]["mouth"]["gestures"] = serde_json::json!(["kiss", "smile", "frown", "neutral"])),
+            json_with(|v| {
+                v["zones"]["mouth"]["gestures"] =
+                    serde_json::json!(["kiss", "smile", "frown", "neutral"])
+            }),
             json_with(|v| {
                 v["zones"].as_object_mut().unwrap().remove("brows");
             }),
             json_with(|v| v["zones"]["eye"]["width"] = 0.into()),
             json_with(|v| v["zones"]["eye"]["mirror_ref68"] = Value::Null),
-            json_with(|v| v["zones"]["mouth"]["template"] = serde_json::json!([[0.5, 0.5], [0.5, 0.5]])),
+            json_with(|v| {
+                v["zones"]["mouth"]["template"] = serde_json::json!([[0.5, 0.5], [0.5, 0.5]])
+            }),
         ] {
             assert!(
                 matches!(load(&bad_json, &files), Err(Error::ModelLoad(_))),

@@ -61,7 +61,9 @@ impl Net {
                     model.outlet_label(*o) == Some(*name) || model.node(o.node).name == *name
                 })
                 .ok_or_else(|| {
-                    Error::ModelLoad(format!("{what}: no output named {name:?} (models/M3_IO.md)"))
+                    Error::ModelLoad(format!(
+                        "{what}: no output named {name:?} (models/M3_IO.md)"
+                    ))
                 })?;
             output_slots.push(slot);
         }

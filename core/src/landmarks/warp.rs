@@ -62,7 +62,14 @@ impl Affine {
     pub fn mirrored_x(&self, width: f64) -> Self {
         let m = &self.m;
         Self {
-            m: [-m[0], m[1], m[0] * width + m[2], -m[3], m[4], m[3] * width + m[5]],
+            m: [
+                -m[0],
+                m[1],
+                m[0] * width + m[2],
+                -m[3],
+                m[4],
+                m[3] * width + m[5],
+            ],
         }
     }
 
@@ -112,7 +119,10 @@ pub fn sample(
         )));
     }
     if !map.m.iter().all(|v| v.is_finite()) {
-        return Err(Error::InvalidInput(format!("non-finite patch map {:?}", map.m)));
+        return Err(Error::InvalidInput(format!(
+            "non-finite patch map {:?}",
+            map.m
+        )));
     }
     out.resize(width * height, 0);
     let data = image.data();
@@ -139,7 +149,8 @@ pub fn sample(
             let p01 = f64::from(data[ra + xb]);
             let p10 = f64::from(data[rb + xa]);
             let p11 = f64::from(data[rb + xb]);
-            let val = (1.0 - fy) * ((1.0 - fx) * p00 + fx * p01) + fy * ((1.0 - fx) * p10 + fx * p11);
+            let val =
+                (1.0 - fy) * ((1.0 - fx) * p00 + fx * p01) + fy * ((1.0 - fx) * p10 + fx * p11);
             *o = (val + 0.5).floor().clamp(0.0, 255.0) as u8;
         }
     }
@@ -151,7 +162,9 @@ mod tests {
     use super::*;
 
     fn ramp(w: usize, h: usize) -> GrayImage {
-        let data = (0..w * h).map(|i| ((i % w) * 3 + (i / w) * 5) as u8).collect();
+        let data = (0..w * h)
+            .map(|i| ((i % w) * 3 + (i / w) * 5) as u8)
+            .collect();
         GrayImage::from_vec(w, h, data).unwrap()
     }
 

@@ -73,7 +73,11 @@ fn probs(names: &[&str], p: &[f32]) -> Value {
 }
 
 fn vec3(v: &[f32; 3]) -> Value {
-    json!(v.iter().map(|x| round(f64::from(*x), 4)).collect::<Vec<_>>())
+    json!(
+        v.iter()
+            .map(|x| round(f64::from(*x), 4))
+            .collect::<Vec<_>>()
+    )
 }
 
 /// The CONTRACT's FACE object without the fit fields.
@@ -146,8 +150,7 @@ fn landmarks_line(text: &str, base: &Path, p: &mut Pipeline) -> Result<Value, St
     let mut faces = Vec::with_capacity(boxes.len());
     for (k, (rect, det_score)) in boxes.iter().enumerate() {
         let t0 = Instant::now();
-        p.m3
-            .estimate(&p.gray, rect, &mut p.lm)
+        p.m3.estimate(&p.gray, rect, &mut p.lm)
             .map_err(|e| format!("face {k}: {e}"))?;
         landmarks_us += t0.elapsed().as_micros() as u64;
         let mut pts = [[0.0f64; 2]; N_POINTS];

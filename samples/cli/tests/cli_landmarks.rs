@@ -39,7 +39,10 @@ fn landmarks_on_given_boxes_follow_the_contract() {
     .unwrap();
     let input = dir.join("in.jsonl");
     let b = ASTRONAUT_BOX;
-    let good = format!(r#"{{"image": "astronaut.jpg", "faces": [{{"box": [{}, {}, {}, {}]}}]}}"#, b[0], b[1], b[2], b[3]);
+    let good = format!(
+        r#"{{"image": "astronaut.jpg", "faces": [{{"box": [{}, {}, {}, {}]}}]}}"#,
+        b[0], b[1], b[2], b[3]
+    );
     let cam = format!(
         r#"{{"image": "astronaut.jpg", "camera": {{"fx": 400, "fy": 400, "cx": 256, "cy": 256}}, "faces": [{{"box": [{}, {}, {}, {}]}}, {{"box": [10, 10, 60, 60]}}]}}"#,
         b[0], b[1], b[2], b[3]
@@ -58,7 +61,11 @@ fn landmarks_on_given_boxes_follow_the_contract() {
         "--out",
         out_path.to_str().unwrap(),
     ]);
-    assert_eq!(out.status.code(), Some(1), "bad lines make the exit status 1");
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "bad lines make the exit status 1"
+    );
     let text = std::fs::read_to_string(&out_path).unwrap();
     let lines: Vec<serde_json::Value> = text
         .lines()
@@ -68,14 +75,22 @@ fn landmarks_on_given_boxes_follow_the_contract() {
 
     for (l, n_faces) in [(&lines[0], 1), (&lines[1], 2)] {
         assert_eq!(l["image"], "astronaut.jpg");
-        assert_eq!((l["width"].as_u64(), l["height"].as_u64()), (Some(512), Some(512)));
+        assert_eq!(
+            (l["width"].as_u64(), l["height"].as_u64()),
+            (Some(512), Some(512))
+        );
         let faces = l["faces"].as_array().unwrap();
         assert_eq!(faces.len(), n_faces);
         for f in faces {
             let pts = f["landmarks68"].as_array().unwrap();
             assert_eq!(pts.len(), 68);
             assert!(pts.iter().all(|p| p[0].as_f64().unwrap().is_finite()));
-            let yaw: f64 = f["yaw_probs"].as_array().unwrap().iter().map(|p| p.as_f64().unwrap()).sum();
+            let yaw: f64 = f["yaw_probs"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|p| p.as_f64().unwrap())
+                .sum();
             assert!((yaw - 1.0).abs() < 1e-3, "yaw probabilities sum to {yaw}");
             assert!([-60, -30, 0, 30, 60].contains(&f["yaw_class_deg"].as_i64().unwrap()));
             let score = f["score"].as_f64().unwrap();
@@ -108,7 +123,10 @@ fn landmarks_on_given_boxes_follow_the_contract() {
         .collect();
     assert_eq!(got, ASTRONAUT_BOX.to_vec());
     // Same image and box, other camera: same landmarks, other pose depth.
-    assert_eq!(lines[0]["faces"][0]["landmarks68"], lines[1]["faces"][0]["landmarks68"]);
+    assert_eq!(
+        lines[0]["faces"][0]["landmarks68"],
+        lines[1]["faces"][0]["landmarks68"]
+    );
 
     let err = |i: usize| lines[i]["error"].as_str().unwrap().to_string();
     assert_eq!(lines[2]["line"], 3);
