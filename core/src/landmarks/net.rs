@@ -68,7 +68,7 @@ impl Net {
             output_slots.push(slot);
         }
         let plan = model.into_runnable().map_err(load_err(what))?;
-        let state = SimpleState::new(&plan).map_err(load_err(what))?;
+        let state = plan.spawn().map_err(load_err(what))?;
         let inputs = inputs
             .iter()
             .map(|(_, shape)| Tensor::zero::<f32>(shape).map(Arc::new))
