@@ -5,6 +5,19 @@
 //! similarity-normalised patches plus the level-1 yaw and give their zone's landmarks, gestures and
 //! gaze; the two are merged into the 68-point iBUG order. The preprocessing contract shared with the
 //! training scripts is `models/M3_IO.md`.
+//!
+//! [`M3`] holds the four networks (embedded with `include_bytes!`, optimised once by tract when it
+//! is built) and every buffer one face needs, so [`M3::estimate`] allocates nothing after its first
+//! call beyond the per-run output tensors tract itself creates. Preprocessing lives in [`warp`]
+//! (affine crop/patch sampling) and [`filter`] (bilateral filter, histogram equalisation).
+//! One face = one call; run one `M3` per thread (it is `Send`).
+
+pub mod filter;
+mod m3;
+mod net;
+pub mod warp;
+
+pub use m3::{BilateralConfig, EMBEDDED_FILES, Level1Config, M3, M3Config, ZoneConfig};
 
 /// Number of landmarks in the merged output (iBUG 68).
 pub const N_POINTS: usize = 68;

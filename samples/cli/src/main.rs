@@ -3,6 +3,7 @@
 
 mod fit;
 mod json;
+mod landmarks;
 
 use clap::{Parser, Subcommand};
 use std::io::{BufRead, BufWriter, Write};
@@ -28,6 +29,14 @@ enum Command {
         /// Fitting method.
         #[arg(long, value_enum, default_value = "msbp")]
         method: fit::Method,
+    },
+    /// M3 landmarks, gestures, gaze and the MSBP fit of the faces of each image.
+    Landmarks {
+        /// Input JSON lines: {"image", "camera"?, "faces": [{"box": [x, y, w, h]}]?}.
+        input: PathBuf,
+        /// Output JSON lines (default: stdout).
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
 }
 
@@ -75,6 +84,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Fit { input, out, method } => fit::run(&input, out.as_deref(), method),
+        Command::Landmarks { input, out } => landmarks::run(&input, out.as_deref()),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,

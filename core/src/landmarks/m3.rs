@@ -1,0 +1,746 @@
+//! The M3 detector: configuration (`m3.json`), network loading and the per-face pipeline of
+//! `models/M3_IO.md` (level-1 crop → level 1 → zone patches → zone nets → merge into 68 points).
+
+use super::filter::{Bilateral, equalize_hist};
+use super::net::Net;
+use super::warp::{Affine, sample};
+use super::{BROW_GESTURES, FaceLandmarks, MOUTH_GESTURES, N_POINTS, YAW_CLASSES_DEG};
+use crate::error::{Error, Result};
+use crate::image::{GrayImage, Rect};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+
+/// The shipped weights and configuration, trained by `models/train/train_m3.py`, by file name
+/// (the names `m3.json` refers to). A new zone network needs one line here.
+pub const EMBEDDED_FILES: &[(&str, &[u8])] = &[
+    ("m3.json", include_bytes!("../../models/m3/m3.json")),
+    ("level1.onnx", include_bytes!("../../models/m3/level1.onnx")),
+    ("brows.onnx", include_bytes!("../../models/m3/brows.onnx")),
+    ("eye.onnx", include_bytes!("../../models/m3/eye.onnx")),
+    ("mouth.onnx", include_bytes!("../../models/m3/mouth.onnx")),
+];
+
+/// Number of level-1 landmarks (`M3_IO.md`).
+const N_LEVEL1: usize = 32;
+/// Largest crop or patch side accepted from `m3.json`: far above any sensible network input, it
+/// only stops a corrupt configuration from asking for huge buffers.
+const MAX_INPUT_SIDE: usize = 1024;
+/// Largest bilateral diameter accepted from `m3.json` (a corrupt value must not ask for a huge
+/// kernel; the zones use 5).
+const MAX_BILATERAL_D: i32 = 31;
+/// Floor of a vector norm before normalising (the Python reference uses the same).
+const NORM_EPS: f64 = 1e-9;
+
+/// `level1` of `m3.json`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct Level1Config {
+    /// ONNX file name (informational: the bytes are passed separately).
+    pub file: String,
+    /// Side of the square network input, pixels.
+    pub input_size: usize,
+    /// Crop side / face-box side.
+    pub crop_scale: f64,
+    /// Where the 32 level-1 points go in the 68.
+    pub indices68: Vec<usize>,
+    /// Yaw classes, degrees; must equal [`YAW_CLASSES_DEG`].
+    pub yaw_classes_deg: Vec<i32>,
+}
+
+/// `bilateral` of a zone in `m3.json` (OpenCV `bilateralFilter` parameters).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+pub struct BilateralConfig {
+    /// Diameter (≤ 0: from `sigma_space`).
+    pub d: i32,
+    /// Range sigma, grey levels.
+    pub sigma_color: f64,
+    /// Spatial sigma, pixels.
+    pub sigma_space: f64,
+}
+
+/// One zone of `m3.json`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct ZoneConfig {
+    /// ONNX file name (informational).
+    pub file: String,
+    /// Patch width, pixels.
+    pub width: usize,
+    /// Patch height, pixels.
+    pub height: usize,
+    /// The two reference landmarks (68 indices) of the similarity.
+    pub ref68: [usize; 2],
+    /// Their template positions in patch units.
+    pub template: [[f64; 2]; 2],
+    /// Bilateral filter, if any.
+    #[serde(default)]
+    pub bilateral: Option<BilateralConfig>,
+    /// Histogram equalisation after the filter.
+    #[serde(default)]
+    pub equalize: bool,
+    /// Where the zone's points go in the 68.
+    pub indices68: Vec<usize>,
+    /// Reference landmarks of the mirrored (left) eye.
+    #[serde(default)]
+    pub mirror_ref68: Option<[usize; 2]>,
+    /// Where the mirrored eye's points go in the 68.
+    #[serde(default)]
+    pub mirror_indices68: Option<Vec<usize>>,
+    /// Gesture names, in output order.
+    #[serde(default)]
+    pub gestures: Option<Vec<String>>,
+    /// Whether the net outputs a gaze vector.
+    #[serde(default)]
+    pub gaze: bool,
+}
+
+/// `m3.json`: everything the inference needs besides the weights (`models/M3_IO.md`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct M3Config {
+    /// Schema version (1).
+    pub version: u32,
+    /// Level-1 network.
+    pub level1: Level1Config,
+    /// Level-2 networks by zone name. `brows` (brow gestures), `eye` (gaze; the left eye runs
+    /// mirrored) and `mouth` (mouth gestures) are required; further zones (e.g. `face`) give
+    /// landmarks only.
+    pub zones: BTreeMap<String, ZoneConfig>,
+}
+
+fn bad(msg: String) -> Error {
+    Error::ModelLoad(format!("m3.json: {msg}"))
+}
+
+fn check_side(what: &str, v: usize) -> Result<()> {
+    if v == 0 || v > MAX_INPUT_SIDE {
+        return Err(bad(format!("{what} = {v} outside 1..={MAX_INPUT_SIDE}")));
+    }
+    Ok(())
+}
+
+fn check_indices(
+    what: &str,
+    idx: &[usize],
+    n: usize,
+    covered: &mut [bool; N_POINTS],
+) -> Result<()> {
+    if idx.len() != n {
+        return Err(bad(format!(
+            "{what} has {} indices, expected {n}",
+            idx.len()
+        )));
+    }
+    for &i in idx {
+        *covered
+            .get_mut(i)
+            .ok_or_else(|| bad(format!("{what}: index {i} ≥ {N_POINTS}")))? = true;
+    }
+    Ok(())
+}
+
+/// What a zone's outputs mean to [`FaceLandmarks`] besides its points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ZoneKind {
+    /// Brow gesture logits ([`BROW_GESTURES`]).
+    Brows,
+    /// Mouth gesture logits ([`MOUTH_GESTURES`]).
+    Mouth,
+    /// Gaze; run twice, the left eye mirrored.
+    Eye,
+    /// Landmarks only (e.g. the `face` zone refining jaw and nose).
+    Plain,
+}
+
+impl ZoneKind {
+    fn of(name: &str) -> Self {
+        match name {
+            "brows" => Self::Brows,
+            "mouth" => Self::Mouth,
+            "eye" => Self::Eye,
+            _ => Self::Plain,
+        }
+    }
+
+    /// Required landmark count and gesture names of the thesis' zones.
+    fn contract(self) -> (Option<usize>, Option<&'static [&'static str]>) {
+        match self {
+            Self::Brows => (Some(10), Some(&BROW_GESTURES)),
+            Self::Mouth => (Some(20), Some(&MOUTH_GESTURES)),
+            Self::Eye => (Some(6), None),
+            Self::Plain => (None, None),
+        }
+    }
+}
+
+impl ZoneConfig {
+    fn validate(&self, name: &str, covered: &mut [bool; N_POINTS]) -> Result<()> {
+        let kind = ZoneKind::of(name);
+        check_side(&format!("{name}.width"), self.width)?;
+        check_side(&format!("{name}.height"), self.height)?;
+        let [t0, t1] = self.template;
+        if !t0.iter().chain(&t1).all(|v| v.is_finite()) || t0 == t1 {
+            return Err(bad(format!(
+                "{name}.template must hold two distinct finite points"
+            )));
+        }
+        for r in self.ref68.iter().chain(self.mirror_ref68.iter().flatten()) {
+            if *r >= N_POINTS {
+                return Err(bad(format!("{name}: reference index {r} ≥ {N_POINTS}")));
+            }
+        }
+        let (n_points, gestures) = kind.contract();
+        let n = n_points.unwrap_or(self.indices68.len().max(1));
+        check_indices(&format!("{name}.indices68"), &self.indices68, n, covered)?;
+        if let Some(b) = &self.bilateral {
+            if !(b.sigma_color.is_finite() && b.sigma_space.is_finite()) || b.d > MAX_BILATERAL_D {
+                return Err(bad(format!("{name}.bilateral out of range: {b:?}")));
+            }
+        }
+        let got = self.gestures.as_deref().filter(|g| !g.is_empty());
+        let same = match (gestures, got) {
+            (None, None) => true,
+            (Some(want), Some(got)) => got.iter().map(String::as_str).eq(want.iter().copied()),
+            _ => false,
+        };
+        if !same {
+            return Err(bad(format!(
+                "{name}.gestures = {got:?}, expected {gestures:?}"
+            )));
+        }
+        if self.gaze != (kind == ZoneKind::Eye) {
+            return Err(bad(format!(
+                "{name}.gaze = {}: only the eye gives gaze",
+                self.gaze
+            )));
+        }
+        match (kind, &self.mirror_ref68, &self.mirror_indices68) {
+            (ZoneKind::Eye, Some(_), Some(mi)) => {
+                check_indices(&format!("{name}.mirror_indices68"), mi, n, covered)
+            }
+            (ZoneKind::Eye, _, _) => Err(bad(format!(
+                "{name} needs mirror_ref68 and mirror_indices68"
+            ))),
+            (_, None, None) => Ok(()),
+            _ => Err(bad(format!("{name}: only the eye zone is mirrored"))),
+        }
+    }
+}
+
+impl M3Config {
+    /// Parses and checks `m3.json`.
+    ///
+    /// # Errors
+    /// [`Error::ModelLoad`] for malformed JSON or values that break the `M3_IO.md` contract
+    /// (index counts, gesture order, missing zones, uncovered points, sizes).
+    pub fn from_json(bytes: &[u8]) -> Result<Self> {
+        let cfg: Self = serde_json::from_slice(bytes).map_err(|e| bad(e.to_string()))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    fn validate(&self) -> Result<()> {
+        if self.version != 1 {
+            return Err(bad(format!(
+                "version {} (this build reads 1)",
+                self.version
+            )));
+        }
+        let l1 = &self.level1;
+        check_side("level1.input_size", l1.input_size)?;
+        if !(l1.crop_scale.is_finite() && l1.crop_scale > 0.0) {
+            return Err(bad(format!("level1.crop_scale = {}", l1.crop_scale)));
+        }
+        if l1.yaw_classes_deg != YAW_CLASSES_DEG {
+            return Err(bad(format!(
+                "level1.yaw_classes_deg = {:?}, expected {YAW_CLASSES_DEG:?}",
+                l1.yaw_classes_deg
+            )));
+        }
+        let mut covered = [false; N_POINTS];
+        check_indices("level1.indices68", &l1.indices68, N_LEVEL1, &mut covered)?;
+        for required in ["brows", "eye", "mouth"] {
+            if !self.zones.contains_key(required) {
+                return Err(bad(format!("zone {required:?} missing")));
+            }
+        }
+        for (name, z) in &self.zones {
+            z.validate(name, &mut covered)?;
+        }
+        if let Some(i) = covered.iter().position(|c| !c) {
+            return Err(bad(format!("landmark {i} is produced by no network")));
+        }
+        Ok(())
+    }
+}
+
+/// A level-2 zone at run time: its configuration, network and patch buffers.
+#[derive(Debug)]
+struct Zone {
+    kind: ZoneKind,
+    width: usize,
+    height: usize,
+    ref68: [usize; 2],
+    indices68: Vec<usize>,
+    /// The mirrored eye's references and indices.
+    mirror: Option<([usize; 2], Vec<usize>)>,
+    /// Template positions in patch pixels.
+    q: [[f64; 2]; 2],
+    bilateral: Option<Bilateral>,
+    equalize: bool,
+    net: Net,
+    patch: Vec<u8>,
+    filtered: Vec<u8>,
+}
+
+impl Zone {
+    fn new(name: &str, cfg: &ZoneConfig, bytes: &[u8]) -> Result<Self> {
+        let kind = ZoneKind::of(name);
+        let (w, h) = (cfg.width, cfg.height);
+        let n_gestures = cfg.gestures.as_ref().map_or(0, Vec::len);
+        let mut outputs = vec!["landmarks"];
+        let mut sizes = vec![2 * cfg.indices68.len()];
+        if n_gestures > 0 {
+            outputs.push("gesture_logits");
+            sizes.push(n_gestures);
+        }
+        if cfg.gaze {
+            outputs.push("gaze");
+            sizes.push(3);
+        }
+        let mut net = Net::load(
+            name,
+            bytes,
+            &[("patch", &[1, 1, h, w]), ("yaw", &[1, 5])],
+            &outputs,
+        )?;
+        check_outputs(name, &mut net, &sizes)?;
+        Ok(Self {
+            kind,
+            width: w,
+            height: h,
+            ref68: cfg.ref68,
+            indices68: cfg.indices68.clone(),
+            mirror: cfg.mirror_ref68.zip(cfg.mirror_indices68.clone()),
+            q: cfg.template.map(|t| [t[0] * w as f64, t[1] * h as f64]),
+            bilateral: cfg
+                .bilateral
+                .map(|b| Bilateral::new(b.d, b.sigma_color, b.sigma_space)),
+            equalize: cfg.equalize,
+            net,
+            patch: Vec::with_capacity(w * h),
+            filtered: vec![0; w * h],
+        })
+    }
+
+    /// The patch map from the two reference points (image pixels), `M3_IO.md`.
+    fn map(&self, p0: [f64; 2], p1: [f64; 2], mirror: bool) -> Result<Affine> {
+        let [q0, q1] = self.q;
+        let w = self.width as f64;
+        let (q0, q1) = if mirror {
+            ([w - q0[0], q0[1]], [w - q1[0], q1[1]])
+        } else {
+            (q0, q1)
+        };
+        let map = Affine::similarity(p0, p1, q0, q1).ok_or_else(|| {
+            Error::Internal(format!(
+                "non-finite level-1 reference points {p0:?}, {p1:?}"
+            ))
+        })?;
+        Ok(if mirror { map.mirrored_x(w) } else { map })
+    }
+
+    /// Samples, filters and runs the zone for the patch map `map`; writes its points through
+    /// `map` into `pts[indices]`. The other outputs stay in the net.
+    fn run(
+        &mut self,
+        image: &GrayImage,
+        map: &Affine,
+        yaw: &[f32; 5],
+        mirrored: bool,
+        pts: &mut [[f64; 2]; N_POINTS],
+    ) -> Result<()> {
+        let (w, h) = (self.width, self.height);
+        sample(image, map, w, h, &mut self.patch)?;
+        if let Some(b) = &mut self.bilateral {
+            b.apply(&self.patch, w, h, &mut self.filtered);
+            // Both buffers are w·h long: swapping keeps the filtered patch in `patch` for free.
+            std::mem::swap(&mut self.patch, &mut self.filtered);
+        }
+        if self.equalize {
+            equalize_hist(&mut self.patch);
+        }
+        let src = &self.patch;
+        self.net.fill_input(0, |x| to_unit(src, x))?;
+        self.net.fill_input(1, |x| x.copy_from_slice(yaw))?;
+        self.net.run()?;
+        let idx = match (&self.mirror, mirrored) {
+            (Some((_, mi)), true) => mi,
+            _ => &self.indices68,
+        };
+        let lm = self.net.output(0)?;
+        let (wf, hf) = (w as f64, h as f64);
+        for (k, &i) in idx.iter().enumerate() {
+            pts[i] = map.apply([f64::from(lm[2 * k]) * wf, f64::from(lm[2 * k + 1]) * hf]);
+        }
+        Ok(())
+    }
+
+    /// One eye: runs the zone and returns the unit gaze in the camera frame.
+    fn run_eye(
+        &mut self,
+        image: &GrayImage,
+        refs: &[[f64; 2]; N_POINTS],
+        yaw: &[f32; 5],
+        mirrored: bool,
+        pts: &mut [[f64; 2]; N_POINTS],
+    ) -> Result<[f64; 3]> {
+        let r = match (&self.mirror, mirrored) {
+            (Some((r, _)), true) => *r,
+            _ => self.ref68,
+        };
+        let map = self.map(refs[r[0]], refs[r[1]], mirrored)?;
+        self.run(image, &map, yaw, mirrored, pts)?;
+        let g = self.net.output(1)?;
+        // Patch frame → camera frame: the patch axes as image unit vectors. For the mirrored eye
+        // the u axis points the other way, which is M3_IO.md's "gaze x negated".
+        let xy = map.rotate_unit([f64::from(g[0]), f64::from(g[1])]);
+        Ok(normalized([xy[0], xy[1], f64::from(g[2])]))
+    }
+}
+
+/// Runs `net` once on its zero inputs to check its output sizes (and warm its plan up).
+fn check_outputs(name: &str, net: &mut Net, sizes: &[usize]) -> Result<()> {
+    net.run()?;
+    for (k, &want) in sizes.iter().enumerate() {
+        let got = net.output(k)?.len();
+        if got != want {
+            return Err(Error::ModelLoad(format!(
+                "{name}: output {k} has {got} values, expected {want}"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// u8 pixels → float32 `pixel / 255` (`M3_IO.md`, network input).
+fn to_unit(src: &[u8], dst: &mut [f32]) {
+    for (d, &s) in dst.iter_mut().zip(src) {
+        *d = f32::from(s) / 255.0;
+    }
+}
+
+fn softmax<const N: usize>(logits: &[f32], out: &mut [f32; N]) {
+    let m = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    let mut sum = 0.0;
+    for (o, &l) in out.iter_mut().zip(logits) {
+        *o = (l - m).exp();
+        sum += *o;
+    }
+    for o in out.iter_mut() {
+        *o /= sum;
+    }
+}
+
+fn normalized(v: [f64; 3]) -> [f64; 3] {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        .sqrt()
+        .max(NORM_EPS);
+    [v[0] / n, v[1] / n, v[2] / n]
+}
+
+/// The M3 landmark and gesture detector (thesis section 3.3). See the module docs.
+#[derive(Debug)]
+pub struct M3 {
+    cfg: M3Config,
+    level1: Net,
+    zones: Vec<Zone>,
+    crop: Vec<u8>,
+    /// The merged 68 points of the face in progress, image pixels.
+    pts: [[f64; 2]; N_POINTS],
+    /// The level-1 points of the face in progress (zone references).
+    ref_pts: [[f64; 2]; N_POINTS],
+}
+
+/// What level 1 gives besides its points.
+struct Level1Out {
+    yaw: [f32; 5],
+    face_prob: f32,
+}
+
+impl M3 {
+    /// The detector with the weights embedded in the library ([`EMBEDDED_FILES`], `models/m3/`).
+    ///
+    /// # Errors
+    /// [`Error::ModelLoad`] if the embedded models cannot be loaded (a build defect).
+    pub fn new() -> Result<Self> {
+        let json = EMBEDDED_FILES
+            .iter()
+            .find(|(n, _)| *n == "m3.json")
+            .map(|(_, b)| *b)
+            .ok_or_else(|| Error::ModelLoad("m3.json not embedded".into()))?;
+        Self::from_bytes(json, EMBEDDED_FILES)
+    }
+
+    /// The detector from other weights: `m3.json` and the network files it names, given as
+    /// (file name, ONNX bytes) pairs (`models/M3_IO.md`).
+    ///
+    /// # Errors
+    /// [`Error::ModelLoad`] for malformed JSON, a configuration that breaks the contract, a file
+    /// it names that is not given, ONNX bytes tract cannot load, or networks whose inputs/outputs
+    /// do not match the contract.
+    pub fn from_bytes(json: &[u8], files: &[(&str, &[u8])]) -> Result<Self> {
+        let cfg = M3Config::from_json(json)?;
+        let file = |name: &str| {
+            files
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map(|(_, b)| *b)
+                .ok_or_else(|| Error::ModelLoad(format!("model file {name:?} not given")))
+        };
+        let s = cfg.level1.input_size;
+        let mut level1 = Net::load(
+            "level1",
+            file(&cfg.level1.file)?,
+            &[("image", &[1, 1, s, s])],
+            &["landmarks", "yaw_logits", "face_logit"],
+        )?;
+        check_outputs("level1", &mut level1, &[2 * N_LEVEL1, 5, 1])?;
+        let zones = cfg
+            .zones
+            .iter()
+            .map(|(name, z)| Zone::new(name, z, file(&z.file)?))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self {
+            crop: Vec::with_capacity(s * s),
+            cfg,
+            level1,
+            zones,
+            pts: [[0.0; 2]; N_POINTS],
+            ref_pts: [[0.0; 2]; N_POINTS],
+        })
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &M3Config {
+        &self.cfg
+    }
+
+    fn check_input(image: &GrayImage, face: &Rect) -> Result<()> {
+        if image.width() == 0 || image.height() == 0 {
+            return Err(Error::InvalidInput(format!(
+                "empty image {}x{}",
+                image.width(),
+                image.height()
+            )));
+        }
+        if !face.is_valid() {
+            return Err(Error::InvalidInput(format!(
+                "face box must be finite with positive size, got {face:?}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Runs level 1 on the crop of `face` and writes its points into `self.pts`.
+    fn run_level1(&mut self, image: &GrayImage, face: &Rect) -> Result<Level1Out> {
+        Self::check_input(image, face)?;
+        let l1 = &self.cfg.level1;
+        let s = l1.input_size;
+        let c = face.center();
+        let side = f64::from(face.w.max(face.h));
+        let map = Affine::square_crop([f64::from(c[0]), f64::from(c[1])], l1.crop_scale * side, s);
+        sample(image, &map, s, s, &mut self.crop)?;
+        let crop = &self.crop;
+        self.level1.fill_input(0, |x| to_unit(crop, x))?;
+        self.level1.run()?;
+        let lm = self.level1.output(0)?;
+        for (k, &i) in l1.indices68.iter().enumerate() {
+            let p = [
+                f64::from(lm[2 * k]) * s as f64,
+                f64::from(lm[2 * k + 1]) * s as f64,
+            ];
+            self.pts[i] = map.apply(p);
+        }
+        let mut yaw = [0.0; 5];
+        softmax(self.level1.output(1)?, &mut yaw);
+        let logit = self.level1.output(2)?[0];
+        Ok(Level1Out {
+            yaw,
+            face_prob: 1.0 / (1.0 + (-logit).exp()),
+        })
+    }
+
+    /// Level 1 only: the probability that the crop of `face` holds a face (the tracker's check of
+    /// its patch).
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] for an empty image or a non-finite / empty box;
+    /// [`Error::Internal`] if the network fails to run.
+    pub fn face_confidence(&mut self, image: &GrayImage, face: &Rect) -> Result<f32> {
+        Ok(self.run_level1(image, face)?.face_prob)
+    }
+
+    /// Landmarks, yaw, face confidence, gestures and gaze of the face in `face` (one call per
+    /// face), written into `out`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] for an empty image or a non-finite / empty box;
+    /// [`Error::Internal`] if a network fails to run or level 1 gives non-finite points.
+    pub fn estimate(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        out: &mut FaceLandmarks,
+    ) -> Result<()> {
+        let l1 = self.run_level1(image, face)?;
+        let yaw = l1.yaw;
+        // Zone reference points always come from level 1 (M3_IO.md).
+        self.ref_pts = self.pts;
+        let (refs, pts) = (&self.ref_pts, &mut self.pts);
+        for zone in &mut self.zones {
+            if zone.kind == ZoneKind::Eye {
+                let right = zone.run_eye(image, refs, &yaw, false, pts)?;
+                let left = zone.run_eye(image, refs, &yaw, true, pts)?;
+                let both = normalized([left[0] + right[0], left[1] + right[1], left[2] + right[2]]);
+                out.gaze_right = right.map(|v| v as f32);
+                out.gaze_left = left.map(|v| v as f32);
+                out.gaze_combined = both.map(|v| v as f32);
+                continue;
+            }
+            let map = zone.map(refs[zone.ref68[0]], refs[zone.ref68[1]], false)?;
+            zone.run(image, &map, &yaw, false, pts)?;
+            match zone.kind {
+                ZoneKind::Brows => softmax(zone.net.output(1)?, &mut out.brows),
+                ZoneKind::Mouth => softmax(zone.net.output(1)?, &mut out.mouth),
+                ZoneKind::Eye | ZoneKind::Plain => {}
+            }
+        }
+        for (o, p) in out.points.iter_mut().zip(&self.pts) {
+            *o = [p[0] as f32, p[1] as f32];
+        }
+        out.yaw_probs = yaw;
+        out.face_prob = l1.face_prob;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::Value;
+
+    fn embedded(name: &str) -> &'static [u8] {
+        EMBEDDED_FILES.iter().find(|(n, _)| *n == name).unwrap().1
+    }
+
+    fn json_with(edit: impl FnOnce(&mut Value)) -> Vec<u8> {
+        let mut v: Value = serde_json::from_slice(embedded("m3.json")).unwrap();
+        edit(&mut v);
+        serde_json::to_vec(&v).unwrap()
+    }
+
+    fn image() -> GrayImage {
+        let (w, h) = (160, 120);
+        let data = (0..w * h)
+            .map(|i| (((i % w) * 3 + (i / w) * 2 + (i * 31) % 17) % 256) as u8)
+            .collect();
+        GrayImage::from_vec(w, h, data).unwrap()
+    }
+
+    #[test]
+    fn m3_is_send() {
+        fn send<T: Send>() {}
+        send::<M3>();
+    }
+
+    #[test]
+    fn embedded_models_load_and_give_finite_consistent_outputs() {
+        let mut m3 = M3::new().unwrap();
+        let img = image();
+        let face = Rect::new(40.0, 20.0, 70.0, 80.0);
+        let mut a = FaceLandmarks::default();
+        m3.estimate(&img, &face, &mut a).unwrap();
+        assert!(a.points.iter().flatten().all(|v| v.is_finite()));
+        for p in [&a.yaw_probs[..], &a.mouth[..], &a.brows[..]] {
+            assert!((p.iter().sum::<f32>() - 1.0).abs() < 1e-4);
+        }
+        for g in [a.gaze_left, a.gaze_right, a.gaze_combined] {
+            let n = g.iter().map(|v| v * v).sum::<f32>().sqrt();
+            assert!((n - 1.0).abs() < 1e-4, "{g:?}");
+        }
+        assert!((0.0..=1.0).contains(&a.face_prob));
+        // A call on another box in between changes nothing: no state leaks between faces.
+        let mut b = FaceLandmarks::default();
+        m3.estimate(&img, &Rect::new(0.0, 0.0, 30.0, 30.0), &mut b)
+            .unwrap();
+        m3.estimate(&img, &face, &mut b).unwrap();
+        assert_eq!(a, b);
+        let conf = m3.face_confidence(&img, &face).unwrap();
+        assert_eq!(conf, a.face_prob);
+    }
+
+    #[test]
+    fn bad_inputs_are_invalid_input() {
+        let mut m3 = M3::new().unwrap();
+        let img = image();
+        let mut out = FaceLandmarks::default();
+        for face in [
+            Rect::new(f32::NAN, 0.0, 10.0, 10.0),
+            Rect::new(0.0, 0.0, 0.0, 10.0),
+            Rect::new(0.0, 0.0, 10.0, f32::INFINITY),
+            Rect::new(0.0, 0.0, -5.0, 10.0),
+        ] {
+            assert!(matches!(
+                m3.estimate(&img, &face, &mut out),
+                Err(Error::InvalidInput(_))
+            ));
+        }
+        assert!(matches!(
+            m3.face_confidence(&GrayImage::new(0, 0), &Rect::new(0.0, 0.0, 5.0, 5.0)),
+            Err(Error::InvalidInput(_))
+        ));
+    }
+
+    #[test]
+    fn broken_models_are_model_load_errors() {
+        let load = |json: &[u8], files: &[(&str, &[u8])]| M3::from_bytes(json, files);
+        let good = embedded("m3.json");
+        let corrupt: &[u8] = b"\x08\x07not an onnx model";
+        let mut files: Vec<(&str, &[u8])> = EMBEDDED_FILES.to_vec();
+        assert!(load(good, &files).is_ok());
+        for bad_json in [
+            b"{not json".to_vec(),
+            json_with(|v| v["version"] = 2.into()),
+            json_with(|v| v["level1"]["indices68"] = serde_json::json!([0, 1, 2])),
+            json_with(|v| {
+                v["zones"]["mouth"]["gestures"] =
+                    serde_json::json!(["kiss", "smile", "frown", "neutral"])
+            }),
+            json_with(|v| {
+                v["zones"].as_object_mut().unwrap().remove("brows");
+            }),
+            json_with(|v| v["zones"]["eye"]["width"] = 0.into()),
+            json_with(|v| v["zones"]["eye"]["mirror_ref68"] = Value::Null),
+            json_with(|v| {
+                v["zones"]["mouth"]["template"] = serde_json::json!([[0.5, 0.5], [0.5, 0.5]])
+            }),
+        ] {
+            assert!(
+                matches!(load(&bad_json, &files), Err(Error::ModelLoad(_))),
+                "{}",
+                String::from_utf8_lossy(&bad_json)
+            );
+        }
+        for i in 1..files.len() {
+            let saved = files[i].1;
+            files[i].1 = corrupt;
+            assert!(matches!(load(good, &files), Err(Error::ModelLoad(_))));
+            files[i].1 = &saved[..saved.len() / 2];
+            assert!(matches!(load(good, &files), Err(Error::ModelLoad(_))));
+            files[i].1 = saved;
+        }
+        // A zone net in the level-1 slot: wrong input names.
+        files[1].1 = embedded("mouth.onnx");
+        assert!(matches!(load(good, &files), Err(Error::ModelLoad(_))));
+        files.remove(1);
+        assert!(matches!(load(good, &files), Err(Error::ModelLoad(_))));
+    }
+}

@@ -1,0 +1,236 @@
+//! Affine sampling of crops and patches (`models/M3_IO.md`, "Sampling convention").
+//!
+//! A crop or patch of W×H pixels is defined by an affine map A from patch coordinates to image
+//! coordinates. Both use the CONTRACT pixel convention (pixel (i, j) has its centre at
+//! (i + 0.5, j + 0.5)), so output pixel (u, v) is the bilinear sample of the image at
+//! A(u + 0.5, v + 0.5) − (0.5, 0.5) in array-index space, with border pixels replicated outside the
+//! image, rounded half up to u8. The training side (OpenCV `warpAffine`, `WARP_INVERSE_MAP`,
+//! `BORDER_REPLICATE`, float kernels of OpenCV ≥ 4.11) agrees with this to ±1 on about 1 pixel in
+//! 15,000 (measured by `tests/data/m3_preproc/make_golden.py`).
+
+use crate::error::{Error, Result};
+use crate::image::GrayImage;
+
+/// A 2×3 affine map from patch coordinates (u, v) to image coordinates (x, y):
+/// `x = m[0]·u + m[1]·v + m[2]`, `y = m[3]·u + m[4]·v + m[5]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Affine {
+    /// Row-major coefficients.
+    pub m: [f64; 6],
+}
+
+impl Affine {
+    /// The identity map.
+    pub const IDENTITY: Self = Self {
+        m: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+    };
+
+    /// The level-1 crop map: the `size`² crop covers the axis-aligned square of side `side` centred
+    /// on `center` (image pixels).
+    pub fn square_crop(center: [f64; 2], side: f64, size: usize) -> Self {
+        let k = side / size as f64;
+        let half = 0.5 * size as f64;
+        Self {
+            m: [k, 0.0, center[0] - k * half, 0.0, k, center[1] - k * half],
+        }
+    }
+
+    /// The similarity (rotation + uniform scale + translation, no reflection) that sends patch
+    /// points `q0`, `q1` to image points `p0`, `p1`. `None` when `q0 == q1` or any input is not
+    /// finite (the map is then undefined); `p0 == p1` gives a degenerate (zero-scale) map, which
+    /// samples one pixel everywhere rather than failing.
+    pub fn similarity(p0: [f64; 2], p1: [f64; 2], q0: [f64; 2], q1: [f64; 2]) -> Option<Self> {
+        let (dqx, dqy) = (q1[0] - q0[0], q1[1] - q0[1]);
+        let (dpx, dpy) = (p1[0] - p0[0], p1[1] - p0[1]);
+        let n = dqx * dqx + dqy * dqy;
+        // z = dp / dq as complex numbers: z = a + i b is the rotation-scale.
+        let a = (dpx * dqx + dpy * dqy) / n;
+        let b = (dpy * dqx - dpx * dqy) / n;
+        let m = [
+            a,
+            -b,
+            p0[0] - (a * q0[0] - b * q0[1]),
+            b,
+            a,
+            p0[1] - (b * q0[0] + a * q0[1]),
+        ];
+        (n > 0.0 && m.iter().all(|v| v.is_finite())).then_some(Self { m })
+    }
+
+    /// The map `(u, v) ↦ self(width − u, v)`: the patch mirrored left–right (`M3_IO.md`, eye
+    /// mirroring).
+    pub fn mirrored_x(&self, width: f64) -> Self {
+        let m = &self.m;
+        Self {
+            m: [
+                -m[0],
+                m[1],
+                m[0] * width + m[2],
+                -m[3],
+                m[4],
+                m[3] * width + m[5],
+            ],
+        }
+    }
+
+    /// Image point of patch point `p`.
+    #[inline]
+    pub fn apply(&self, p: [f64; 2]) -> [f64; 2] {
+        let m = &self.m;
+        [
+            m[0] * p[0] + m[1] * p[1] + m[2],
+            m[3] * p[0] + m[4] * p[1] + m[5],
+        ]
+    }
+
+    /// Image direction of patch vector `d` divided by the map's scale (`sqrt|det|`): for a
+    /// similarity, the patch axes expressed in the image as unit vectors (reflection included).
+    /// `d` unchanged when the map is degenerate.
+    pub fn rotate_unit(&self, d: [f64; 2]) -> [f64; 2] {
+        let m = &self.m;
+        let s = (m[0] * m[4] - m[1] * m[3]).abs().sqrt();
+        if s > 0.0 && s.is_finite() {
+            [
+                (m[0] * d[0] + m[1] * d[1]) / s,
+                (m[3] * d[0] + m[4] * d[1]) / s,
+            ]
+        } else {
+            d
+        }
+    }
+}
+
+/// Samples the `width`×`height` patch of `image` under `map` into `out` (row-major, resized to
+/// `width·height`; its allocation is reused).
+///
+/// # Errors
+/// [`Error::InvalidInput`] when the image or the patch is empty, or the map is not finite.
+pub fn sample(
+    image: &GrayImage,
+    map: &Affine,
+    width: usize,
+    height: usize,
+    out: &mut Vec<u8>,
+) -> Result<()> {
+    let (iw, ih) = (image.width(), image.height());
+    if iw == 0 || ih == 0 || width == 0 || height == 0 {
+        return Err(Error::InvalidInput(format!(
+            "cannot sample a {width}x{height} patch from a {iw}x{ih} image"
+        )));
+    }
+    if !map.m.iter().all(|v| v.is_finite()) {
+        return Err(Error::InvalidInput(format!(
+            "non-finite patch map {:?}",
+            map.m
+        )));
+    }
+    out.resize(width * height, 0);
+    let data = image.data();
+    let m = &map.m;
+    let (xmax, ymax) = ((iw - 1) as isize, (ih - 1) as isize);
+    // Beyond one pixel outside the image every replicated sample equals the edge pixel, so clamping
+    // the coordinate there changes nothing and keeps the integer conversion in range.
+    let (xlo, xhi) = (-1.0, iw as f64);
+    let (ylo, yhi) = (-1.0, ih as f64);
+    for (v, row) in out.chunks_exact_mut(width).enumerate() {
+        let vc = v as f64 + 0.5;
+        for (u, o) in row.iter_mut().enumerate() {
+            let uc = u as f64 + 0.5;
+            let x = (m[0] * uc + m[1] * vc + m[2] - 0.5).clamp(xlo, xhi);
+            let y = (m[3] * uc + m[4] * vc + m[5] - 0.5).clamp(ylo, yhi);
+            let (xf, yf) = (x.floor(), y.floor());
+            let (fx, fy) = (x - xf, y - yf);
+            let (x0, y0) = (xf as isize, yf as isize);
+            let xa = x0.clamp(0, xmax) as usize;
+            let xb = (x0 + 1).clamp(0, xmax) as usize;
+            let ra = y0.clamp(0, ymax) as usize * iw;
+            let rb = (y0 + 1).clamp(0, ymax) as usize * iw;
+            let p00 = f64::from(data[ra + xa]);
+            let p01 = f64::from(data[ra + xb]);
+            let p10 = f64::from(data[rb + xa]);
+            let p11 = f64::from(data[rb + xb]);
+            let val =
+                (1.0 - fy) * ((1.0 - fx) * p00 + fx * p01) + fy * ((1.0 - fx) * p10 + fx * p11);
+            *o = (val + 0.5).floor().clamp(0.0, 255.0) as u8;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(w: usize, h: usize) -> GrayImage {
+        let data = (0..w * h)
+            .map(|i| ((i % w) * 3 + (i / w) * 5) as u8)
+            .collect();
+        GrayImage::from_vec(w, h, data).unwrap()
+    }
+
+    #[test]
+    fn identity_map_copies_the_image() {
+        let img = ramp(20, 10);
+        let mut out = Vec::new();
+        sample(&img, &Affine::IDENTITY, 20, 10, &mut out).unwrap();
+        assert_eq!(out, img.data());
+    }
+
+    #[test]
+    fn half_pixel_shift_averages_neighbours_and_rounds_half_up() {
+        let img = GrayImage::from_vec(2, 1, vec![10, 13]).unwrap();
+        let map = Affine {
+            m: [1.0, 0.0, 0.5, 0.0, 1.0, 0.0],
+        };
+        let mut out = Vec::new();
+        sample(&img, &map, 2, 1, &mut out).unwrap();
+        // 11.5 rounds up to 12; beyond the right edge the border pixel is replicated.
+        assert_eq!(out, vec![12, 13]);
+    }
+
+    #[test]
+    fn far_outside_replicates_the_border() {
+        let img = ramp(8, 8);
+        let map = Affine {
+            m: [1.0, 0.0, -1e9, 0.0, 1.0, 1e9],
+        };
+        let mut out = Vec::new();
+        sample(&img, &map, 3, 3, &mut out).unwrap();
+        assert!(out.iter().all(|&v| v == img.get(0, 7)));
+    }
+
+    #[test]
+    fn similarity_sends_q_to_p_and_mirroring_flips_u() {
+        let (p0, p1) = ([10.0, 20.0], [30.0, 25.0]);
+        let (q0, q1) = ([8.0, 13.0], [32.0, 13.0]);
+        let a = Affine::similarity(p0, p1, q0, q1).unwrap();
+        for (p, q) in [(p0, q0), (p1, q1)] {
+            let r = a.apply(q);
+            assert!((r[0] - p[0]).abs() < 1e-9 && (r[1] - p[1]).abs() < 1e-9);
+        }
+        let w = 40.0;
+        let mirrored = a.mirrored_x(w);
+        let r = mirrored.apply([w - q0[0], q0[1]]);
+        assert!((r[0] - p0[0]).abs() < 1e-9 && (r[1] - p0[1]).abs() < 1e-9);
+        // Unit axes: the mirrored map's u axis points the other way.
+        let (e, f) = (a.rotate_unit([1.0, 0.0]), mirrored.rotate_unit([1.0, 0.0]));
+        assert!((e[0] + f[0]).abs() < 1e-12 && (e[1] + f[1]).abs() < 1e-12);
+        assert!(((e[0] * e[0] + e[1] * e[1]) - 1.0).abs() < 1e-12);
+        assert!(Affine::similarity(p0, p1, q0, q0).is_none());
+    }
+
+    #[test]
+    fn bad_input_is_an_error() {
+        let img = ramp(4, 4);
+        let mut out = Vec::new();
+        assert!(sample(&GrayImage::new(0, 0), &Affine::IDENTITY, 2, 2, &mut out).is_err());
+        assert!(sample(&img, &Affine::IDENTITY, 0, 2, &mut out).is_err());
+        let nan = Affine {
+            m: [f64::NAN, 0.0, 0.0, 0.0, 1.0, 0.0],
+        };
+        assert!(matches!(
+            sample(&img, &nan, 2, 2, &mut out),
+            Err(Error::InvalidInput(_))
+        ));
+    }
+}

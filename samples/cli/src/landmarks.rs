@@ -1,0 +1,202 @@
+//! `monotrack landmarks IN.jsonl [--out OUT.jsonl]`: M3 landmarks, gestures, gaze and the MSBP
+//! fit for every face of every image (CONTRACT.md). With `faces` boxes in a line, M3 runs on those
+//! boxes only (no detection); without, faces would be detected — no detector exists yet, so such
+//! lines get a per-line error. One output line per input line; a bad line yields
+//! `{"line": N, "error": "..."}` in its place, a message on stderr, and exit status 1 at the end.
+
+use crate::json::{CameraJson, intrinsics, put_fit};
+use crate::{LineSink, read_lines};
+use monotrack_core::fit::{Msbp, MsbpConfig};
+use monotrack_core::image::{Frame, FrameDesc, GrayImage, PixelFormat, Rect};
+use monotrack_core::landmarks::{BROW_GESTURES, FaceLandmarks, M3, MOUTH_GESTURES, N_POINTS};
+use serde::Deserialize;
+use serde_json::{Map, Value, json};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The per-line error for lines without boxes until a face detector lands.
+pub const NO_DETECTOR: &str = "no face boxes given and no detector available yet";
+
+#[derive(Deserialize)]
+struct FaceIn {
+    #[serde(rename = "box")]
+    bbox: [f32; 4],
+}
+
+#[derive(Deserialize)]
+struct LineIn {
+    image: String,
+    camera: Option<CameraJson>,
+    faces: Option<Vec<FaceIn>>,
+}
+
+/// Everything reused from line to line.
+struct Pipeline {
+    m3: M3,
+    msbp: Msbp,
+    gray: GrayImage,
+    lm: FaceLandmarks,
+}
+
+impl Pipeline {
+    /// Face boxes and scores of a whole image. The one call a detector plugs into.
+    fn detect(&mut self) -> Result<Vec<(Rect, Option<f32>)>, String> {
+        Err(NO_DETECTOR.into())
+    }
+}
+
+fn round(v: f64, digits: i32) -> f64 {
+    let p = 10f64.powi(digits);
+    (v * p).round() / p
+}
+
+/// Decodes an image file into the upright luma image (the core's BT.601 conversion).
+fn load_gray(path: &Path, out: &mut GrayImage) -> Result<(), String> {
+    let rgb = image::open(path)
+        .map_err(|e| format!("cannot read image {}: {e}", path.display()))?
+        .to_rgb8();
+    let desc = FrameDesc::packed(rgb.width(), rgb.height(), PixelFormat::Rgb8);
+    Frame::new(rgb.as_raw(), desc)
+        .map_err(|e| e.to_string())?
+        .to_luma(out);
+    Ok(())
+}
+
+fn probs(names: &[&str], p: &[f32]) -> Value {
+    Value::Object(
+        names
+            .iter()
+            .zip(p)
+            .map(|(n, v)| (n.to_string(), json!(round(f64::from(*v), 4))))
+            .collect(),
+    )
+}
+
+fn vec3(v: &[f32; 3]) -> Value {
+    json!(
+        v.iter()
+            .map(|x| round(f64::from(*x), 4))
+            .collect::<Vec<_>>()
+    )
+}
+
+/// The CONTRACT's FACE object without the fit fields.
+fn face_json(rect: &Rect, score: f32, lm: &FaceLandmarks) -> Map<String, Value> {
+    let mut face = Map::new();
+    face.insert(
+        "box".into(),
+        json!([rect.x, rect.y, rect.w, rect.h].map(|v| round(f64::from(v), 2))),
+    );
+    face.insert("score".into(), json!(round(f64::from(score), 4)));
+    face.insert(
+        "landmarks68".into(),
+        json!(
+            lm.points
+                .iter()
+                .map(|p| [round(f64::from(p[0]), 3), round(f64::from(p[1]), 3)])
+                .collect::<Vec<_>>()
+        ),
+    );
+    face.insert("yaw_class_deg".into(), json!(lm.yaw_class_deg()));
+    face.insert(
+        "yaw_probs".into(),
+        json!(
+            lm.yaw_probs
+                .iter()
+                .map(|p| round(f64::from(*p), 4))
+                .collect::<Vec<_>>()
+        ),
+    );
+    face.insert("face_prob".into(), json!(round(f64::from(lm.face_prob), 4)));
+    face.insert(
+        "gestures".into(),
+        json!({"mouth": probs(&MOUTH_GESTURES, &lm.mouth), "brows": probs(&BROW_GESTURES, &lm.brows)}),
+    );
+    face.insert(
+        "gaze".into(),
+        json!({"left": vec3(&lm.gaze_left), "right": vec3(&lm.gaze_right),
+               "combined": vec3(&lm.gaze_combined)}),
+    );
+    face
+}
+
+fn landmarks_line(text: &str, base: &Path, p: &mut Pipeline) -> Result<Value, String> {
+    let t_start = Instant::now();
+    let line: LineIn = serde_json::from_str(text).map_err(|e| format!("malformed JSON: {e}"))?;
+    let path = {
+        let pb = PathBuf::from(&line.image);
+        if pb.is_absolute() { pb } else { base.join(pb) }
+    };
+    load_gray(&path, &mut p.gray)?;
+    let (w, h) = (p.gray.width() as u32, p.gray.height() as u32);
+    let cam = intrinsics(line.camera, w, h).map_err(|e| e.to_string())?;
+    let t_detect = Instant::now();
+    let boxes: Vec<(Rect, Option<f32>)> = match &line.faces {
+        Some(faces) => faces
+            .iter()
+            .map(|f| {
+                let [x, y, bw, bh] = f.bbox;
+                (Rect::new(x, y, bw, bh), None)
+            })
+            .collect(),
+        None => p.detect()?,
+    };
+    let detect_us = if line.faces.is_some() {
+        0
+    } else {
+        t_detect.elapsed().as_micros() as u64
+    };
+    let (mut landmarks_us, mut fit_us) = (0u64, 0u64);
+    let mut faces = Vec::with_capacity(boxes.len());
+    for (k, (rect, det_score)) in boxes.iter().enumerate() {
+        let t0 = Instant::now();
+        p.m3.estimate(&p.gray, rect, &mut p.lm)
+            .map_err(|e| format!("face {k}: {e}"))?;
+        landmarks_us += t0.elapsed().as_micros() as u64;
+        let mut pts = [[0.0f64; 2]; N_POINTS];
+        for (d, s) in pts.iter_mut().zip(&p.lm.points) {
+            *d = [f64::from(s[0]), f64::from(s[1])];
+        }
+        let t1 = Instant::now();
+        let fit = p
+            .msbp
+            .fit(&pts, None, &cam, None)
+            .map_err(|e| format!("face {k}: fit: {e}"))?;
+        fit_us += t1.elapsed().as_micros() as u64;
+        // Given boxes have no detection score: the level-1 face confidence stands in for it.
+        let mut face = face_json(rect, det_score.unwrap_or(p.lm.face_prob), &p.lm);
+        put_fit(&mut face, &fit);
+        faces.push(Value::Object(face));
+    }
+    Ok(json!({
+        "image": line.image, "width": w, "height": h, "faces": faces,
+        "timings_us": {"detect": detect_us, "landmarks": landmarks_us, "fit": fit_us,
+                       "total": t_start.elapsed().as_micros() as u64},
+    }))
+}
+
+/// Runs the subcommand; returns whether every line succeeded.
+pub fn run(input: &Path, out: Option<&Path>) -> Result<bool, String> {
+    let lines = read_lines(input)?;
+    let base = input
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."));
+    let mut sink = LineSink::new(out)?;
+    let mut p = Pipeline {
+        m3: M3::new().map_err(|e| e.to_string())?,
+        msbp: Msbp::new(MsbpConfig::default()),
+        gray: GrayImage::default(),
+        lm: FaceLandmarks::default(),
+    };
+    let mut ok = true;
+    for (n, text) in lines {
+        let v = landmarks_line(&text, &base, &mut p).unwrap_or_else(|e| {
+            eprintln!("{}:{n}: {e}", input.display());
+            ok = false;
+            json!({"line": n, "error": e})
+        });
+        sink.write(&v)?;
+    }
+    Ok(ok)
+}

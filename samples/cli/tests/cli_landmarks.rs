@@ -1,0 +1,140 @@
+//! The `landmarks` subcommand end to end on the committed sample image: CONTRACT fields and
+//! ranges, relative image paths, the no-detector error for lines without boxes, and malformed
+//! lines reported with their line numbers without a panic.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+/// The astronaut's face in `samples/data/astronaut.jpg` (the tight box of its 68 points, by eye).
+const ASTRONAUT_BOX: [f64; 4] = [172.0, 90.0, 104.0, 94.0];
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn monotrack(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_monotrack"))
+        .args(args)
+        .output()
+        .expect("run monotrack")
+}
+
+fn norm(v: &serde_json::Value) -> f64 {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap().powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+#[test]
+fn landmarks_on_given_boxes_follow_the_contract() {
+    let dir = std::env::temp_dir().join(format!("monotrack-cli-lm-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(
+        root().join("samples/data/astronaut.jpg"),
+        dir.join("astronaut.jpg"),
+    )
+    .unwrap();
+    let input = dir.join("in.jsonl");
+    let b = ASTRONAUT_BOX;
+    let good = format!(
+        r#"{{"image": "astronaut.jpg", "faces": [{{"box": [{}, {}, {}, {}]}}]}}"#,
+        b[0], b[1], b[2], b[3]
+    );
+    let cam = format!(
+        r#"{{"image": "astronaut.jpg", "camera": {{"fx": 400, "fy": 400, "cx": 256, "cy": 256}}, "faces": [{{"box": [{}, {}, {}, {}]}}, {{"box": [10, 10, 60, 60]}}]}}"#,
+        b[0], b[1], b[2], b[3]
+    );
+    std::fs::write(
+        &input,
+        format!(
+            "{good}\n{cam}\n{{\"image\": \"astronaut.jpg\"}}\n{{broken\n{{\"image\": \"missing.jpg\", \"faces\": []}}\n{{\"image\": \"astronaut.jpg\", \"faces\": [{{\"box\": [1, 1, 0, 5]}}]}}\n"
+        ),
+    )
+    .unwrap();
+    let out_path = dir.join("out.jsonl");
+    let out = monotrack(&[
+        "landmarks",
+        input.to_str().unwrap(),
+        "--out",
+        out_path.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "bad lines make the exit status 1"
+    );
+    let text = std::fs::read_to_string(&out_path).unwrap();
+    let lines: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 6, "one output line per input line");
+
+    for (l, n_faces) in [(&lines[0], 1), (&lines[1], 2)] {
+        assert_eq!(l["image"], "astronaut.jpg");
+        assert_eq!(
+            (l["width"].as_u64(), l["height"].as_u64()),
+            (Some(512), Some(512))
+        );
+        let faces = l["faces"].as_array().unwrap();
+        assert_eq!(faces.len(), n_faces);
+        for f in faces {
+            let pts = f["landmarks68"].as_array().unwrap();
+            assert_eq!(pts.len(), 68);
+            assert!(pts.iter().all(|p| p[0].as_f64().unwrap().is_finite()));
+            let yaw: f64 = f["yaw_probs"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|p| p.as_f64().unwrap())
+                .sum();
+            assert!((yaw - 1.0).abs() < 1e-3, "yaw probabilities sum to {yaw}");
+            assert!([-60, -30, 0, 30, 60].contains(&f["yaw_class_deg"].as_i64().unwrap()));
+            let score = f["score"].as_f64().unwrap();
+            assert!((0.0..=1.0).contains(&score));
+            let mouth = f["gestures"]["mouth"].as_object().unwrap();
+            assert_eq!(mouth.len(), 4);
+            let s: f64 = mouth.values().map(|v| v.as_f64().unwrap()).sum();
+            assert!((s - 1.0).abs() < 1e-3);
+            assert_eq!(f["gestures"]["brows"].as_object().unwrap().len(), 3);
+            for g in ["left", "right", "combined"] {
+                assert!((norm(&f["gaze"][g]) - 1.0).abs() < 1e-3, "gaze {g}");
+            }
+            assert_eq!(f["pose"]["rotation"].as_array().unwrap().len(), 3);
+            assert_eq!(f["shape_units"].as_object().unwrap().len(), 11);
+            assert_eq!(f["action_units"].as_object().unwrap().len(), 6);
+            assert!(f["fit_rms_px"].as_f64().unwrap().is_finite());
+        }
+        let t = &l["timings_us"];
+        for k in ["detect", "landmarks", "fit", "total"] {
+            assert!(t[k].as_u64().is_some(), "timings_us.{k}");
+        }
+        assert_eq!(t["detect"], 0, "given boxes: no detection");
+    }
+    // The given box is kept as is.
+    let got: Vec<f64> = lines[0]["faces"][0]["box"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(got, ASTRONAUT_BOX.to_vec());
+    // Same image and box, other camera: same landmarks, other pose depth.
+    assert_eq!(
+        lines[0]["faces"][0]["landmarks68"],
+        lines[1]["faces"][0]["landmarks68"]
+    );
+
+    let err = |i: usize| lines[i]["error"].as_str().unwrap().to_string();
+    assert_eq!(lines[2]["line"], 3);
+    assert!(err(2).contains("no face boxes given and no detector available yet"));
+    assert!(err(3).contains("malformed JSON"));
+    assert!(err(4).contains("missing.jpg"));
+    assert!(err(5).contains("invalid input"), "{}", err(5));
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(stderr.contains(":3:") && stderr.contains(":4:") && stderr.contains(":6:"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,130 @@
+//! Golden tests of the M3 preprocessing (`core::landmarks::{warp, filter}`) against OpenCV, the
+//! library the training side of `core/models/M3_IO.md` calls. Fixtures and tolerances:
+//! `tests/data/m3_preproc/make_golden.py` (its docstring says where every expected value comes from).
+
+use monotrack_core::image::GrayImage;
+use monotrack_core::landmarks::filter::{Bilateral, equalize_hist};
+use monotrack_core::landmarks::warp::{Affine, sample};
+use serde::Deserialize;
+use std::path::PathBuf;
+
+/// Warps: at most this fraction of pixels one level off OpenCV (`make_golden.py`).
+const WARP_MAX_OFF_FRACTION: f64 = 0.02;
+/// Bilateral filter: at most this fraction of pixels one level off OpenCV (`make_golden.py`).
+const BILATERAL_MAX_OFF_FRACTION: f64 = 0.01;
+
+fn dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/m3_preproc")
+}
+
+/// Reads a binary PGM (P5, maxval 255) as written by `make_golden.py`.
+fn pgm(name: &str) -> GrayImage {
+    let bytes = std::fs::read(dir().join(name)).unwrap();
+    let mut fields = Vec::new();
+    let mut pos = 0;
+    while fields.len() < 4 {
+        while bytes[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        let start = pos;
+        while !bytes[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        fields.push(String::from_utf8(bytes[start..pos].to_vec()).unwrap());
+    }
+    assert_eq!(fields[0], "P5");
+    assert_eq!(fields[3], "255");
+    let (w, h): (usize, usize) = (fields[1].parse().unwrap(), fields[2].parse().unwrap());
+    GrayImage::from_vec(w, h, bytes[pos + 1..].to_vec()).unwrap()
+}
+
+/// (max |diff|, fraction of pixels that differ).
+fn compare(got: &[u8], want: &[u8]) -> (u8, f64) {
+    assert_eq!(got.len(), want.len());
+    let max = got
+        .iter()
+        .zip(want)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap();
+    let off = got.iter().zip(want).filter(|(a, b)| a != b).count();
+    (max, off as f64 / got.len() as f64)
+}
+
+#[derive(Deserialize)]
+struct Warp {
+    name: String,
+    width: usize,
+    height: usize,
+    map: [[f64; 3]; 2],
+}
+
+#[derive(Deserialize)]
+struct Cases {
+    patch_sizes: Vec<[usize; 2]>,
+    warps: Vec<Warp>,
+}
+
+fn cases() -> Cases {
+    serde_json::from_str(&std::fs::read_to_string(dir().join("cases.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn warps_match_the_contract_exactly_and_opencv_within_one_level() {
+    let src = pgm("src.pgm");
+    let mut out = Vec::new();
+    for c in cases().warps {
+        let m = c.map;
+        let map = Affine {
+            m: [m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2]],
+        };
+        sample(&src, &map, c.width, c.height, &mut out).unwrap();
+        let exact = pgm(&format!("warp_{}_exact.pgm", c.name));
+        assert_eq!(
+            out,
+            exact.data(),
+            "{}: differs from the exact contract",
+            c.name
+        );
+        let (max, off) = compare(&out, pgm(&format!("warp_{}.pgm", c.name)).data());
+        println!(
+            "warp {}: vs OpenCV max {max}, {:.3} % off",
+            c.name,
+            100.0 * off
+        );
+        assert!(
+            max <= 1 && off <= WARP_MAX_OFF_FRACTION,
+            "{}: {max} / {off}",
+            c.name
+        );
+    }
+}
+
+#[test]
+fn bilateral_and_equalize_match_opencv() {
+    let mut bf = Bilateral::new(5, 20.0, 3.0);
+    for [w, h] in cases().patch_sizes {
+        let tag = format!("{w}x{h}");
+        let patch = pgm(&format!("patch_{tag}.pgm"));
+        let want = pgm(&format!("bilateral_{tag}.pgm"));
+        let mut got = vec![0; w * h];
+        bf.apply(patch.data(), w, h, &mut got);
+        let (max, off) = compare(&got, want.data());
+        println!(
+            "bilateral {tag}: vs OpenCV max {max}, {:.3} % off",
+            100.0 * off
+        );
+        assert!(
+            max <= 1 && off <= BILATERAL_MAX_OFF_FRACTION,
+            "{tag}: {max} / {off}"
+        );
+
+        let mut eq = want.data().to_vec();
+        equalize_hist(&mut eq);
+        assert_eq!(
+            eq,
+            pgm(&format!("equalize_{tag}.pgm")).data(),
+            "equalize {tag}"
+        );
+    }
+}
