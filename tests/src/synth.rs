@@ -286,7 +286,7 @@ impl Sequence {
         }
         let mut last_box: Option<Rect> = None;
         let mut last_face = usize::MAX;
-        for k in 0..config.segments {
+        for _ in 0..config.segments {
             let mut face = (rng.next_u64() % faces.len() as u64) as usize;
             if face == last_face {
                 face = (face + 1) % faces.len();

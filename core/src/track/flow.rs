@@ -588,11 +588,17 @@ mod tests {
 
     #[test]
     fn affine_motion_is_recovered() {
-        // 3° rotation, 4% zoom and a shift: the window sees (nearly) a translation locally.
+        // 3° rotation and 4 % zoom about the image centre plus a shift (points move 5–20 px): the
+        // window sees (nearly) a translation locally.
         let (s, c) = (3f32.to_radians().sin(), 3f32.to_radians().cos());
         let k = 1.04;
         let a = [[k * c, -k * s], [k * s, k * c]];
-        check(a, [-14.0, 6.0], 0.3, 0.9);
+        let centre = [320.0f32, 240.0];
+        let b = [
+            centre[0] - (a[0][0] * centre[0] + a[0][1] * centre[1]) - 4.0,
+            centre[1] - (a[1][0] * centre[0] + a[1][1] * centre[1]) + 3.0,
+        ];
+        check(a, b, 0.3, 0.9);
     }
 
     #[test]

@@ -4,7 +4,7 @@
 mod fit;
 mod json;
 // Generic over the tracker; the `track` subcommand is wired once core::detect and M3 land.
-#[cfg_attr(not(test), allow(dead_code))]
+#[allow(dead_code)]
 mod track;
 
 use clap::{Parser, Subcommand};
