@@ -657,12 +657,14 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         let n_active = self.slots.iter().filter(|s| s.active).count();
         // Detect: always in image mode; in video mode when nothing is tracked (first frame, or no
         // face yet) unless the loss happened just now and re-detection waits for the next frame,
-        // when a loss asked for it, or periodically while there is room for more faces.
+        // when a loss asked for it, or periodically while some faces are tracked and there is room
+        // for more.
         let run_detector = !video
             || (n_active == 0 && !lost_now)
             || (lost_now && self.config.redetect_immediately)
             || self.redetect_next
-            || (n_active < self.config.max_faces
+            || (n_active > 0
+                && n_active < self.config.max_faces
                 && self.config.new_face_interval > 0
                 && self.frames_since_detect + 1 >= self.config.new_face_interval);
         // A loss this frame (not re-detected at once) triggers the detector on the next frame.
@@ -704,7 +706,12 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                         }
                     }
                     None => {
-                        if let Some(s) = self.slots.iter_mut().find(|s| !s.active) {
+                        // A free slot; in image mode also one whose face was not seen this call.
+                        if let Some(s) = self
+                            .slots
+                            .iter_mut()
+                            .find(|s| !s.active || (!video && !s.seen))
+                        {
                             s.start(self.next_id, rect, score);
                             self.next_id += 1;
                         }
