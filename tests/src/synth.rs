@@ -316,7 +316,7 @@ impl Sequence {
                 [
                     amp,
                     2.0 * std::f32::consts::PI / period,
-                    rng.range(0.0, 6.283),
+                    rng.range(0.0, std::f32::consts::TAU),
                 ]
             };
             let waves = [

@@ -181,7 +181,7 @@ fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, out: &mut [f32]) {
     let w01 = (1.0 - fx) * fy;
     let w11 = fx * fy;
     let d = img.data();
-    if ix >= 0 && iy >= 0 && ix + size as i64 + 1 <= w as i64 && iy + size as i64 + 1 <= h as i64 {
+    if ix >= 0 && iy >= 0 && ix + (size as i64) < w as i64 && iy + (size as i64) < h as i64 {
         // Fast path: same weights for the whole patch, no bounds checks per sample.
         let (ix, iy) = (ix as usize, iy as usize);
         for r in 0..size {
@@ -465,10 +465,9 @@ impl FlowFilter {
                 &mut self.error,
             )?;
             let t2 = threshold_px * threshold_px;
-            for i in 0..n {
-                let (f, p) = (self.flow[i], points[i]);
-                if self.status[i] && (f[0] - p[0]).powi(2) + (f[1] - p[1]).powi(2) <= t2 {
-                    points[i] = f;
+            for ((p, f), &ok) in points.iter_mut().zip(&self.flow).zip(&self.status) {
+                if ok && (f[0] - p[0]).powi(2) + (f[1] - p[1]).powi(2) <= t2 {
+                    *p = *f;
                     used += 1;
                 }
             }
