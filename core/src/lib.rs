@@ -18,5 +18,7 @@ pub mod image;
 pub mod landmarks;
 pub mod metrics;
 pub mod model;
+pub mod track;
 
 pub use error::{Error, Result};
+pub use track::{FaceTracker, TrackerConfig, TrackingResult};

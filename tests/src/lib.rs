@@ -19,3 +19,5 @@ pub fn shared_data_or_skip(test: &str) -> Option<PathBuf> {
     }
     d
 }
+
+pub mod synth;

@@ -4,6 +4,9 @@
 mod fit;
 mod json;
 mod landmarks;
+// Generic over the tracker; the `track` subcommand is wired once core::detect and M3 land.
+#[allow(dead_code)]
+mod track;
 
 use clap::{Parser, Subcommand};
 use std::io::{BufRead, BufWriter, Write};

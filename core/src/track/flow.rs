@@ -1,0 +1,678 @@
+//! Pyramidal Lucas–Kanade optical flow (Bouguet's formulation) and the optical-flow landmark filter
+//! of the thesis' Algorithm 8.
+//!
+//! - [`Pyramid`]: 2×2 box-filtered image pyramid built into reused buffers.
+//! - [`PyramidalLk`]: per point, iterative LK in a square window from the coarsest level down, with
+//!   a status (lost: singular gradient matrix or left the image) and an error (mean absolute grey
+//!   difference over the window) per point.
+//! - [`FlowFilter`]: per landmark, keeps the flow estimate from the previous frame's (filtered)
+//!   landmarks when it lies within a threshold of the new detection, else takes the detection. The
+//!   flow follows real motion, so this removes detection jitter without adding lag; a landmark that
+//!   moved farther than the threshold snaps to the detection at once.
+//!
+//! Coordinates follow [`crate::camera`]: pixel (i, j) covers [i, i+1)×[j, j+1). With 2×2 box
+//! decimation that corner convention scales exactly: level l's coordinates are level 0's / 2^l.
+
+use crate::error::{Error, Result};
+use crate::image::GrayImage;
+use serde::{Deserialize, Serialize};
+
+/// Smallest side a pyramid level may have; coarser levels carry too few pixels for a window.
+pub const MIN_LEVEL_SIDE: usize = 16;
+
+/// Lucas–Kanade settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct LkConfig {
+    /// Window half-size: the window is (2·h + 1)² pixels. 5 (11×11) balances cost and robustness
+    /// for landmark-sized features; OpenCV's default 21×21 costs 3.6× more per iteration.
+    pub half_window: usize,
+    /// Pyramid levels including full resolution (3 follows motions up to ~4 × window / 2 px).
+    pub levels: usize,
+    /// Iterations per level at most.
+    pub max_iterations: u32,
+    /// Stop iterating when the update is below this many pixels.
+    pub epsilon: f32,
+    /// Smallest eigenvalue of the window's gradient matrix divided by the window area (grey levels²
+    /// per pixel) under which a point is textureless and lost (OpenCV's `minEigThreshold` idea; its
+    /// 1e-4 is on gradients scaled to 0..1, i.e. 6.5 in our 0..255 units — we take 1.0, since faces
+    /// have gentle texture and the filter falls back to the detection anyway).
+    pub min_eigenvalue: f32,
+}
+
+impl Default for LkConfig {
+    fn default() -> Self {
+        Self {
+            half_window: 5,
+            levels: 3,
+            max_iterations: 10,
+            epsilon: 0.01,
+            min_eigenvalue: 1.0,
+        }
+    }
+}
+
+impl LkConfig {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`Error::InvalidConfig`] for a window half-size outside 1..=15, levels outside 1..=6, zero
+    /// iterations, or a non-finite or negative epsilon / eigenvalue threshold.
+    pub fn validate(&self) -> Result<()> {
+        if !(1..=15).contains(&self.half_window) {
+            return Err(Error::InvalidConfig(format!(
+                "lk.half_window must be 1..=15, got {}",
+                self.half_window
+            )));
+        }
+        if !(1..=6).contains(&self.levels) {
+            return Err(Error::InvalidConfig(format!(
+                "lk.levels must be 1..=6, got {}",
+                self.levels
+            )));
+        }
+        if self.max_iterations == 0 {
+            return Err(Error::InvalidConfig("lk.max_iterations must be > 0".into()));
+        }
+        if !(self.epsilon.is_finite() && self.epsilon > 0.0) {
+            return Err(Error::InvalidConfig(format!(
+                "lk.epsilon must be finite and > 0, got {}",
+                self.epsilon
+            )));
+        }
+        if !(self.min_eigenvalue.is_finite() && self.min_eigenvalue >= 0.0) {
+            return Err(Error::InvalidConfig(format!(
+                "lk.min_eigenvalue must be finite and >= 0, got {}",
+                self.min_eigenvalue
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// An image pyramid: level 0 is a copy of the image, each next level the 2×2 mean of the one before.
+#[derive(Debug, Clone, Default)]
+pub struct Pyramid {
+    levels: Vec<GrayImage>,
+    n: usize,
+}
+
+impl Pyramid {
+    /// An empty pyramid.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Rebuilds from `image` with up to `levels` levels (fewer when a level would get smaller than
+    /// [`MIN_LEVEL_SIDE`]), reusing the buffers.
+    pub fn build(&mut self, image: &GrayImage, levels: usize) {
+        let levels = levels.max(1);
+        while self.levels.len() < levels {
+            self.levels.push(GrayImage::default());
+        }
+        let l0 = &mut self.levels[0];
+        l0.resize(image.width(), image.height());
+        l0.data_mut().copy_from_slice(image.data());
+        self.n = 1;
+        for l in 1..levels {
+            let (w, h) = (
+                self.levels[l - 1].width() / 2,
+                self.levels[l - 1].height() / 2,
+            );
+            if w < MIN_LEVEL_SIDE || h < MIN_LEVEL_SIDE {
+                break;
+            }
+            let (lo, hi) = self.levels.split_at_mut(l);
+            let src = &lo[l - 1];
+            let dst = &mut hi[0];
+            dst.resize(w, h);
+            let sw = src.width();
+            for y in 0..h {
+                let r0 = &src.data()[2 * y * sw..2 * y * sw + 2 * w];
+                let r1 = &src.data()[(2 * y + 1) * sw..(2 * y + 1) * sw + 2 * w];
+                let d = &mut dst.data_mut()[y * w..(y + 1) * w];
+                for (x, o) in d.iter_mut().enumerate() {
+                    let s = u16::from(r0[2 * x])
+                        + u16::from(r0[2 * x + 1])
+                        + u16::from(r1[2 * x])
+                        + u16::from(r1[2 * x + 1]);
+                    *o = ((s + 2) >> 2) as u8;
+                }
+            }
+            self.n = l + 1;
+        }
+    }
+
+    /// Number of built levels.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Whether nothing was built yet.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// The built levels, finest first.
+    pub fn levels(&self) -> &[GrayImage] {
+        &self.levels[..self.n]
+    }
+
+    /// Full-resolution size (0, 0 when empty).
+    pub fn size(&self) -> (usize, usize) {
+        if self.n == 0 {
+            (0, 0)
+        } else {
+            (self.levels[0].width(), self.levels[0].height())
+        }
+    }
+}
+
+/// Samples a `size × size` patch whose top-left sample sits at pixel-index position (x, y)
+/// (bilinear; positions outside the image clamp to the border).
+fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, out: &mut [f32]) {
+    let (w, h) = (img.width(), img.height());
+    let ix = x.floor();
+    let iy = y.floor();
+    let (fx, fy) = (x - ix, y - iy);
+    let (ix, iy) = (ix as i64, iy as i64);
+    let w00 = (1.0 - fx) * (1.0 - fy);
+    let w10 = fx * (1.0 - fy);
+    let w01 = (1.0 - fx) * fy;
+    let w11 = fx * fy;
+    let d = img.data();
+    if ix >= 0 && iy >= 0 && ix + (size as i64) < w as i64 && iy + (size as i64) < h as i64 {
+        // Fast path: same weights for the whole patch, no bounds checks per sample.
+        let (ix, iy) = (ix as usize, iy as usize);
+        for r in 0..size {
+            let a = &d[(iy + r) * w + ix..(iy + r) * w + ix + size + 1];
+            let b = &d[(iy + r + 1) * w + ix..(iy + r + 1) * w + ix + size + 1];
+            let o = &mut out[r * size..(r + 1) * size];
+            for c in 0..size {
+                o[c] = w00 * f32::from(a[c])
+                    + w10 * f32::from(a[c + 1])
+                    + w01 * f32::from(b[c])
+                    + w11 * f32::from(b[c + 1]);
+            }
+        }
+        return;
+    }
+    let at = |px: i64, py: i64| -> f32 {
+        let px = px.clamp(0, w as i64 - 1) as usize;
+        let py = py.clamp(0, h as i64 - 1) as usize;
+        f32::from(d[py * w + px])
+    };
+    for r in 0..size {
+        let py = iy + r as i64;
+        for c in 0..size {
+            let px = ix + c as i64;
+            out[r * size + c] = w00 * at(px, py)
+                + w10 * at(px + 1, py)
+                + w01 * at(px, py + 1)
+                + w11 * at(px + 1, py + 1);
+        }
+    }
+}
+
+/// Pyramidal Lucas–Kanade point tracker; holds its window buffers.
+#[derive(Debug, Clone)]
+pub struct PyramidalLk {
+    config: LkConfig,
+    /// Previous-image patch with a 1-pixel border (for central-difference gradients).
+    bordered: Vec<f32>,
+    patch: Vec<f32>,
+    gx: Vec<f32>,
+    gy: Vec<f32>,
+    moving: Vec<f32>,
+}
+
+impl PyramidalLk {
+    /// A tracker with `config`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidConfig`] when the config is out of range ([`LkConfig::validate`]).
+    pub fn new(config: LkConfig) -> Result<Self> {
+        config.validate()?;
+        let n = 2 * config.half_window + 1;
+        Ok(Self {
+            config,
+            bordered: vec![0.0; (n + 2) * (n + 2)],
+            patch: vec![0.0; n * n],
+            gx: vec![0.0; n * n],
+            gy: vec![0.0; n * n],
+            moving: vec![0.0; n * n],
+        })
+    }
+
+    /// Settings.
+    pub fn config(&self) -> &LkConfig {
+        &self.config
+    }
+
+    /// Tracks `from` (points in `prev`'s level-0 pixels) into `next`, writing the new positions to
+    /// `to`, whether each point was tracked to `status` and its mean absolute grey difference over
+    /// the window to `error`. Lost points keep their old position in `to`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] when the slices differ in length, the pyramids are empty or differ
+    /// in size or depth.
+    pub fn track(
+        &mut self,
+        prev: &Pyramid,
+        next: &Pyramid,
+        from: &[[f32; 2]],
+        to: &mut [[f32; 2]],
+        status: &mut [bool],
+        error: &mut [f32],
+    ) -> Result<()> {
+        if to.len() != from.len() || status.len() != from.len() || error.len() != from.len() {
+            return Err(Error::InvalidInput(format!(
+                "optical flow: {} points but {} outputs, {} status, {} errors",
+                from.len(),
+                to.len(),
+                status.len(),
+                error.len()
+            )));
+        }
+        if prev.is_empty() || prev.size() != next.size() || prev.len() != next.len() {
+            return Err(Error::InvalidInput(format!(
+                "optical flow: pyramids differ ({:?}, {} levels vs {:?}, {} levels)",
+                prev.size(),
+                prev.len(),
+                next.size(),
+                next.len()
+            )));
+        }
+        for i in 0..from.len() {
+            let (p, ok, e) = self.track_point(prev, next, from[i]);
+            to[i] = if ok { p } else { from[i] };
+            status[i] = ok;
+            error[i] = e;
+        }
+        Ok(())
+    }
+
+    fn track_point(
+        &mut self,
+        prev: &Pyramid,
+        next: &Pyramid,
+        p: [f32; 2],
+    ) -> ([f32; 2], bool, f32) {
+        let cfg = self.config;
+        let hw = cfg.half_window;
+        let n = 2 * hw + 1;
+        let area = (n * n) as f32;
+        if !(p[0].is_finite() && p[1].is_finite()) {
+            return (p, false, f32::INFINITY);
+        }
+        let mut g = [0.0f32; 2];
+        let mut d = [0.0f32; 2];
+        for l in (0..prev.len()).rev() {
+            let scale = 1.0 / (1u32 << l) as f32;
+            let (pi, ni) = (&prev.levels()[l], &next.levels()[l]);
+            // Window centre in pixel-index coordinates (corner convention → subtract 0.5).
+            let cx = p[0] * scale - 0.5;
+            let cy = p[1] * scale - 0.5;
+            sample_patch(
+                pi,
+                cx - hw as f32 - 1.0,
+                cy - hw as f32 - 1.0,
+                n + 2,
+                &mut self.bordered,
+            );
+            let (mut gxx, mut gxy, mut gyy) = (0.0f32, 0.0f32, 0.0f32);
+            let bw = n + 2;
+            for r in 0..n {
+                for c in 0..n {
+                    let k = r * n + c;
+                    let b = (r + 1) * bw + c + 1;
+                    self.patch[k] = self.bordered[b];
+                    let gx = 0.5 * (self.bordered[b + 1] - self.bordered[b - 1]);
+                    let gy = 0.5 * (self.bordered[b + bw] - self.bordered[b - bw]);
+                    self.gx[k] = gx;
+                    self.gy[k] = gy;
+                    gxx += gx * gx;
+                    gxy += gx * gy;
+                    gyy += gy * gy;
+                }
+            }
+            let det = gxx * gyy - gxy * gxy;
+            let min_eig = 0.5 * (gxx + gyy - ((gxx - gyy).powi(2) + 4.0 * gxy * gxy).sqrt());
+            if min_eig / area < cfg.min_eigenvalue || det.abs() < f32::EPSILON {
+                return (p, false, f32::INFINITY);
+            }
+            let inv_det = 1.0 / det;
+            d = [0.0, 0.0];
+            for _ in 0..cfg.max_iterations {
+                sample_patch(
+                    ni,
+                    cx + g[0] + d[0] - hw as f32,
+                    cy + g[1] + d[1] - hw as f32,
+                    n,
+                    &mut self.moving,
+                );
+                let (mut bx, mut by) = (0.0f32, 0.0f32);
+                for k in 0..n * n {
+                    let diff = self.patch[k] - self.moving[k];
+                    bx += diff * self.gx[k];
+                    by += diff * self.gy[k];
+                }
+                let ux = (gyy * bx - gxy * by) * inv_det;
+                let uy = (gxx * by - gxy * bx) * inv_det;
+                d[0] += ux;
+                d[1] += uy;
+                if ux * ux + uy * uy < cfg.epsilon * cfg.epsilon {
+                    break;
+                }
+            }
+            if l > 0 {
+                g = [2.0 * (g[0] + d[0]), 2.0 * (g[1] + d[1])];
+            }
+        }
+        let out = [p[0] + g[0] + d[0], p[1] + g[1] + d[1]];
+        let (w, h) = next.size();
+        if !(out[0].is_finite()
+            && out[1].is_finite()
+            && out[0] >= 0.0
+            && out[1] >= 0.0
+            && out[0] <= w as f32
+            && out[1] <= h as f32)
+        {
+            return (p, false, f32::INFINITY);
+        }
+        // Error at full resolution, where `patch` and `moving` hold level 0 after the loop.
+        let err = self
+            .patch
+            .iter()
+            .zip(&self.moving)
+            .map(|(a, b)| (a - b).abs())
+            .sum::<f32>()
+            / area;
+        (out, true, err)
+    }
+}
+
+/// The optical-flow landmark filter (thesis Alg. 8), one per tracked face.
+#[derive(Debug, Clone)]
+pub struct FlowFilter {
+    lk: PyramidalLk,
+    prev: Vec<[f32; 2]>,
+    flow: Vec<[f32; 2]>,
+    status: Vec<bool>,
+    error: Vec<f32>,
+    has_prev: bool,
+}
+
+impl FlowFilter {
+    /// A filter whose flow uses `config`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidConfig`] for an out-of-range [`LkConfig`].
+    pub fn new(config: LkConfig) -> Result<Self> {
+        Ok(Self {
+            lk: PyramidalLk::new(config)?,
+            prev: Vec::new(),
+            flow: Vec::new(),
+            status: Vec::new(),
+            error: Vec::new(),
+            has_prev: false,
+        })
+    }
+
+    /// Forgets the previous landmarks (a new track starts).
+    pub fn reset(&mut self) {
+        self.has_prev = false;
+    }
+
+    /// Whether previous landmarks are held.
+    pub fn has_previous(&self) -> bool {
+        self.has_prev
+    }
+
+    /// Filters `points` (the new detection, in `next`'s pixels) in place: each point becomes the
+    /// flow of the previous output from `prev` to `next` when that was tracked and lies within
+    /// `threshold_px` of the detection, else stays the detection. The result is remembered for the
+    /// next frame. Returns how many points came from the flow (0 on the first frame of a track or
+    /// when the number of points changed, which restarts the filter).
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] when the pyramids differ in size or depth (the caller must reset on
+    /// a change of frame size) or a threshold that is not finite and ≥ 0.
+    pub fn apply(
+        &mut self,
+        prev: &Pyramid,
+        next: &Pyramid,
+        points: &mut [[f32; 2]],
+        threshold_px: f32,
+    ) -> Result<usize> {
+        if !(threshold_px.is_finite() && threshold_px >= 0.0) {
+            return Err(Error::InvalidInput(format!(
+                "flow filter threshold must be finite and >= 0, got {threshold_px}"
+            )));
+        }
+        let mut used = 0;
+        if self.has_prev && self.prev.len() == points.len() {
+            let n = points.len();
+            self.flow.resize(n, [0.0; 2]);
+            self.status.resize(n, false);
+            self.error.resize(n, 0.0);
+            self.lk.track(
+                prev,
+                next,
+                &self.prev,
+                &mut self.flow,
+                &mut self.status,
+                &mut self.error,
+            )?;
+            let t2 = threshold_px * threshold_px;
+            for ((p, f), &ok) in points.iter_mut().zip(&self.flow).zip(&self.status) {
+                if ok && (f[0] - p[0]).powi(2) + (f[1] - p[1]).powi(2) <= t2 {
+                    *p = *f;
+                    used += 1;
+                }
+            }
+        }
+        self.prev.clear();
+        self.prev.extend_from_slice(points);
+        self.has_prev = true;
+        Ok(used)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::ncc::tests::texture;
+    use super::*;
+
+    /// 640×480 image of the texture under the affine map p ↦ A·p + b (image(A·q + b) = texture(q)).
+    fn warped(a: [[f32; 2]; 2], b: [f32; 2]) -> GrayImage {
+        let det = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+        let inv = [
+            [a[1][1] / det, -a[0][1] / det],
+            [-a[1][0] / det, a[0][0] / det],
+        ];
+        let (w, h) = (640, 480);
+        let mut img = GrayImage::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                let (px, py) = (x as f32 + 0.5 - b[0], y as f32 + 0.5 - b[1]);
+                let qx = inv[0][0] * px + inv[0][1] * py;
+                let qy = inv[1][0] * px + inv[1][1] * py;
+                img.data_mut()[y * w + x] = texture(qx, qy).round() as u8;
+            }
+        }
+        img
+    }
+
+    fn grid() -> Vec<[f32; 2]> {
+        let mut pts = Vec::new();
+        for j in 0..6 {
+            for i in 0..8 {
+                pts.push([120.0 + 55.0 * i as f32 + 0.3, 90.0 + 55.0 * j as f32 + 0.7]);
+            }
+        }
+        pts
+    }
+
+    fn run(a: [[f32; 2]; 2], b: [f32; 2]) -> (Vec<[f32; 2]>, Vec<[f32; 2]>, Vec<bool>) {
+        let id = [[1.0, 0.0], [0.0, 1.0]];
+        let (mut p0, mut p1) = (Pyramid::new(), Pyramid::new());
+        p0.build(&warped(id, [0.0, 0.0]), 3);
+        p1.build(&warped(a, b), 3);
+        let from = grid();
+        let mut to = vec![[0.0; 2]; from.len()];
+        let mut st = vec![false; from.len()];
+        let mut err = vec![0.0; from.len()];
+        let mut lk = PyramidalLk::new(LkConfig::default()).unwrap();
+        lk.track(&p0, &p1, &from, &mut to, &mut st, &mut err)
+            .unwrap();
+        let expect = from
+            .iter()
+            .map(|p| {
+                [
+                    a[0][0] * p[0] + a[0][1] * p[1] + b[0],
+                    a[1][0] * p[0] + a[1][1] * p[1] + b[1],
+                ]
+            })
+            .collect();
+        (to, expect, st)
+    }
+
+    fn check(a: [[f32; 2]; 2], b: [f32; 2], tol: f32, min_tracked: f32) {
+        let (to, expect, st) = run(a, b);
+        let n = st.len() as f32;
+        let tracked = st.iter().filter(|&&s| s).count() as f32;
+        assert!(tracked / n >= min_tracked, "tracked {tracked}/{n}");
+        let mut errs: Vec<f32> = to
+            .iter()
+            .zip(&expect)
+            .zip(&st)
+            .filter(|(_, s)| **s)
+            .map(|((t, e), _)| ((t[0] - e[0]).powi(2) + (t[1] - e[1]).powi(2)).sqrt())
+            .collect();
+        errs.sort_by(f32::total_cmp);
+        let median = errs[errs.len() / 2];
+        assert!(median < tol, "median error {median} px (all {errs:?})");
+    }
+
+    #[test]
+    fn pyramid_levels_halve_and_average() {
+        let mut img = GrayImage::new(64, 40);
+        for (i, v) in img.data_mut().iter_mut().enumerate() {
+            *v = (i % 7 * 30) as u8;
+        }
+        let mut p = Pyramid::new();
+        p.build(&img, 4);
+        // 64×40 → 32×20 → 16×10 stops (10 < MIN_LEVEL_SIDE).
+        assert_eq!(p.len(), 2);
+        assert_eq!((p.levels()[1].width(), p.levels()[1].height()), (32, 20));
+        let s: u32 = [(0, 0), (1, 0), (0, 1), (1, 1)]
+            .iter()
+            .map(|&(x, y)| u32::from(img.get(x, y)))
+            .sum();
+        assert_eq!(u32::from(p.levels()[1].get(0, 0)), (s + 2) / 4);
+        // Rebuilding reuses buffers.
+        let cap = p.levels()[0].data().as_ptr();
+        p.build(&img, 4);
+        assert_eq!(cap, p.levels()[0].data().as_ptr());
+    }
+
+    #[test]
+    fn translation_is_recovered() {
+        let id = [[1.0, 0.0], [0.0, 1.0]];
+        check(id, [2.6, -1.3], 0.1, 0.9);
+        // Larger than the window: needs the pyramid.
+        check(id, [11.4, 7.8], 0.15, 0.9);
+    }
+
+    #[test]
+    fn affine_motion_is_recovered() {
+        // 3° rotation and 4 % zoom about the image centre plus a shift (points move 5–20 px): the
+        // window sees (nearly) a translation locally.
+        let (s, c) = (3f32.to_radians().sin(), 3f32.to_radians().cos());
+        let k = 1.04;
+        let a = [[k * c, -k * s], [k * s, k * c]];
+        let centre = [320.0f32, 240.0];
+        let b = [
+            centre[0] - (a[0][0] * centre[0] + a[0][1] * centre[1]) - 4.0,
+            centre[1] - (a[1][0] * centre[0] + a[1][1] * centre[1]) + 3.0,
+        ];
+        check(a, b, 0.3, 0.9);
+    }
+
+    #[test]
+    fn mismatched_inputs_are_errors() {
+        let mut lk = PyramidalLk::new(LkConfig::default()).unwrap();
+        let (mut p0, mut p1) = (Pyramid::new(), Pyramid::new());
+        p0.build(&GrayImage::new(64, 64), 3);
+        p1.build(&GrayImage::new(80, 64), 3);
+        let from = [[10.0f32, 10.0]];
+        let (mut to, mut st, mut e) = ([[0.0f32; 2]; 1], [false; 1], [0.0f32; 1]);
+        assert!(matches!(
+            lk.track(&p0, &p1, &from, &mut to, &mut st, &mut e),
+            Err(Error::InvalidInput(_))
+        ));
+        assert!(matches!(
+            lk.track(&p0, &p0, &from, &mut [[0.0; 2]; 2], &mut st, &mut e),
+            Err(Error::InvalidInput(_))
+        ));
+        // A flat image: every point is textureless and lost, and keeps its position.
+        lk.track(&p0, &p0, &from, &mut to, &mut st, &mut e).unwrap();
+        assert!(!st[0]);
+        assert_eq!(to[0], from[0]);
+        assert!(matches!(
+            PyramidalLk::new(LkConfig {
+                levels: 0,
+                ..Default::default()
+            }),
+            Err(Error::InvalidConfig(_))
+        ));
+    }
+
+    #[test]
+    fn filter_keeps_flow_near_detections_and_snaps_to_far_ones() {
+        let id = [[1.0, 0.0], [0.0, 1.0]];
+        let shift = [3.0f32, -2.0];
+        let (mut p0, mut p1) = (Pyramid::new(), Pyramid::new());
+        p0.build(&warped(id, [0.0, 0.0]), 3);
+        p1.build(&warped(id, shift), 3);
+        let truth0 = grid();
+        let mut f = FlowFilter::new(LkConfig::default()).unwrap();
+        // First frame of a track: the detection passes through.
+        let mut pts = truth0.clone();
+        assert_eq!(f.apply(&p0, &p0, &mut pts, 5.0).unwrap(), 0);
+        assert_eq!(pts, truth0);
+        // Next frame: detections = truth + jitter (±1.5 px) on all but point 0, which the detector
+        // puts 20 px off (a jump the filter must follow: beyond the threshold).
+        let mut det: Vec<[f32; 2]> = truth0
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let j = if i % 2 == 0 { 1.5 } else { -1.5 };
+                [p[0] + shift[0] + j, p[1] + shift[1] - j]
+            })
+            .collect();
+        det[0][0] += 20.0;
+        let mut out = det.clone();
+        let used = f.apply(&p0, &p1, &mut out, 5.0).unwrap();
+        assert!(used >= det.len() - 3, "used {used}");
+        assert_eq!(out[0], det[0], "far detection must win");
+        let mut err_det = 0.0;
+        let mut err_out = 0.0;
+        for i in 1..det.len() {
+            let t = [truth0[i][0] + shift[0], truth0[i][1] + shift[1]];
+            err_det += ((det[i][0] - t[0]).powi(2) + (det[i][1] - t[1]).powi(2)).sqrt();
+            err_out += ((out[i][0] - t[0]).powi(2) + (out[i][1] - t[1]).powi(2)).sqrt();
+        }
+        // The flow removes the jitter: the filtered points sit on the true motion.
+        assert!(err_out < 0.2 * err_det, "{err_out} vs {err_det}");
+        // Threshold 0 takes the detections; reset restarts.
+        let mut out2 = det.clone();
+        f.apply(&p1, &p1, &mut out2, 0.0).unwrap();
+        f.reset();
+        assert!(!f.has_previous());
+        let mut out3 = det.clone();
+        assert_eq!(f.apply(&p1, &p1, &mut out3, 5.0).unwrap(), 0);
+        assert!(f.apply(&p1, &p1, &mut out3, f32::NAN).is_err());
+    }
+}

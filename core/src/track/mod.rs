@@ -1,0 +1,1162 @@
+//! The face-tracking pipeline (thesis 4.3.2–4.3.3, Algorithms 8 and 9): [`FaceTracker`].
+//!
+//! Per frame, for each tracked face (at most [`TrackerConfig::max_faces`]):
+//! 1. **Region.** On the first frame, after a loss, or in [`Mode::Image`], the whole-frame
+//!    [`RegionDetector`] runs. Otherwise the fitted model of the previous frame was projected to a
+//!    face region and cut from the previous frame as a template; [`ncc::NccMatcher`] finds it in a
+//!    search window around the old place at a reduced scale, and the found window is validated by
+//!    [`LandmarkEstimator::face_confidence`] (M3 level 1's face classifier). A failed match or
+//!    validation ends the track; the detector then runs on the *next* frame as in the thesis, or on
+//!    the same frame with [`TrackerConfig::redetect_immediately`].
+//! 2. **Landmarks** by the [`LandmarkEstimator`] (M3) on the region.
+//! 3. **Optical-flow filter** ([`flow::FlowFilter`], Alg. 8) on the 68 points when tracking.
+//! 4. **3D fit** by MSBP, from the previous frame's fit when tracking. The shape units are fitted
+//!    freely over the first [`TrackerConfig::shape_frames`] frames of a track, then held at their
+//!    per-unit median ([`ShapeAccumulator`]); a new track re-estimates them.
+//!
+//! The region handed to the landmark estimator keeps the detector's box convention: when a track
+//! starts, the offset and scale between the detector's box and the bounding box of the projected
+//! model are recorded, and every tracked region (a projected-model box moved by NCC) is mapped back
+//! through them. Whatever convention M3 was trained on, tracking feeds it the same kind of box.
+//!
+//! Everything per frame lives in buffers held by the tracker; after the first frames nothing is
+//! allocated (the result's face list keeps its capacity).
+
+pub mod flow;
+pub mod ncc;
+
+use crate::camera::Intrinsics;
+use crate::error::{Error, Result};
+use crate::fit::{FaceFit, Msbp, MsbpConfig, ShapeAccumulator};
+use crate::image::{Frame, GrayImage, Rect};
+use crate::landmarks::{FaceLandmarks, N_POINTS};
+use crate::model::{FaceModel, N_LANDMARKS};
+use flow::{FlowFilter, LkConfig, Pyramid};
+use ncc::NccMatcher;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Most faces a tracker may be configured for (each face costs landmarks + fit per frame).
+pub const MAX_FACES_LIMIT: usize = 16;
+
+/// Face width (pixels) at which the flow threshold applies unscaled: the thesis' 5 px were set on
+/// 640×480 video of a user at arm's length, where the 68-point box spans about 200 px. The
+/// threshold scales with the face's box size relative to this.
+pub const FLOW_REFERENCE_FACE_PX: f32 = 200.0;
+
+/// Whole-frame face detection (`core::detect`'s detector implements it).
+pub trait RegionDetector {
+    /// Appends the faces found in `image` to `out` (cleared first by the callee) as (box, score in
+    /// 0..1), any order. Boxes follow the detector's own convention; the tracker preserves it.
+    ///
+    /// # Errors
+    /// Whatever the detector reports (model failures); "no face" is an empty `out`, not an error.
+    fn detect(&mut self, image: &GrayImage, out: &mut Vec<(Rect, f32)>) -> Result<()>;
+}
+
+/// Landmarks and face validation on one face region (`core::landmarks`' M3 implements it).
+pub trait LandmarkEstimator {
+    /// Fills `out` with the 68 landmarks (image pixels), yaw, face probability, gestures and gaze
+    /// of the face in `face`.
+    ///
+    /// # Errors
+    /// Whatever the estimator reports (model failures, a box it cannot use).
+    fn estimate(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()>;
+
+    /// Probability (0..1) that `face` holds a face — the cheap check the tracker runs on the window
+    /// NCC found (M3 level 1's face confidence).
+    ///
+    /// # Errors
+    /// Whatever the estimator reports.
+    fn face_confidence(&mut self, image: &GrayImage, face: &Rect) -> Result<f32>;
+}
+
+/// Processing mode (MediaPipe-like).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum Mode {
+    /// Independent images: detect on every call, no temporal state but stable ids by overlap.
+    Image,
+    /// A video stream: detect once, then track; timestamps must strictly increase.
+    #[default]
+    Video,
+}
+
+/// Tracker settings. Every field has a default (`#[serde(default)]`), so a JSON object with only
+/// the fields to change is a valid config.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TrackerConfig {
+    /// Image or video mode.
+    pub mode: Mode,
+    /// Most faces tracked at once (1..=[`MAX_FACES_LIMIT`]).
+    pub max_faces: usize,
+    /// Camera intrinsics of the upright image; `None` = the CONTRACT default for its size.
+    pub camera: Option<Intrinsics>,
+    /// Detections scoring below this are ignored. 0.5: the detector's calibrated decision point.
+    pub min_detection_score: f32,
+    /// A tracked window whose face confidence is below this is a loss. 0.5: the classifier's
+    /// decision point (M3 level 1 is trained with a balanced face / non-face loss).
+    pub min_face_confidence: f32,
+    /// An NCC peak below this is a loss without asking the classifier. Consecutive frames of a
+    /// tracked face score > 0.9 in our synthetic sequences; 0.5 only rejects clearly wrong matches.
+    pub min_ncc_score: f32,
+    /// Search window margin around the previous region, as a fraction of the region's larger side,
+    /// each direction. 0.5 follows a face moving half its width per frame.
+    pub search_margin: f32,
+    /// Larger side (pixels) of the NCC template after decimation: the reduced scale. 32 keeps the
+    /// search well under a millisecond whatever the face size.
+    pub ncc_template_px: usize,
+    /// Optical-flow filter on or off.
+    pub flow_filter: bool,
+    /// The filter's threshold for a face of [`FLOW_REFERENCE_FACE_PX`] (thesis: 5 px); scaled by
+    /// face size.
+    pub flow_threshold_px: f32,
+    /// Lucas–Kanade settings of the filter.
+    pub lk: LkConfig,
+    /// Frames at the start of a track over which shape units are estimated before being held.
+    pub shape_frames: usize,
+    /// MSBP rounds on a tracking frame (from the previous fit; 1 is enough, `benches/fit.rs`).
+    pub tracking_fit_rounds: u32,
+    /// MSBP settings for a face's first frame (and every face in image mode).
+    pub msbp: MsbpConfig,
+    /// Intersection over union above which a detection is the same face as a track.
+    pub match_iou: f32,
+    /// In video mode with fewer faces than `max_faces`, run the detector every this many frames to
+    /// pick up new faces (0 = only when no face is tracked).
+    pub new_face_interval: u32,
+    /// Re-detect in the same frame when tracking fails (`false`: in the next frame, the thesis).
+    pub redetect_immediately: bool,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Video,
+            max_faces: 1,
+            camera: None,
+            min_detection_score: 0.5,
+            min_face_confidence: 0.5,
+            min_ncc_score: 0.5,
+            search_margin: 0.5,
+            ncc_template_px: 32,
+            flow_filter: true,
+            flow_threshold_px: 5.0,
+            lk: LkConfig::default(),
+            shape_frames: 10,
+            tracking_fit_rounds: 1,
+            msbp: MsbpConfig::default(),
+            match_iou: 0.3,
+            new_face_interval: 15,
+            redetect_immediately: false,
+        }
+    }
+}
+
+fn unit_interval(name: &str, v: f32) -> Result<()> {
+    if v.is_finite() && (0.0..=1.0).contains(&v) {
+        Ok(())
+    } else {
+        Err(Error::InvalidConfig(format!(
+            "{name} must be in 0..=1, got {v}"
+        )))
+    }
+}
+
+impl TrackerConfig {
+    /// Checks every field's range.
+    ///
+    /// # Errors
+    /// [`Error::InvalidConfig`] naming the first bad field (or [`Error::InvalidCamera`] for bad
+    /// intrinsics).
+    pub fn validate(&self) -> Result<()> {
+        if !(1..=MAX_FACES_LIMIT).contains(&self.max_faces) {
+            return Err(Error::InvalidConfig(format!(
+                "max_faces must be 1..={MAX_FACES_LIMIT}, got {}",
+                self.max_faces
+            )));
+        }
+        if let Some(c) = &self.camera {
+            c.validate()?;
+        }
+        unit_interval("min_detection_score", self.min_detection_score)?;
+        unit_interval("min_face_confidence", self.min_face_confidence)?;
+        unit_interval("match_iou", self.match_iou)?;
+        if !(self.min_ncc_score.is_finite() && (-1.0..=1.0).contains(&self.min_ncc_score)) {
+            return Err(Error::InvalidConfig(format!(
+                "min_ncc_score must be in -1..=1, got {}",
+                self.min_ncc_score
+            )));
+        }
+        if !(self.search_margin.is_finite()
+            && self.search_margin > 0.0
+            && self.search_margin <= 4.0)
+        {
+            return Err(Error::InvalidConfig(format!(
+                "search_margin must be in (0, 4], got {}",
+                self.search_margin
+            )));
+        }
+        if !(8..=256).contains(&self.ncc_template_px) {
+            return Err(Error::InvalidConfig(format!(
+                "ncc_template_px must be 8..=256, got {}",
+                self.ncc_template_px
+            )));
+        }
+        if !(self.flow_threshold_px.is_finite() && self.flow_threshold_px >= 0.0) {
+            return Err(Error::InvalidConfig(format!(
+                "flow_threshold_px must be finite and >= 0, got {}",
+                self.flow_threshold_px
+            )));
+        }
+        self.lk.validate()?;
+        if !(1..=1000).contains(&self.shape_frames) {
+            return Err(Error::InvalidConfig(format!(
+                "shape_frames must be 1..=1000, got {}",
+                self.shape_frames
+            )));
+        }
+        if !(1..=10).contains(&self.tracking_fit_rounds) {
+            return Err(Error::InvalidConfig(format!(
+                "tracking_fit_rounds must be 1..=10, got {}",
+                self.tracking_fit_rounds
+            )));
+        }
+        let m = &self.msbp;
+        if !(m.z_near_mm.is_finite()
+            && m.z_far_mm.is_finite()
+            && m.z_near_mm > 0.0
+            && m.z_far_mm > m.z_near_mm
+            && m.xy_range_mm.is_finite()
+            && m.xy_range_mm > 0.0
+            && m.outer_iterations >= 1
+            && m.shape_prior.is_finite()
+            && m.shape_prior >= 0.0
+            && m.animation_prior.is_finite()
+            && m.animation_prior >= 0.0
+            && m.yaw_seeds_deg.iter().all(|v| v.is_finite()))
+        {
+            return Err(Error::InvalidConfig(format!(
+                "msbp settings out of range: {m:?}"
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// How a face's region was found this frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum FaceState {
+    /// By the whole-frame detector.
+    Detected,
+    /// By the NCC tracker from the previous frame.
+    Tracked,
+}
+
+/// What a frame's faces were, as a whole (CONTRACT's `state`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum FrameState {
+    /// At least one face came from the detector this frame.
+    Detected,
+    /// Every face was tracked.
+    Tracked,
+    /// No face.
+    Lost,
+}
+
+/// Per-stage wall time of one frame, microseconds (all faces together).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct StageTimings {
+    /// Frame → upright luma (only for [`FaceTracker::process_frame`]).
+    pub image_us: u64,
+    /// Region: detector, or NCC search + face validation.
+    pub region_us: u64,
+    /// Of `region_us`, the detector's share (0 on pure tracking frames).
+    pub detect_us: u64,
+    /// Landmark estimation.
+    pub landmarks_us: u64,
+    /// Pyramid + Lucas–Kanade + filter.
+    pub flow_us: u64,
+    /// MSBP (+ projecting the model for the next region).
+    pub fit_us: u64,
+    /// The whole call.
+    pub total_us: u64,
+}
+
+/// One face of a [`TrackingResult`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackedFace {
+    /// Stable id: the same while a track lasts, new for every new track.
+    pub id: u64,
+    /// The region the landmarks were estimated on (detector box convention), pixels.
+    pub rect: Rect,
+    /// Detector score on a detection frame, face confidence of the window on a tracked frame.
+    pub score: f32,
+    /// How the region was found.
+    pub state: FaceState,
+    /// Landmarks (68 points after the flow filter), yaw, face probability, gestures, gaze.
+    pub landmarks: FaceLandmarks,
+    /// The 3D fit: pose (R, t in mm; Euler via [`crate::fit::Pose::euler_deg`]), shape units,
+    /// animation units and the fit report (RMS reprojection error).
+    pub fit: FaceFit,
+    /// Whether the shape units are held (estimated over the track's first frames).
+    pub shape_held: bool,
+    /// Landmarks that came from the optical flow rather than the detection this frame.
+    pub flow_points: u32,
+}
+
+/// The result of one [`FaceTracker::process`] call; owned by the tracker and refilled each call.
+#[derive(Debug, Clone, Default)]
+pub struct TrackingResult {
+    /// The caller's timestamp, nanoseconds.
+    pub timestamp_ns: i64,
+    /// 0-based count of processed frames.
+    pub frame_index: u64,
+    /// The faces, in slot order (stable while tracks last).
+    pub faces: Vec<TrackedFace>,
+    /// Whether the whole-frame detector ran on this frame.
+    pub detector_ran: bool,
+    /// Per-stage timings.
+    pub timings: StageTimings,
+}
+
+impl TrackingResult {
+    /// Detected / tracked / lost, as CONTRACT's `state`.
+    pub fn state(&self) -> FrameState {
+        if self.faces.is_empty() {
+            FrameState::Lost
+        } else if self.faces.iter().any(|f| f.state == FaceState::Detected) {
+            FrameState::Detected
+        } else {
+            FrameState::Tracked
+        }
+    }
+}
+
+/// The detector box relative to the projected-model box at the start of a track: centre offset in
+/// units of the model box's size, and size ratios.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct BoxCalib {
+    dx: f32,
+    dy: f32,
+    sx: f32,
+    sy: f32,
+}
+
+impl BoxCalib {
+    const IDENTITY: Self = Self {
+        dx: 0.0,
+        dy: 0.0,
+        sx: 1.0,
+        sy: 1.0,
+    };
+
+    fn between(model_box: &Rect, det_box: &Rect) -> Self {
+        if !(model_box.is_valid() && det_box.is_valid()) {
+            return Self::IDENTITY;
+        }
+        let (mc, dc) = (model_box.center(), det_box.center());
+        Self {
+            dx: (dc[0] - mc[0]) / model_box.w,
+            dy: (dc[1] - mc[1]) / model_box.h,
+            sx: det_box.w / model_box.w,
+            sy: det_box.h / model_box.h,
+        }
+    }
+
+    fn apply(&self, model_box: &Rect) -> Rect {
+        let c = model_box.center();
+        let (w, h) = (model_box.w * self.sx, model_box.h * self.sy);
+        let (cx, cy) = (c[0] + self.dx * model_box.w, c[1] + self.dy * model_box.h);
+        Rect::new(cx - 0.5 * w, cy - 0.5 * h, w, h)
+    }
+}
+
+/// One face's track state and buffers.
+#[derive(Debug, Clone)]
+struct Slot {
+    active: bool,
+    /// Seen in this frame (image mode: matched by a detection).
+    seen: bool,
+    id: u64,
+    state: FaceState,
+    score: f32,
+    /// Region for the landmark estimator this frame.
+    rect: Rect,
+    /// Bounding box of the projected fitted model, previous frame (the NCC template's region).
+    model_box: Rect,
+    calib: BoxCalib,
+    /// Whether the calibration is still to be taken from this frame's fit.
+    calib_pending: bool,
+    landmarks: FaceLandmarks,
+    fit: Option<FaceFit>,
+    ncc: NccMatcher,
+    filter: FlowFilter,
+    flow_points: u32,
+    shape_acc: ShapeAccumulator,
+    msbp_init: Msbp,
+    msbp_track: Msbp,
+}
+
+impl Slot {
+    fn new(cfg: &TrackerConfig) -> Result<Self> {
+        Ok(Self {
+            active: false,
+            seen: false,
+            id: 0,
+            state: FaceState::Detected,
+            score: 0.0,
+            rect: Rect::default(),
+            model_box: Rect::default(),
+            calib: BoxCalib::IDENTITY,
+            calib_pending: true,
+            landmarks: FaceLandmarks::default(),
+            fit: None,
+            ncc: NccMatcher::new(cfg.ncc_template_px),
+            filter: FlowFilter::new(cfg.lk)?,
+            flow_points: 0,
+            shape_acc: ShapeAccumulator::new(cfg.shape_frames),
+            msbp_init: Msbp::new(cfg.msbp),
+            msbp_track: Msbp::new(MsbpConfig {
+                outer_iterations: cfg.tracking_fit_rounds,
+                ..cfg.msbp
+            }),
+        })
+    }
+
+    /// Starts a new track on a detection.
+    fn start(&mut self, id: u64, rect: Rect, score: f32) {
+        self.active = true;
+        self.seen = true;
+        self.id = id;
+        self.state = FaceState::Detected;
+        self.score = score;
+        self.rect = rect;
+        self.calib = BoxCalib::IDENTITY;
+        self.calib_pending = true;
+        self.fit = None;
+        self.ncc.clear();
+        self.filter.reset();
+        self.shape_acc.clear();
+        self.msbp_init.set_fixed_shape(None);
+        self.msbp_track.set_fixed_shape(None);
+    }
+
+    fn end(&mut self) {
+        self.active = false;
+        self.seen = false;
+        self.fit = None;
+        self.ncc.clear();
+        self.filter.reset();
+    }
+}
+
+/// The face tracker: detector + landmark estimator + NCC tracking + flow filter + MSBP, generic
+/// over the detector and the landmark estimator.
+#[derive(Debug)]
+pub struct FaceTracker<D: RegionDetector, L: LandmarkEstimator> {
+    detector: D,
+    estimator: L,
+    config: TrackerConfig,
+    slots: Vec<Slot>,
+    next_id: u64,
+    last_timestamp: Option<i64>,
+    frame_index: u64,
+    frames_since_detect: u32,
+    redetect_next: bool,
+    detections: Vec<(Rect, f32)>,
+    pyr_prev: Pyramid,
+    pyr_cur: Pyramid,
+    luma: GrayImage,
+    points: [[f32; 2]; N_POINTS],
+    points64: [[f64; 2]; N_LANDMARKS],
+    projected: [[f64; 2]; N_LANDMARKS],
+    result: TrackingResult,
+    frame_size: (usize, usize),
+}
+
+fn us(t: Instant) -> u64 {
+    t.elapsed().as_micros() as u64
+}
+
+impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
+    /// A tracker over `detector` and `estimator`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidConfig`] / [`Error::InvalidCamera`] when `config` fails
+    /// [`TrackerConfig::validate`].
+    pub fn new(detector: D, estimator: L, config: TrackerConfig) -> Result<Self> {
+        config.validate()?;
+        let slots = (0..config.max_faces)
+            .map(|_| Slot::new(&config))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self {
+            detector,
+            estimator,
+            config,
+            slots,
+            next_id: 1,
+            last_timestamp: None,
+            frame_index: 0,
+            frames_since_detect: 0,
+            redetect_next: true,
+            detections: Vec::with_capacity(64),
+            pyr_prev: Pyramid::new(),
+            pyr_cur: Pyramid::new(),
+            luma: GrayImage::default(),
+            points: [[0.0; 2]; N_POINTS],
+            points64: [[0.0; 2]; N_LANDMARKS],
+            projected: [[0.0; 2]; N_LANDMARKS],
+            result: TrackingResult {
+                faces: Vec::with_capacity(config.max_faces),
+                ..Default::default()
+            },
+            frame_size: (0, 0),
+        })
+    }
+
+    /// Settings.
+    pub fn config(&self) -> &TrackerConfig {
+        &self.config
+    }
+
+    /// The detector (e.g. to read its statistics).
+    pub fn detector(&self) -> &D {
+        &self.detector
+    }
+
+    /// The detector, mutable.
+    pub fn detector_mut(&mut self) -> &mut D {
+        &mut self.detector
+    }
+
+    /// The landmark estimator.
+    pub fn estimator(&self) -> &L {
+        &self.estimator
+    }
+
+    /// The landmark estimator, mutable.
+    pub fn estimator_mut(&mut self) -> &mut L {
+        &mut self.estimator
+    }
+
+    /// The last result.
+    pub fn result(&self) -> &TrackingResult {
+        &self.result
+    }
+
+    /// Ends every track and forgets the timestamp history (a new stream).
+    pub fn reset(&mut self) {
+        for s in &mut self.slots {
+            s.end();
+        }
+        self.last_timestamp = None;
+        self.redetect_next = true;
+        self.frames_since_detect = 0;
+        self.pyr_prev = Pyramid::new();
+        self.frame_size = (0, 0);
+    }
+
+    /// Converts `frame` to upright luma (in a buffer the tracker keeps) and processes it.
+    ///
+    /// # Errors
+    /// As [`FaceTracker::process`].
+    pub fn process_frame(
+        &mut self,
+        frame: &Frame<'_>,
+        timestamp_ns: i64,
+    ) -> Result<&TrackingResult> {
+        let t0 = Instant::now();
+        let mut luma = std::mem::take(&mut self.luma);
+        frame.to_luma(&mut luma);
+        let image_us = us(t0);
+        let r = self.process_inner(&luma, timestamp_ns, t0);
+        self.luma = luma;
+        r?;
+        self.result.timings.image_us = image_us;
+        Ok(&self.result)
+    }
+
+    /// Processes one upright luma image taken at `timestamp_ns`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidFrame`] for an empty image; [`Error::InvalidInput`] in video mode when
+    /// `timestamp_ns` is not greater than the previous call's; errors of the detector, the landmark
+    /// estimator or the fit (non-finite landmarks) pass through. After an error the tracker's
+    /// tracks are unchanged where the error came before any update, and may have ended otherwise.
+    pub fn process(&mut self, image: &GrayImage, timestamp_ns: i64) -> Result<&TrackingResult> {
+        self.process_inner(image, timestamp_ns, Instant::now())?;
+        Ok(&self.result)
+    }
+
+    fn process_inner(&mut self, image: &GrayImage, timestamp_ns: i64, t0: Instant) -> Result<()> {
+        let (w, h) = (image.width(), image.height());
+        if w == 0 || h == 0 || image.data().len() != w * h {
+            return Err(Error::InvalidFrame(format!(
+                "empty or inconsistent {w}x{h} image"
+            )));
+        }
+        let video = self.config.mode == Mode::Video;
+        if video {
+            if let Some(last) = self.last_timestamp {
+                if timestamp_ns <= last {
+                    return Err(Error::InvalidInput(format!(
+                        "video mode needs strictly increasing timestamps: got {timestamp_ns} ns after {last} ns"
+                    )));
+                }
+            }
+            self.last_timestamp = Some(timestamp_ns);
+            if self.frame_size != (w, h) {
+                // A new frame size: old regions and pyramids mean nothing here.
+                for s in &mut self.slots {
+                    s.end();
+                }
+                self.pyr_prev = Pyramid::new();
+                self.redetect_next = true;
+            }
+        }
+        self.frame_size = (w, h);
+        let camera = match self.config.camera {
+            Some(c) => c,
+            None => Intrinsics::default_for(w as u32, h as u32)?,
+        };
+        let mut timings = StageTimings::default();
+
+        // 1. Region: NCC tracking of the active tracks.
+        let t = Instant::now();
+        let mut lost_now = false;
+        if video {
+            for s in self.slots.iter_mut().filter(|s| s.active) {
+                s.seen = false;
+                let Some(hit) = s.ncc.search(image, self.config.search_margin) else {
+                    s.end();
+                    lost_now = true;
+                    continue;
+                };
+                if hit.score < self.config.min_ncc_score {
+                    s.end();
+                    lost_now = true;
+                    continue;
+                }
+                let region = s.calib.apply(&hit.rect);
+                let conf = self.estimator.face_confidence(image, &region)?;
+                if conf < self.config.min_face_confidence {
+                    s.end();
+                    lost_now = true;
+                    continue;
+                }
+                s.seen = true;
+                s.rect = region;
+                s.score = conf;
+                s.state = FaceState::Tracked;
+            }
+        } else {
+            for s in &mut self.slots {
+                s.seen = false;
+            }
+        }
+        let n_active = self.slots.iter().filter(|s| s.active).count();
+        // Detect: always in image mode; in video mode when nothing is tracked (first frame, or no
+        // face yet) unless the loss happened just now and re-detection waits for the next frame,
+        // when a loss asked for it, or periodically while some faces are tracked and there is room
+        // for more.
+        let run_detector = !video
+            || (n_active == 0 && !lost_now)
+            || (lost_now && self.config.redetect_immediately)
+            || self.redetect_next
+            || (n_active > 0
+                && n_active < self.config.max_faces
+                && self.config.new_face_interval > 0
+                && self.frames_since_detect + 1 >= self.config.new_face_interval);
+        // A loss this frame (not re-detected at once) triggers the detector on the next frame.
+        self.redetect_next = lost_now && !self.config.redetect_immediately;
+        if run_detector {
+            let td = Instant::now();
+            self.detector.detect(image, &mut self.detections)?;
+            timings.detect_us = us(td);
+            self.frames_since_detect = 0;
+            self.redetect_next = false;
+            self.detections.retain(|(r, s)| {
+                r.is_valid() && s.is_finite() && *s >= self.config.min_detection_score
+            });
+            self.detections.sort_by(|a, b| b.1.total_cmp(&a.1));
+            for k in 0..self.detections.len() {
+                let (rect, score) = self.detections[k];
+                // The track this detection belongs to, by overlap with its region this frame
+                // (video: the tracked window; image: last call's box).
+                let mut best: Option<(usize, f32)> = None;
+                for (i, s) in self.slots.iter().enumerate() {
+                    if !s.active {
+                        continue;
+                    }
+                    let iou = s.rect.iou(&rect);
+                    if iou > self.config.match_iou && best.is_none_or(|(_, b)| iou > b) {
+                        best = Some((i, iou));
+                    }
+                }
+                match best {
+                    Some((i, _)) => {
+                        let s = &mut self.slots[i];
+                        if !video && !s.seen {
+                            // Image mode: the same face as last call keeps its id.
+                            s.seen = true;
+                            s.rect = rect;
+                            s.score = score;
+                            s.state = FaceState::Detected;
+                            s.fit = None;
+                        }
+                    }
+                    None => {
+                        // A free slot; in image mode also one whose face was not seen this call.
+                        if let Some(s) = self
+                            .slots
+                            .iter_mut()
+                            .find(|s| !s.active || (!video && !s.seen))
+                        {
+                            s.start(self.next_id, rect, score);
+                            self.next_id += 1;
+                        }
+                    }
+                }
+            }
+        } else {
+            self.frames_since_detect = self.frames_since_detect.saturating_add(1);
+        }
+        if !video {
+            for s in self.slots.iter_mut().filter(|s| s.active && !s.seen) {
+                s.end();
+            }
+        }
+        timings.region_us = us(t);
+
+        // Flow pyramid for this frame (kept as the next frame's previous).
+        let use_flow = video && self.config.flow_filter;
+        if use_flow {
+            let t = Instant::now();
+            self.pyr_cur.build(image, self.config.lk.levels);
+            timings.flow_us += us(t);
+        }
+
+        // 2–4. Landmarks, flow filter, fit; then the next frame's region and template.
+        let model = FaceModel::builtin();
+        let ref_scale = self.config.flow_threshold_px / FLOW_REFERENCE_FACE_PX;
+        for s in self.slots.iter_mut().filter(|s| s.active) {
+            let t = Instant::now();
+            self.estimator.estimate(image, &s.rect, &mut s.landmarks)?;
+            timings.landmarks_us += us(t);
+
+            let t = Instant::now();
+            s.flow_points = 0;
+            if use_flow {
+                if s.state == FaceState::Detected || self.pyr_prev.size() != self.pyr_cur.size() {
+                    s.filter.reset();
+                }
+                self.points = s.landmarks.points;
+                let size = face_size(&self.points);
+                let used = s.filter.apply(
+                    &self.pyr_prev,
+                    &self.pyr_cur,
+                    &mut self.points,
+                    ref_scale * size,
+                )?;
+                s.landmarks.points = self.points;
+                s.flow_points = used as u32;
+            }
+            timings.flow_us += us(t);
+
+            let t = Instant::now();
+            for (o, p) in self.points64.iter_mut().zip(&s.landmarks.points) {
+                *o = [f64::from(p[0]), f64::from(p[1])];
+            }
+            let tracking = video && s.state == FaceState::Tracked && s.fit.is_some();
+            let fit = if tracking {
+                s.msbp_track
+                    .fit(&self.points64, None, &camera, s.fit.as_ref())?
+            } else {
+                s.msbp_init.fit(&self.points64, None, &camera, None)?
+            };
+            if video && s.msbp_init.fixed_shape().is_none() {
+                s.shape_acc.push(&fit.shape);
+                if s.shape_acc.is_complete() {
+                    let shape = s.shape_acc.median();
+                    s.msbp_init.set_fixed_shape(shape);
+                    s.msbp_track.set_fixed_shape(shape);
+                }
+            }
+            s.fit = Some(fit);
+            if video {
+                model.project_into(
+                    &fit.shape,
+                    &fit.animation,
+                    &fit.pose.rotation,
+                    &fit.pose.translation,
+                    &camera,
+                    &mut self.projected,
+                );
+                s.model_box = bbox64(&self.projected);
+                if s.calib_pending {
+                    s.calib = BoxCalib::between(&s.model_box, &s.rect);
+                    s.calib_pending = false;
+                }
+                // On failure (face off-frame or flat) the track ends after this frame's report.
+                s.ncc.set_template(image, &s.model_box);
+            }
+            timings.fit_us += us(t);
+        }
+
+        // Result.
+        self.result.faces.clear();
+        for s in self.slots.iter().filter(|s| s.active) {
+            if let Some(fit) = s.fit {
+                self.result.faces.push(TrackedFace {
+                    id: s.id,
+                    rect: s.rect,
+                    score: s.score,
+                    state: s.state,
+                    landmarks: s.landmarks,
+                    fit,
+                    shape_held: s.msbp_track.fixed_shape().is_some(),
+                    flow_points: s.flow_points,
+                });
+            }
+        }
+        if video {
+            // Tracks without a template cannot be followed: end them after reporting this frame.
+            for s in self
+                .slots
+                .iter_mut()
+                .filter(|s| s.active && !s.ncc.has_template())
+            {
+                s.end();
+                self.redetect_next = true;
+            }
+            if use_flow {
+                std::mem::swap(&mut self.pyr_prev, &mut self.pyr_cur);
+            }
+        }
+        self.result.timestamp_ns = timestamp_ns;
+        self.result.frame_index = self.frame_index;
+        self.result.detector_ran = run_detector;
+        timings.total_us = us(t0);
+        self.result.timings = timings;
+        self.frame_index += 1;
+        Ok(())
+    }
+}
+
+/// Larger side of the points' bounding box.
+fn face_size(points: &[[f32; 2]]) -> f32 {
+    let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
+    for p in points {
+        x0 = x0.min(p[0]);
+        y0 = y0.min(p[1]);
+        x1 = x1.max(p[0]);
+        y1 = y1.max(p[1]);
+    }
+    (x1 - x0).max(y1 - y0).max(0.0)
+}
+
+/// Bounding box of projected points.
+fn bbox64(points: &[[f64; 2]]) -> Rect {
+    let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    for p in points {
+        x0 = x0.min(p[0]);
+        y0 = y0.min(p[1]);
+        x1 = x1.max(p[0]);
+        y1 = y1.max(p[1]);
+    }
+    Rect::new(x0 as f32, y0 as f32, (x1 - x0) as f32, (y1 - y0) as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ncc::tests::shifted;
+    use super::*;
+    use crate::fit::Pose;
+    use crate::model::{N_ANIM, N_SHAPE};
+    use nalgebra::Vector3;
+
+    /// Truth faces of a synthetic frame: 68 points each.
+    #[derive(Default)]
+    struct Truth {
+        faces: Vec<([[f32; 2]; N_POINTS], f32)>,
+    }
+
+    fn tight(points: &[[f32; 2]]) -> Rect {
+        let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
+        for p in points {
+            x0 = x0.min(p[0]);
+            y0 = y0.min(p[1]);
+            x1 = x1.max(p[0]);
+            y1 = y1.max(p[1]);
+        }
+        Rect::new(x0, y0, x1 - x0, y1 - y0)
+    }
+
+    struct Det<'a> {
+        truth: &'a std::cell::RefCell<Truth>,
+        calls: usize,
+    }
+
+    impl RegionDetector for Det<'_> {
+        fn detect(&mut self, _: &GrayImage, out: &mut Vec<(Rect, f32)>) -> Result<()> {
+            self.calls += 1;
+            out.clear();
+            for (p, score) in &self.truth.borrow().faces {
+                // A detector box 10 % larger than the points and a little low, like a real one.
+                let b = tight(p);
+                out.push((
+                    Rect::new(b.x - 0.05 * b.w, b.y, 1.1 * b.w, 1.1 * b.h),
+                    *score,
+                ));
+            }
+            Ok(())
+        }
+    }
+
+    struct Est<'a> {
+        truth: &'a std::cell::RefCell<Truth>,
+    }
+
+    impl Est<'_> {
+        fn find(&self, face: &Rect) -> Option<[[f32; 2]; N_POINTS]> {
+            self.truth
+                .borrow()
+                .faces
+                .iter()
+                .map(|(p, _)| *p)
+                .find(|p| tight(p).iou(face) > 0.4)
+        }
+    }
+
+    impl LandmarkEstimator for Est<'_> {
+        fn estimate(&mut self, _: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
+            let p = self
+                .find(face)
+                .ok_or_else(|| Error::Internal(format!("no face at {face:?}")))?;
+            out.points = p;
+            out.face_prob = 1.0;
+            Ok(())
+        }
+
+        fn face_confidence(&mut self, _: &GrayImage, face: &Rect) -> Result<f32> {
+            Ok(if self.find(face).is_some() { 0.9 } else { 0.1 })
+        }
+    }
+
+    /// The model's landmarks at `pose`, moved by `shift` pixels.
+    fn face_points(pose: &Pose, cam: &Intrinsics, shift: [f32; 2]) -> [[f32; 2]; N_POINTS] {
+        let mut p = [[0.0; 2]; N_LANDMARKS];
+        FaceModel::builtin().project_into(
+            &[0.0; N_SHAPE],
+            &[0.0; N_ANIM],
+            &pose.rotation,
+            &pose.translation,
+            cam,
+            &mut p,
+        );
+        std::array::from_fn(|i| [p[i][0] as f32 + shift[0], p[i][1] as f32 + shift[1]])
+    }
+
+    #[test]
+    fn bad_configs_are_typed_errors() {
+        assert!(TrackerConfig::default().validate().is_ok());
+        let bad = [
+            TrackerConfig {
+                max_faces: 0,
+                ..Default::default()
+            },
+            TrackerConfig {
+                max_faces: MAX_FACES_LIMIT + 1,
+                ..Default::default()
+            },
+            TrackerConfig {
+                min_face_confidence: f32::NAN,
+                ..Default::default()
+            },
+            TrackerConfig {
+                min_detection_score: 1.5,
+                ..Default::default()
+            },
+            TrackerConfig {
+                search_margin: 0.0,
+                ..Default::default()
+            },
+            TrackerConfig {
+                ncc_template_px: 2,
+                ..Default::default()
+            },
+            TrackerConfig {
+                flow_threshold_px: -1.0,
+                ..Default::default()
+            },
+            TrackerConfig {
+                shape_frames: 0,
+                ..Default::default()
+            },
+            TrackerConfig {
+                lk: LkConfig {
+                    half_window: 0,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+            TrackerConfig {
+                msbp: MsbpConfig {
+                    z_far_mm: 10.0,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+        ];
+        for c in bad {
+            assert!(
+                matches!(c.validate(), Err(Error::InvalidConfig(_))),
+                "{c:?}"
+            );
+        }
+        let cam = TrackerConfig {
+            camera: Some(Intrinsics {
+                fx: -1.0,
+                fy: 1.0,
+                cx: 0.0,
+                cy: 0.0,
+            }),
+            ..Default::default()
+        };
+        assert!(matches!(cam.validate(), Err(Error::InvalidCamera(_))));
+        // Partial JSON configs take the defaults for the rest.
+        let c: TrackerConfig =
+            serde_json::from_str(r#"{"max_faces": 3, "flow_filter": false, "mode": "Image"}"#)
+                .unwrap();
+        assert_eq!(c.max_faces, 3);
+        assert_eq!(c.mode, Mode::Image);
+        assert_eq!(c.search_margin, TrackerConfig::default().search_margin);
+        let truth = std::cell::RefCell::new(Truth::default());
+        let made = FaceTracker::new(
+            Det {
+                truth: &truth,
+                calls: 0,
+            },
+            Est { truth: &truth },
+            TrackerConfig {
+                max_faces: 0,
+                ..Default::default()
+            },
+        );
+        assert!(matches!(made, Err(Error::InvalidConfig(_))));
+    }
+
+    #[test]
+    fn video_timestamps_must_increase() {
+        let truth = std::cell::RefCell::new(Truth::default());
+        let img = GrayImage::new(64, 48);
+        let mut t = FaceTracker::new(
+            Det {
+                truth: &truth,
+                calls: 0,
+            },
+            Est { truth: &truth },
+            TrackerConfig::default(),
+        )
+        .unwrap();
+        let r = t.process(&img, 1_000).unwrap();
+        assert_eq!(r.state(), FrameState::Lost);
+        assert!(r.detector_ran);
+        for bad in [1_000, 999, -5] {
+            assert!(matches!(t.process(&img, bad), Err(Error::InvalidInput(_))));
+        }
+        assert!(t.process(&img, 1_001).is_ok());
+        assert!(matches!(
+            t.process(&GrayImage::new(0, 0), 2_000),
+            Err(Error::InvalidFrame(_))
+        ));
+        t.reset();
+        assert!(t.process(&img, 0).is_ok());
+        // Image mode accepts any order.
+        let mut t = FaceTracker::new(
+            Det {
+                truth: &truth,
+                calls: 0,
+            },
+            Est { truth: &truth },
+            TrackerConfig {
+                mode: Mode::Image,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert!(t.process(&img, 5).is_ok());
+        assert!(t.process(&img, 5).is_ok());
+        assert!(t.process(&img, 1).is_ok());
+    }
+
+    #[test]
+    fn two_faces_keep_their_ids_while_tracked() {
+        let cam = Intrinsics::default_for(640, 480).unwrap();
+        let poses = [
+            Pose::from_euler_deg(10.0, 0.0, 0.0, Vector3::new(-120.0, -20.0, 700.0)),
+            Pose::from_euler_deg(-15.0, 5.0, 0.0, Vector3::new(110.0, 30.0, 650.0)),
+        ];
+        let truth = std::cell::RefCell::new(Truth::default());
+        let set_truth = |shift: [f32; 2]| {
+            truth.borrow_mut().faces = vec![
+                (face_points(&poses[0], &cam, shift), 0.8),
+                (face_points(&poses[1], &cam, shift), 0.9),
+            ];
+        };
+        for max_faces in [2usize, 1] {
+            let mut t = FaceTracker::new(
+                Det {
+                    truth: &truth,
+                    calls: 0,
+                },
+                Est { truth: &truth },
+                TrackerConfig {
+                    max_faces,
+                    new_face_interval: 0,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let mut ids: Vec<u64> = Vec::new();
+            for f in 0..6 {
+                let shift = [3.0 * f as f32, -2.0 * f as f32];
+                set_truth(shift);
+                let img = shifted(shift);
+                let r = t.process(&img, f as i64 * 33_000_000).unwrap();
+                assert_eq!(r.faces.len(), max_faces, "frame {f}");
+                let now: Vec<u64> = r.faces.iter().map(|x| x.id).collect();
+                if f == 0 {
+                    assert_eq!(r.state(), FrameState::Detected);
+                    ids = now;
+                    if max_faces == 1 {
+                        // The higher-scoring face wins the only slot.
+                        let b = tight(&truth.borrow().faces[1].0);
+                        assert!(r.faces[0].rect.iou(&b) > 0.5);
+                    }
+                } else {
+                    assert_eq!(r.state(), FrameState::Tracked, "frame {f}");
+                    assert_eq!(now, ids, "frame {f}");
+                    for face in &r.faces {
+                        assert!(face.fit.report.rms_px < 1.0, "{:?}", face.fit.report);
+                    }
+                }
+                assert!(r.timings.total_us >= r.timings.fit_us);
+            }
+            assert_eq!(t.detector().calls, 1);
+        }
+    }
+
+    #[test]
+    fn box_calibration_round_trips() {
+        let model = Rect::new(100.0, 80.0, 120.0, 140.0);
+        let det = Rect::new(90.0, 85.0, 140.0, 150.0);
+        let c = BoxCalib::between(&model, &det);
+        let back = c.apply(&model);
+        assert!((back.x - det.x).abs() < 1e-3 && (back.w - det.w).abs() < 1e-3);
+        assert!((back.y - det.y).abs() < 1e-3 && (back.h - det.h).abs() < 1e-3);
+        // Moved model box → moved detector-convention box.
+        let moved = c.apply(&Rect::new(110.0, 70.0, 120.0, 140.0));
+        assert!((moved.x - 100.0).abs() < 1e-3 && (moved.y - 75.0).abs() < 1e-3);
+    }
+}

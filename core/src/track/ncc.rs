@@ -1,0 +1,442 @@
+//! Normalised cross-correlation (NCC) template matching at a reduced scale — the fast tracker's
+//! region step (thesis 4.3.2): the face region of the previous frame is cut as a template and found
+//! again in a search window around its old place in the new frame.
+//!
+//! Both the template and the window are box-decimated by one integer factor `f` chosen so the
+//! template's larger side is about [`NccMatcher::template_px`] pixels; the cost is then independent of
+//! the face size. Window sums and sums of squares come from integral images, so each candidate offset
+//! costs one dot product with the zero-mean template. The peak is refined to sub-pixel by a parabola
+//! through its neighbours along x and y, and the shift is returned in full-resolution pixels.
+//!
+//! Pixel convention: see [`crate::camera`]; a region's (x, y) is the top-left corner.
+
+use crate::image::{GrayImage, Rect};
+
+/// Smallest decimated template side that still carries a usable correlation peak (below 4×4 cells
+/// a face template is a few blobs and matches anywhere).
+pub const MIN_TEMPLATE_CELLS: usize = 4;
+
+/// Window standard deviation (grey levels, decimated) under which a candidate patch is treated as
+/// flat: its NCC is undefined and scored 0 (a uniform wall must never "match" a face).
+const FLAT_STD: f64 = 0.5;
+
+/// The best match of a search.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NccMatch {
+    /// The template's region moved by the found shift (full-resolution pixels).
+    pub rect: Rect,
+    /// Shift from the template's region to the match, pixels (sub-pixel).
+    pub shift: [f32; 2],
+    /// Normalised cross-correlation at the peak, −1..1.
+    pub score: f32,
+}
+
+/// Template matcher. Holds one template and every buffer, reused across frames.
+#[derive(Debug, Clone)]
+pub struct NccMatcher {
+    template_px: usize,
+    /// The region the template was cut for (may extend past the image).
+    region: Rect,
+    /// Full-resolution integer top-left corner of the part of the region inside the image.
+    origin: [i64; 2],
+    factor: usize,
+    tw: usize,
+    th: usize,
+    /// Zero-mean decimated template, row-major `tw × th`.
+    template: Vec<f32>,
+    template_norm: f64,
+    has_template: bool,
+    window: Vec<f32>,
+    integral: Vec<f64>,
+    integral_sq: Vec<f64>,
+}
+
+impl NccMatcher {
+    /// A matcher whose decimated template has its larger side near `template_px` (clamped to ≥ 8).
+    pub fn new(template_px: usize) -> Self {
+        Self {
+            template_px: template_px.max(8),
+            region: Rect::default(),
+            origin: [0, 0],
+            factor: 1,
+            tw: 0,
+            th: 0,
+            template: Vec::new(),
+            template_norm: 0.0,
+            has_template: false,
+            window: Vec::new(),
+            integral: Vec::new(),
+            integral_sq: Vec::new(),
+        }
+    }
+
+    /// Target larger side of the decimated template, pixels.
+    pub fn template_px(&self) -> usize {
+        self.template_px
+    }
+
+    /// The decimation factor of the current template (1 = full resolution).
+    pub fn factor(&self) -> usize {
+        self.factor
+    }
+
+    /// Whether a usable template is held.
+    pub fn has_template(&self) -> bool {
+        self.has_template
+    }
+
+    /// Forgets the template.
+    pub fn clear(&mut self) {
+        self.has_template = false;
+    }
+
+    /// Cuts the template for `region` from `image` (the part inside the image). Returns whether a
+    /// usable template resulted: `false` for a region (nearly) outside the image, too small, or flat.
+    pub fn set_template(&mut self, image: &GrayImage, region: &Rect) -> bool {
+        self.has_template = false;
+        if !region.is_valid() || image.width() == 0 || image.height() == 0 {
+            return false;
+        }
+        let size = region.w.max(region.h);
+        let factor = ((size / self.template_px as f32).round() as usize).max(1);
+        let x0 = (region.x.round() as i64).max(0);
+        let y0 = (region.y.round() as i64).max(0);
+        let x1 = ((region.x + region.w).round() as i64).min(image.width() as i64);
+        let y1 = ((region.y + region.h).round() as i64).min(image.height() as i64);
+        if x1 <= x0 || y1 <= y0 {
+            return false;
+        }
+        let tw = (x1 - x0) as usize / factor;
+        let th = (y1 - y0) as usize / factor;
+        if tw < MIN_TEMPLATE_CELLS || th < MIN_TEMPLATE_CELLS {
+            return false;
+        }
+        decimate(
+            image,
+            x0 as usize,
+            y0 as usize,
+            tw,
+            th,
+            factor,
+            &mut self.template,
+        );
+        let n = (tw * th) as f64;
+        let mean = self.template.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+        let mut ss = 0.0;
+        for v in &mut self.template {
+            *v -= mean as f32;
+            ss += f64::from(*v) * f64::from(*v);
+        }
+        if ss / n < FLAT_STD * FLAT_STD {
+            return false;
+        }
+        self.region = *region;
+        self.origin = [x0, y0];
+        self.factor = factor;
+        self.tw = tw;
+        self.th = th;
+        self.template_norm = ss.sqrt();
+        self.has_template = true;
+        true
+    }
+
+    /// Finds the template in `image` within `margin` × (the region's larger side) of its old place
+    /// in every direction. `None` without a template, or when the window left inside the image is
+    /// smaller than the template.
+    pub fn search(&mut self, image: &GrayImage, margin: f32) -> Option<NccMatch> {
+        if !self.has_template || !margin.is_finite() || margin < 0.0 {
+            return None;
+        }
+        let f = self.factor;
+        let m = (margin * self.region.w.max(self.region.h)).ceil() as i64;
+        let (iw, ih) = (image.width() as i64, image.height() as i64);
+        let wx0 = (self.origin[0] - m).max(0);
+        let wy0 = (self.origin[1] - m).max(0);
+        let wx1 = (self.origin[0] + (self.tw * f) as i64 + m).min(iw);
+        let wy1 = (self.origin[1] + (self.th * f) as i64 + m).min(ih);
+        if wx1 <= wx0 || wy1 <= wy0 {
+            return None;
+        }
+        let ww = (wx1 - wx0) as usize / f;
+        let wh = (wy1 - wy0) as usize / f;
+        let (tw, th) = (self.tw, self.th);
+        if ww < tw || wh < th {
+            return None;
+        }
+        decimate(
+            image,
+            wx0 as usize,
+            wy0 as usize,
+            ww,
+            wh,
+            f,
+            &mut self.window,
+        );
+        integrals(
+            &self.window,
+            ww,
+            wh,
+            &mut self.integral,
+            &mut self.integral_sq,
+        );
+
+        let (nx, ny) = (ww - tw + 1, wh - th + 1);
+        let n = (tw * th) as f64;
+        let stride = ww + 1;
+        let score_at = |i: usize, j: usize| -> f64 {
+            let box_sum = |t: &[f64]| {
+                t[(j + th) * stride + i + tw] - t[j * stride + i + tw] - t[(j + th) * stride + i]
+                    + t[j * stride + i]
+            };
+            let s = box_sum(&self.integral);
+            let ss = box_sum(&self.integral_sq);
+            let var = ss - s * s / n;
+            if var < FLAT_STD * FLAT_STD * n {
+                return 0.0;
+            }
+            // Σ t'·I equals Σ t'·(I − mean) because the template is zero-mean.
+            let mut num = 0.0f64;
+            for v in 0..th {
+                let row = &self.window[(j + v) * ww + i..(j + v) * ww + i + tw];
+                let trow = &self.template[v * tw..(v + 1) * tw];
+                num += f64::from(dot(trow, row));
+            }
+            num / (self.template_norm * var.sqrt())
+        };
+
+        let mut best = (f64::NEG_INFINITY, 0usize, 0usize);
+        for j in 0..ny {
+            for i in 0..nx {
+                let s = score_at(i, j);
+                if s > best.0 {
+                    best = (s, i, j);
+                }
+            }
+        }
+        let (peak, bi, bj) = best;
+        if !peak.is_finite() {
+            return None;
+        }
+        let sub = |lo: Option<f64>, hi: Option<f64>| -> f64 {
+            match (lo, hi) {
+                (Some(a), Some(b)) => {
+                    let d = a - 2.0 * peak + b;
+                    if d < -1e-12 {
+                        (0.5 * (a - b) / d).clamp(-0.5, 0.5)
+                    } else {
+                        0.0
+                    }
+                }
+                _ => 0.0,
+            }
+        };
+        let dx = sub(
+            (bi > 0).then(|| score_at(bi - 1, bj)),
+            (bi + 1 < nx).then(|| score_at(bi + 1, bj)),
+        );
+        let dy = sub(
+            (bj > 0).then(|| score_at(bi, bj - 1)),
+            (bj + 1 < ny).then(|| score_at(bi, bj + 1)),
+        );
+        // Cell (i, j) of the window starts at (wx0 + i·f, wy0 + j·f); the template's first cell at
+        // `origin`. Both are block means, so the shift between block grids is exact in full pixels.
+        let sx = (wx0 - self.origin[0]) as f64 + (bi as f64 + dx) * f as f64;
+        let sy = (wy0 - self.origin[1]) as f64 + (bj as f64 + dy) * f as f64;
+        let shift = [sx as f32, sy as f32];
+        Some(NccMatch {
+            rect: Rect::new(
+                self.region.x + shift[0],
+                self.region.y + shift[1],
+                self.region.w,
+                self.region.h,
+            ),
+            shift,
+            score: peak as f32,
+        })
+    }
+}
+
+/// Dot product with eight independent accumulators so the compiler vectorises it.
+#[inline]
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 8];
+    let ca = a.chunks_exact(8);
+    let cb = b.chunks_exact(8);
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for k in 0..8 {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    let mut s: f32 = acc.iter().sum();
+    for (x, y) in ra.iter().zip(rb) {
+        s += x * y;
+    }
+    s
+}
+
+/// Means of `f × f` blocks: `cols × rows` cells starting at full-resolution pixel (x0, y0), which
+/// the caller keeps inside the image.
+fn decimate(
+    image: &GrayImage,
+    x0: usize,
+    y0: usize,
+    cols: usize,
+    rows: usize,
+    f: usize,
+    out: &mut Vec<f32>,
+) {
+    out.clear();
+    out.resize(cols * rows, 0.0);
+    if f == 1 {
+        for r in 0..rows {
+            let src = &image.row(y0 + r)[x0..x0 + cols];
+            for (o, &s) in out[r * cols..(r + 1) * cols].iter_mut().zip(src) {
+                *o = f32::from(s);
+            }
+        }
+        return;
+    }
+    let inv = 1.0 / (f * f) as f32;
+    for r in 0..rows {
+        let dst = &mut out[r * cols..(r + 1) * cols];
+        for dy in 0..f {
+            let src = &image.row(y0 + r * f + dy)[x0..x0 + cols * f];
+            for (o, block) in dst.iter_mut().zip(src.chunks_exact(f)) {
+                *o += block.iter().map(|&v| u32::from(v)).sum::<u32>() as f32;
+            }
+        }
+        for o in dst.iter_mut() {
+            *o *= inv;
+        }
+    }
+}
+
+/// Integral images of values and squares, `(w + 1) × (h + 1)`, first row and column zero.
+fn integrals(src: &[f32], w: usize, h: usize, sum: &mut Vec<f64>, sq: &mut Vec<f64>) {
+    let stride = w + 1;
+    sum.clear();
+    sum.resize(stride * (h + 1), 0.0);
+    sq.clear();
+    sq.resize(stride * (h + 1), 0.0);
+    for y in 0..h {
+        let (mut rs, mut rq) = (0.0f64, 0.0f64);
+        for x in 0..w {
+            let v = f64::from(src[y * w + x]);
+            rs += v;
+            rq += v * v;
+            sum[(y + 1) * stride + x + 1] = sum[y * stride + x + 1] + rs;
+            sq[(y + 1) * stride + x + 1] = sq[y * stride + x + 1] + rq;
+        }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    /// A smooth, non-periodic texture (sum of incommensurate sines and Gaussian blobs), sampled at
+    /// continuous positions so sub-pixel shifts are exact.
+    pub(crate) fn texture(x: f32, y: f32) -> f32 {
+        let blobs = [
+            (120.0, 90.0, 25.0, 60.0),
+            (300.0, 200.0, 40.0, -50.0),
+            (200.0, 330.0, 30.0, 45.0),
+            (450.0, 120.0, 35.0, -40.0),
+        ];
+        let mut v = 128.0
+            + 30.0 * (0.113 * x + 0.071 * y).sin()
+            + 25.0 * (0.047 * x - 0.131 * y + 1.0).sin()
+            + 15.0 * (0.29 * x + 0.23 * y + 2.0).sin();
+        for (cx, cy, s, a) in blobs {
+            v += a * (-((x - cx).powi(2) + (y - cy).powi(2)) / (2.0 * s * s)).exp();
+        }
+        v.clamp(0.0, 255.0)
+    }
+
+    /// A 640×480 image of the texture moved by `shift` (image(p) = texture(p − shift)).
+    pub(crate) fn shifted(shift: [f32; 2]) -> GrayImage {
+        let (w, h) = (640, 480);
+        let mut img = GrayImage::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                let v = texture(x as f32 + 0.5 - shift[0], y as f32 + 0.5 - shift[1]);
+                img.data_mut()[y * w + x] = v.round() as u8;
+            }
+        }
+        img
+    }
+
+    #[test]
+    fn integer_shift_is_found_exactly_at_full_resolution() {
+        let a = shifted([0.0, 0.0]);
+        let b = shifted([7.0, -4.0]);
+        let mut m = NccMatcher::new(64);
+        let region = Rect::new(200.0, 150.0, 60.0, 60.0);
+        assert!(m.set_template(&a, &region));
+        assert_eq!(m.factor(), 1);
+        let hit = m.search(&b, 0.5).unwrap();
+        assert!((hit.shift[0] - 7.0).abs() < 0.05, "{hit:?}");
+        assert!((hit.shift[1] + 4.0).abs() < 0.05, "{hit:?}");
+        assert!(hit.score > 0.99, "{hit:?}");
+        assert!((hit.rect.x - 207.0).abs() < 0.05 && (hit.rect.y - 146.0).abs() < 0.05);
+    }
+
+    #[test]
+    fn subpixel_shift_within_half_a_pixel() {
+        let a = shifted([0.0, 0.0]);
+        for s in [[3.5f32, 2.25], [-6.3, 4.7], [0.4, -0.4]] {
+            let b = shifted(s);
+            let mut m = NccMatcher::new(64);
+            assert!(m.set_template(&a, &Rect::new(250.0, 180.0, 64.0, 64.0)));
+            let hit = m.search(&b, 0.3).unwrap();
+            assert!(
+                (hit.shift[0] - s[0]).abs() < 0.5 && (hit.shift[1] - s[1]).abs() < 0.5,
+                "{s:?} → {hit:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn reduced_scale_finds_large_shifts() {
+        let a = shifted([0.0, 0.0]);
+        let region = Rect::new(180.0, 120.0, 180.0, 200.0);
+        for s in [[31.0f32, -22.0], [-45.5, 17.25], [2.0, 3.0]] {
+            let b = shifted(s);
+            let mut m = NccMatcher::new(32);
+            assert!(m.set_template(&a, &region));
+            assert!(m.factor() > 4, "factor {}", m.factor());
+            let hit = m.search(&b, 0.4).unwrap();
+            // One decimated cell is `factor` pixels; the parabola gets within a fraction of it.
+            let tol = 0.5 * m.factor() as f32;
+            assert!(
+                (hit.shift[0] - s[0]).abs() < tol && (hit.shift[1] - s[1]).abs() < tol,
+                "{s:?} → {hit:?} (factor {})",
+                m.factor()
+            );
+            assert!(hit.score > 0.9);
+        }
+    }
+
+    #[test]
+    fn degenerate_inputs_give_no_template_or_no_match() {
+        let a = shifted([0.0, 0.0]);
+        let mut m = NccMatcher::new(32);
+        assert!(!m.set_template(&a, &Rect::new(700.0, 10.0, 50.0, 50.0)));
+        assert!(!m.set_template(&a, &Rect::new(10.0, 10.0, 3.0, 3.0)));
+        assert!(!m.set_template(&a, &Rect::new(f32::NAN, 10.0, 50.0, 50.0)));
+        assert!(m.search(&a, 0.5).is_none());
+        let flat = GrayImage::new(640, 480);
+        assert!(!m.set_template(&flat, &Rect::new(100.0, 100.0, 80.0, 80.0)));
+        // A flat search window scores 0, never a match.
+        assert!(m.set_template(&a, &Rect::new(100.0, 100.0, 80.0, 80.0)));
+        let hit = m.search(&flat, 0.5).unwrap();
+        assert_eq!(hit.score, 0.0);
+        // A region hanging over the border still tracks by its inside part.
+        let b = shifted([5.0, 3.0]);
+        assert!(m.set_template(&a, &Rect::new(-30.0, -20.0, 120.0, 120.0)));
+        let hit = m.search(&b, 0.3).unwrap();
+        let tol = 0.5 * m.factor() as f32;
+        assert!((hit.shift[0] - 5.0).abs() < tol && (hit.shift[1] - 3.0).abs() < tol);
+    }
+}

@@ -1,0 +1,883 @@
+//! `monotrack track VIDEO_OR_FRAME_DIR [--out OUT.jsonl] [--overlay DIR]` (CONTRACT.md): the parts
+//! that do not depend on which detector and landmark estimator the tracker holds — frame input (a
+//! directory of PNG/JPEG frames in file-name order, or a video piped through `ffmpeg`), a progress
+//! bar on stderr, the CONTRACT JSON line of a [`TrackingResult`], overlay drawing (landmarks,
+//! projected model mesh, head axes) and the loop [`run`], generic over the tracker's detector and
+//! estimator.
+
+use crate::LineSink;
+use crate::json::put_fit;
+use monotrack_core::camera::Intrinsics;
+use monotrack_core::image::GrayImage;
+use monotrack_core::landmarks::{BROW_GESTURES, MOUTH_GESTURES};
+use monotrack_core::model::{FaceModel, N_LANDMARKS};
+use monotrack_core::track::{
+    FaceState, FaceTracker, FrameState, LandmarkEstimator, RegionDetector, TrackedFace,
+    TrackingResult,
+};
+use nalgebra::Vector3;
+use serde_json::{Map, Value, json};
+use std::io::{IsTerminal, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdout, Command, Stdio};
+use std::time::Instant;
+
+/// Frame rate assumed for a frame directory (no timing information there): 30 fps, the usual
+/// phone camera rate.
+pub const DIR_FPS: f64 = 30.0;
+
+/// What `ffmpeg` missing means for the user.
+const NO_FFMPEG: &str = "reading video files needs ffmpeg and ffprobe (Debian/Ubuntu: \
+     apt-get install ffmpeg); a directory of PNG/JPEG frames always works";
+
+/// `round(0.299 R + 0.587 G + 0.114 B)` — the CONTRACT luma of 8-bit RGB.
+fn luma(r: u8, g: u8, b: u8) -> u8 {
+    (0.299 * f32::from(r) + 0.587 * f32::from(g) + 0.114 * f32::from(b)).round() as u8
+}
+
+/// The frame files of `dir` (PNG/JPEG by extension, any case), in file-name order.
+///
+/// # Errors
+/// A message when the directory cannot be read or holds no frame.
+pub fn list_frames(dir: &Path) -> Result<Vec<PathBuf>, String> {
+    let rd = std::fs::read_dir(dir).map_err(|e| format!("cannot read {}: {e}", dir.display()))?;
+    let mut files = Vec::new();
+    for entry in rd {
+        let p = entry.map_err(|e| e.to_string())?.path();
+        let ext = p
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        if p.is_file() && matches!(ext.as_deref(), Some("png" | "jpg" | "jpeg")) {
+            files.push(p);
+        }
+    }
+    files.sort_by(|a, b| a.file_name().cmp(&b.file_name()));
+    if files.is_empty() {
+        return Err(format!("{} holds no PNG or JPEG frame", dir.display()));
+    }
+    Ok(files)
+}
+
+/// Decodes an image file into upright luma (`out` is resized, its allocation reused).
+///
+/// # Errors
+/// A message when the file cannot be decoded.
+pub fn load_luma(path: &Path, out: &mut GrayImage) -> Result<(), String> {
+    let img = image::open(path)
+        .map_err(|e| format!("{}: {e}", path.display()))?
+        .to_rgb8();
+    out.resize(img.width() as usize, img.height() as usize);
+    for (o, p) in out.data_mut().iter_mut().zip(img.as_raw().chunks_exact(3)) {
+        *o = luma(p[0], p[1], p[2]);
+    }
+    Ok(())
+}
+
+/// Where frames come from.
+pub enum FrameSource {
+    /// Image files, read in order.
+    Dir {
+        /// The files.
+        files: Vec<PathBuf>,
+        /// Next index.
+        next: usize,
+    },
+    /// Raw gray frames from `ffmpeg -f rawvideo -pix_fmt gray`.
+    Video {
+        /// The ffmpeg process.
+        child: Child,
+        /// Its stdout.
+        stdout: ChildStdout,
+        /// Frame width.
+        width: usize,
+        /// Frame height.
+        height: usize,
+        /// Frames per second (from ffprobe).
+        fps: f64,
+        /// Frame count if the container says.
+        frames: Option<usize>,
+        /// Next index.
+        next: usize,
+    },
+}
+
+/// Runs ffprobe for width, height, frame rate and (if known) frame count of the first video stream.
+fn probe(path: &Path) -> Result<(usize, usize, f64, Option<usize>), String> {
+    let out = Command::new("ffprobe")
+        .args([
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "stream=width,height,avg_frame_rate,nb_frames",
+            "-of",
+            "default=noprint_wrappers=1",
+        ])
+        .arg(path)
+        .output()
+        .map_err(|e| {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                NO_FFMPEG.to_string()
+            } else {
+                format!("ffprobe: {e}")
+            }
+        })?;
+    if !out.status.success() {
+        return Err(format!(
+            "ffprobe cannot read {}: {}",
+            path.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ));
+    }
+    parse_probe(&String::from_utf8_lossy(&out.stdout))
+        .ok_or_else(|| format!("{}: no video stream", path.display()))
+}
+
+/// Parses ffprobe's `key=value` lines.
+fn parse_probe(text: &str) -> Option<(usize, usize, f64, Option<usize>)> {
+    let (mut w, mut h, mut fps, mut n) = (None, None, None, None);
+    for line in text.lines() {
+        let Some((k, v)) = line.trim().split_once('=') else {
+            continue;
+        };
+        match k {
+            "width" => w = v.parse().ok(),
+            "height" => h = v.parse().ok(),
+            "avg_frame_rate" => {
+                fps = match v.split_once('/') {
+                    Some((a, b)) => match (a.parse::<f64>(), b.parse::<f64>()) {
+                        (Ok(a), Ok(b)) if b > 0.0 && a > 0.0 => Some(a / b),
+                        _ => None,
+                    },
+                    None => v.parse().ok().filter(|f: &f64| *f > 0.0),
+                }
+            }
+            "nb_frames" => n = v.parse().ok(),
+            _ => {}
+        }
+    }
+    Some((w?, h?, fps.unwrap_or(DIR_FPS), n))
+}
+
+impl FrameSource {
+    /// Opens a frame directory or (through ffmpeg) a video file.
+    ///
+    /// # Errors
+    /// A message for an unreadable path, an empty directory, or a video without ffmpeg installed.
+    pub fn open(path: &Path) -> Result<Self, String> {
+        if path.is_dir() {
+            return Ok(Self::Dir {
+                files: list_frames(path)?,
+                next: 0,
+            });
+        }
+        if !path.is_file() {
+            return Err(format!(
+                "{} is neither a file nor a directory",
+                path.display()
+            ));
+        }
+        let (width, height, fps, frames) = probe(path)?;
+        // -noautorotate: frames keep the stream's stored size, the one ffprobe reported.
+        let mut child = Command::new("ffmpeg")
+            .args(["-v", "error", "-noautorotate", "-i"])
+            .arg(path)
+            .args(["-f", "rawvideo", "-pix_fmt", "gray", "-"])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| {
+                if e.kind() == std::io::ErrorKind::NotFound {
+                    NO_FFMPEG.to_string()
+                } else {
+                    format!("ffmpeg: {e}")
+                }
+            })?;
+        let stdout = child
+            .stdout
+            .take()
+            .ok_or_else(|| "ffmpeg: no stdout".to_string())?;
+        Ok(Self::Video {
+            child,
+            stdout,
+            width,
+            height,
+            fps,
+            frames,
+            next: 0,
+        })
+    }
+
+    /// Number of frames, when known in advance.
+    pub fn len_hint(&self) -> Option<usize> {
+        match self {
+            Self::Dir { files, .. } => Some(files.len()),
+            Self::Video { frames, .. } => *frames,
+        }
+    }
+
+    /// Reads the next frame into `out`; returns its index and timestamp (ns), `None` at the end.
+    ///
+    /// # Errors
+    /// A message when a frame cannot be read or decoded.
+    pub fn next_frame(&mut self, out: &mut GrayImage) -> Result<Option<(usize, i64)>, String> {
+        match self {
+            Self::Dir { files, next } => {
+                let Some(path) = files.get(*next) else {
+                    return Ok(None);
+                };
+                load_luma(path, out)?;
+                let i = *next;
+                *next += 1;
+                Ok(Some((i, (i as f64 * 1e9 / DIR_FPS).round() as i64)))
+            }
+            Self::Video {
+                stdout,
+                width,
+                height,
+                fps,
+                next,
+                ..
+            } => {
+                out.resize(*width, *height);
+                let buf = out.data_mut();
+                let mut filled = 0;
+                while filled < buf.len() {
+                    match stdout.read(&mut buf[filled..]) {
+                        Ok(0) => break,
+                        Ok(n) => filled += n,
+                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                        Err(e) => return Err(format!("reading ffmpeg output: {e}")),
+                    }
+                }
+                if filled == 0 {
+                    return Ok(None);
+                }
+                if filled < buf.len() {
+                    return Err(format!(
+                        "ffmpeg output ended inside frame {next} ({filled} of {} bytes)",
+                        buf.len()
+                    ));
+                }
+                let i = *next;
+                *next += 1;
+                Ok(Some((i, (i as f64 * 1e9 / *fps).round() as i64)))
+            }
+        }
+    }
+}
+
+impl Drop for FrameSource {
+    fn drop(&mut self) {
+        if let Self::Video { child, .. } = self {
+            // Stop ffmpeg if we quit early; it exits on its own at the end of the video.
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// A one-line progress bar on stderr (redrawn at most 10 times a second on a terminal; a line
+/// every 10 % otherwise, so logs stay short).
+pub struct Progress {
+    total: Option<usize>,
+    start: Instant,
+    last: Option<Instant>,
+    tty: bool,
+    last_decile: usize,
+}
+
+impl Progress {
+    /// A bar for `total` frames (unknown: a counter).
+    pub fn new(total: Option<usize>) -> Self {
+        Self {
+            total,
+            start: Instant::now(),
+            last: None,
+            tty: std::io::stderr().is_terminal(),
+            last_decile: 0,
+        }
+    }
+
+    /// The bar's text after `done` frames, `elapsed_s` seconds in.
+    pub fn line(total: Option<usize>, done: usize, elapsed_s: f64) -> String {
+        let fps = if elapsed_s > 0.0 {
+            done as f64 / elapsed_s
+        } else {
+            0.0
+        };
+        match total {
+            Some(t) if t > 0 => {
+                const WIDTH: usize = 30;
+                let filled = (done.min(t) * WIDTH) / t;
+                format!(
+                    "[{}{}] {done}/{t} frames  {fps:.1} fps",
+                    "#".repeat(filled),
+                    "-".repeat(WIDTH - filled)
+                )
+            }
+            _ => format!("{done} frames  {fps:.1} fps"),
+        }
+    }
+
+    /// Reports `done` frames.
+    pub fn update(&mut self, done: usize) {
+        let elapsed = self.start.elapsed().as_secs_f64();
+        if self.tty {
+            if self.last.is_some_and(|l| l.elapsed().as_millis() < 100) {
+                return;
+            }
+            self.last = Some(Instant::now());
+            eprint!("\r{}", Self::line(self.total, done, elapsed));
+            let _ = std::io::stderr().flush();
+        } else if let Some(t) = self.total.filter(|&t| t > 0) {
+            let decile = done * 10 / t;
+            if decile > self.last_decile {
+                self.last_decile = decile;
+                eprintln!("{}", Self::line(self.total, done, elapsed));
+            }
+        }
+    }
+
+    /// Ends the bar with a final line.
+    pub fn finish(&mut self, done: usize) {
+        let line = Self::line(self.total, done, self.start.elapsed().as_secs_f64());
+        if self.tty {
+            eprintln!("\r{line}");
+        } else {
+            eprintln!("{line}");
+        }
+    }
+}
+
+fn round(v: f64, digits: i32) -> f64 {
+    let p = 10f64.powi(digits);
+    (v * p).round() / p
+}
+
+/// One CONTRACT FACE object (plus `id` and `state`) for a tracked face.
+pub fn face_json(face: &TrackedFace) -> Value {
+    let lm = &face.landmarks;
+    let r = face.rect;
+    let mut m = Map::new();
+    m.insert("id".into(), json!(face.id));
+    m.insert(
+        "state".into(),
+        json!(match face.state {
+            FaceState::Detected => "detected",
+            FaceState::Tracked => "tracked",
+        }),
+    );
+    m.insert(
+        "box".into(),
+        json!([
+            round(f64::from(r.x), 2),
+            round(f64::from(r.y), 2),
+            round(f64::from(r.w), 2),
+            round(f64::from(r.h), 2)
+        ]),
+    );
+    m.insert("score".into(), json!(round(f64::from(face.score), 4)));
+    m.insert(
+        "landmarks68".into(),
+        Value::Array(
+            lm.points
+                .iter()
+                .map(|p| json!([round(f64::from(p[0]), 2), round(f64::from(p[1]), 2)]))
+                .collect(),
+        ),
+    );
+    m.insert("yaw_class_deg".into(), json!(lm.yaw_class_deg()));
+    let probs = |v: &[f32]| -> Vec<f64> { v.iter().map(|p| round(f64::from(*p), 4)).collect() };
+    m.insert("yaw_probs".into(), json!(probs(&lm.yaw_probs)));
+    let named = |names: &[&str], v: &[f32]| -> Value {
+        Value::Object(
+            names
+                .iter()
+                .zip(v)
+                .map(|(n, p)| (n.to_string(), json!(round(f64::from(*p), 4))))
+                .collect(),
+        )
+    };
+    m.insert(
+        "gestures".into(),
+        json!({"mouth": named(&MOUTH_GESTURES, &lm.mouth), "brows": named(&BROW_GESTURES, &lm.brows)}),
+    );
+    m.insert(
+        "gaze".into(),
+        json!({
+            "left": probs(&lm.gaze_left),
+            "right": probs(&lm.gaze_right),
+            "combined": probs(&lm.gaze_combined),
+        }),
+    );
+    put_fit(&mut m, &face.fit);
+    m.insert("shape_held".into(), json!(face.shape_held));
+    m.insert("flow_points".into(), json!(face.flow_points));
+    Value::Object(m)
+}
+
+/// The CONTRACT `track` output line of one frame.
+pub fn frame_json(result: &TrackingResult) -> Value {
+    let t = &result.timings;
+    json!({
+        "frame": result.frame_index,
+        "timestamp_ms": round(result.timestamp_ns as f64 / 1e6, 3),
+        "state": match result.state() {
+            FrameState::Detected => "detected",
+            FrameState::Tracked => "tracked",
+            FrameState::Lost => "lost",
+        },
+        "faces": result.faces.iter().map(face_json).collect::<Vec<_>>(),
+        "timings_us": {
+            "image": t.image_us, "region": t.region_us, "detect": t.detect_us,
+            "landmarks": t.landmarks_us, "flow": t.flow_us, "fit": t.fit_us, "total": t.total_us,
+        },
+    })
+}
+
+/// An RGB drawing surface for overlays.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Canvas {
+    width: usize,
+    height: usize,
+    rgb: Vec<u8>,
+}
+
+/// Overlay colours.
+const LANDMARK_RGB: [u8; 3] = [0, 255, 0];
+const MESH_RGB: [u8; 3] = [0, 170, 255];
+const BOX_RGB: [u8; 3] = [255, 255, 0];
+const AXIS_RGB: [[u8; 3]; 3] = [[255, 0, 0], [0, 255, 0], [0, 0, 255]];
+/// Drawn head-axis length, millimetres (about half a face).
+const AXIS_MM: f64 = 60.0;
+
+impl Canvas {
+    /// A gray image as RGB.
+    pub fn from_gray(img: &GrayImage) -> Self {
+        let mut c = Self {
+            width: 0,
+            height: 0,
+            rgb: Vec::new(),
+        };
+        c.set_gray(img);
+        c
+    }
+
+    /// Replaces the contents with a gray image (allocation reused).
+    pub fn set_gray(&mut self, img: &GrayImage) {
+        self.width = img.width();
+        self.height = img.height();
+        self.rgb.clear();
+        self.rgb.extend(img.data().iter().flat_map(|&v| [v, v, v]));
+    }
+
+    /// The pixel at (x, y), if inside.
+    pub fn get(&self, x: usize, y: usize) -> Option<[u8; 3]> {
+        (x < self.width && y < self.height).then(|| {
+            let k = 3 * (y * self.width + x);
+            [self.rgb[k], self.rgb[k + 1], self.rgb[k + 2]]
+        })
+    }
+
+    fn put(&mut self, x: i64, y: i64, c: [u8; 3]) {
+        if x >= 0 && y >= 0 && (x as usize) < self.width && (y as usize) < self.height {
+            let k = 3 * (y as usize * self.width + x as usize);
+            self.rgb[k..k + 3].copy_from_slice(&c);
+        }
+    }
+
+    /// A line between two points in CONTRACT pixel coordinates (Bresenham; clipped to the image;
+    /// non-finite or absurdly far endpoints draw nothing).
+    pub fn line(&mut self, a: [f64; 2], b: [f64; 2], c: [u8; 3]) {
+        let lim = 4.0 * (self.width + self.height) as f64 + 1e4;
+        if !a.iter().chain(&b).all(|v| v.is_finite() && v.abs() < lim) {
+            return;
+        }
+        // Pixel (i, j) holds the point (i + 0.5, j + 0.5): floor gives the pixel.
+        let (mut x0, mut y0) = (a[0].floor() as i64, a[1].floor() as i64);
+        let (x1, y1) = (b[0].floor() as i64, b[1].floor() as i64);
+        let dx = (x1 - x0).abs();
+        let dy = -(y1 - y0).abs();
+        let sx = if x0 < x1 { 1 } else { -1 };
+        let sy = if y0 < y1 { 1 } else { -1 };
+        let mut err = dx + dy;
+        loop {
+            self.put(x0, y0, c);
+            if x0 == x1 && y0 == y1 {
+                break;
+            }
+            let e2 = 2 * err;
+            if e2 >= dy {
+                err += dy;
+                x0 += sx;
+            }
+            if e2 <= dx {
+                err += dx;
+                y0 += sy;
+            }
+        }
+    }
+
+    /// A filled disc of radius `r` pixels around a point.
+    pub fn disc(&mut self, p: [f64; 2], r: f64, c: [u8; 3]) {
+        if !(p[0].is_finite() && p[1].is_finite() && r.is_finite()) {
+            return;
+        }
+        let (x0, x1) = ((p[0] - r).floor() as i64, (p[0] + r).ceil() as i64);
+        let (y0, y1) = ((p[1] - r).floor() as i64, (p[1] + r).ceil() as i64);
+        for y in y0.max(0)..=y1.min(self.height as i64) {
+            for x in x0.max(0)..=x1.min(self.width as i64) {
+                let (cx, cy) = (x as f64 + 0.5 - p[0], y as f64 + 0.5 - p[1]);
+                if cx * cx + cy * cy <= r * r {
+                    self.put(x, y, c);
+                }
+            }
+        }
+    }
+
+    /// Writes a PNG.
+    ///
+    /// # Errors
+    /// A message when the file cannot be written.
+    pub fn save_png(&self, path: &Path) -> Result<(), String> {
+        image::save_buffer(
+            path,
+            &self.rgb,
+            self.width as u32,
+            self.height as u32,
+            image::ExtendedColorType::Rgb8,
+        )
+        .map_err(|e| format!("{}: {e}", path.display()))
+    }
+}
+
+/// Draws every face of `result`: its box, the fitted model's mesh projected through `camera`, the
+/// head axes (x red, y green, z blue, from the model's centroid) and the 68 landmarks.
+pub fn draw_overlay(canvas: &mut Canvas, result: &TrackingResult, camera: &Intrinsics) {
+    let model = FaceModel::builtin();
+    for face in &result.faces {
+        let r = face.rect;
+        let (x0, y0) = (f64::from(r.x), f64::from(r.y));
+        let (x1, y1) = (x0 + f64::from(r.w), y0 + f64::from(r.h));
+        for (a, b) in [
+            ([x0, y0], [x1, y0]),
+            ([x1, y0], [x1, y1]),
+            ([x1, y1], [x0, y1]),
+            ([x0, y1], [x0, y0]),
+        ] {
+            canvas.line(a, b, BOX_RGB);
+        }
+        let fit = &face.fit;
+        let (rot, t) = (&fit.pose.rotation, &fit.pose.translation);
+        let mut proj = [[0.0; 2]; N_LANDMARKS];
+        model.project_into(&fit.shape, &fit.animation, rot, t, camera, &mut proj);
+        for tri in model.triangles() {
+            for k in 0..3 {
+                let (a, b) = (tri[k] as usize, tri[(k + 1) % 3] as usize);
+                canvas.line(proj[a], proj[b], MESH_RGB);
+            }
+        }
+        let mut g = [Vector3::zeros(); N_LANDMARKS];
+        model.shape_into(&fit.shape, &fit.animation, &mut g);
+        let centre = g.iter().sum::<Vector3<f64>>() / N_LANDMARKS as f64;
+        let to_px = |p: Vector3<f64>| {
+            let c = rot * p + t;
+            let (u, v) = camera.project(c.x, c.y, c.z);
+            [u, v]
+        };
+        let o = to_px(centre);
+        for (k, col) in AXIS_RGB.iter().enumerate() {
+            let mut e = Vector3::zeros();
+            e[k] = AXIS_MM;
+            canvas.line(o, to_px(centre + e), *col);
+        }
+        for p in &face.landmarks.points {
+            canvas.disc([f64::from(p[0]), f64::from(p[1])], 1.5, LANDMARK_RGB);
+        }
+    }
+}
+
+/// Tracks every frame of `input` with `tracker`, writing one CONTRACT JSON line per frame to `out`
+/// (stdout when `None`) and, with `overlay`, `frame_NNNNNN.png` overlays there. Returns whether
+/// every frame succeeded (a failed frame writes `{"frame": i, "error": ...}` and goes on).
+///
+/// # Errors
+/// A message when the input cannot be opened or an output cannot be written.
+pub fn run<D: RegionDetector, L: LandmarkEstimator>(
+    tracker: &mut FaceTracker<D, L>,
+    input: &Path,
+    out: Option<&Path>,
+    overlay: Option<&Path>,
+) -> Result<bool, String> {
+    let mut source = FrameSource::open(input)?;
+    let mut sink = LineSink::new(out)?;
+    if let Some(dir) = overlay {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    let mut progress = Progress::new(source.len_hint());
+    let mut frame = GrayImage::default();
+    let mut canvas = Canvas::from_gray(&frame);
+    let mut all_ok = true;
+    let mut done = 0;
+    while let Some((i, ts)) = source.next_frame(&mut frame)? {
+        match tracker.process(&frame, ts) {
+            Ok(result) => {
+                let mut line = frame_json(result);
+                // The tracker counts calls; the CLI's frame number is the input's.
+                line["frame"] = json!(i);
+                sink.write(&line)?;
+                if let Some(dir) = overlay {
+                    let camera = match tracker.config().camera {
+                        Some(c) => c,
+                        None => {
+                            Intrinsics::default_for(frame.width() as u32, frame.height() as u32)
+                                .map_err(|e| e.to_string())?
+                        }
+                    };
+                    canvas.set_gray(&frame);
+                    draw_overlay(&mut canvas, tracker.result(), &camera);
+                    canvas.save_png(&dir.join(format!("frame_{i:06}.png")))?;
+                }
+            }
+            Err(e) => {
+                all_ok = false;
+                eprintln!("monotrack: frame {i}: {e}");
+                sink.write(&json!({"frame": i, "error": e.to_string()}))?;
+            }
+        }
+        done += 1;
+        progress.update(done);
+    }
+    progress.finish(done);
+    Ok(all_ok)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use monotrack_core::fit::{Msbp, MsbpConfig, Pose};
+    use monotrack_core::landmarks::FaceLandmarks;
+    use monotrack_core::model::{N_ANIM, N_SHAPE};
+    use monotrack_core::track::StageTimings;
+
+    fn result(cam: &Intrinsics) -> TrackingResult {
+        let pose = Pose::from_euler_deg(20.0, -5.0, 3.0, Vector3::new(10.0, 0.0, 600.0));
+        let mut p = [[0.0; 2]; N_LANDMARKS];
+        FaceModel::builtin().project_into(
+            &[0.0; N_SHAPE],
+            &[0.0; N_ANIM],
+            &pose.rotation,
+            &pose.translation,
+            cam,
+            &mut p,
+        );
+        let fit = Msbp::new(MsbpConfig::default())
+            .fit(&p, None, cam, None)
+            .unwrap();
+        let mut lm = FaceLandmarks::default();
+        for (o, q) in lm.points.iter_mut().zip(&p) {
+            *o = [q[0] as f32, q[1] as f32];
+        }
+        lm.yaw_probs = [0.0, 0.1, 0.2, 0.7, 0.0];
+        TrackingResult {
+            timestamp_ns: 66_666_667,
+            frame_index: 2,
+            faces: vec![TrackedFace {
+                id: 7,
+                rect: monotrack_core::image::Rect::new(250.0, 180.0, 140.0, 150.0),
+                score: 0.93,
+                state: FaceState::Tracked,
+                landmarks: lm,
+                fit,
+                shape_held: true,
+                flow_points: 60,
+            }],
+            detector_ran: false,
+            timings: StageTimings {
+                total_us: 900,
+                fit_us: 30,
+                ..Default::default()
+            },
+        }
+    }
+
+    #[test]
+    fn frame_json_follows_the_contract() {
+        let cam = Intrinsics::default_for(640, 480).unwrap();
+        let r = result(&cam);
+        let v = frame_json(&r);
+        assert_eq!(v["frame"], 2);
+        assert_eq!(v["timestamp_ms"], 66.667);
+        assert_eq!(v["state"], "tracked");
+        assert_eq!(v["timings_us"]["total"], 900);
+        let f = &v["faces"][0];
+        assert_eq!(f["id"], 7);
+        assert_eq!(f["state"], "tracked");
+        assert_eq!(f["box"], json!([250.0, 180.0, 140.0, 150.0]));
+        assert_eq!(f["landmarks68"].as_array().unwrap().len(), 68);
+        assert_eq!(f["yaw_class_deg"], 30);
+        assert_eq!(f["yaw_probs"].as_array().unwrap().len(), 5);
+        for k in ["smile", "frown", "kiss", "neutral"] {
+            assert!(f["gestures"]["mouth"][k].is_number(), "{k}");
+        }
+        for k in ["raise", "frown", "neutral"] {
+            assert!(f["gestures"]["brows"][k].is_number(), "{k}");
+        }
+        assert_eq!(f["gaze"]["combined"], json!([0.0, 0.0, 1.0]));
+        let yaw = f["pose"]["yaw_deg"].as_f64().unwrap();
+        assert!((yaw - 20.0).abs() < 1.0, "{yaw}");
+        assert_eq!(f["pose"]["rotation"].as_array().unwrap().len(), 3);
+        assert_eq!(f["shape_units"].as_object().unwrap().len(), N_SHAPE);
+        assert_eq!(f["action_units"].as_object().unwrap().len(), N_ANIM);
+        assert!(f["fit_rms_px"].as_f64().unwrap() < 0.5);
+        let mut lost = r.clone();
+        lost.faces.clear();
+        assert_eq!(frame_json(&lost)["state"], "lost");
+        lost.faces = r.faces.clone();
+        lost.faces[0].state = FaceState::Detected;
+        assert_eq!(frame_json(&lost)["state"], "detected");
+    }
+
+    #[test]
+    fn lines_and_discs_land_on_the_right_pixels() {
+        let mut c = Canvas::from_gray(&GrayImage::new(20, 10));
+        let red = [255, 0, 0];
+        c.line([0.5, 0.5], [9.5, 0.5], red);
+        for x in 0..10 {
+            assert_eq!(c.get(x, 0), Some(red));
+        }
+        assert_eq!(c.get(10, 0), Some([0, 0, 0]));
+        // Diagonal: every step touches one pixel per column.
+        c.line([0.5, 2.5], [5.5, 7.5], red);
+        for k in 0..6 {
+            assert_eq!(c.get(k, 2 + k), Some(red));
+        }
+        // Far outside, NaN: clipped or skipped, never a panic.
+        c.line([-1e3, -1e3], [1e3, 1e3], red);
+        c.line([f64::NAN, 0.0], [1.0, 1.0], red);
+        c.line([1e30, 0.0], [1.0, 1.0], red);
+        c.disc([15.5, 5.5], 1.5, [0, 255, 0]);
+        assert_eq!(c.get(15, 5), Some([0, 255, 0]));
+        assert_eq!(c.get(16, 6), Some([0, 255, 0]));
+        assert_eq!(c.get(18, 5), Some([0, 0, 0]));
+        c.disc([19.9, 9.9], 3.0, [0, 255, 0]);
+    }
+
+    #[test]
+    fn overlay_draws_mesh_axes_and_landmarks_and_saves_a_png() {
+        let cam = Intrinsics::default_for(640, 480).unwrap();
+        let r = result(&cam);
+        let mut c = Canvas::from_gray(&GrayImage::new(640, 480));
+        draw_overlay(&mut c, &r, &cam);
+        let count = |col: [u8; 3]| {
+            (0..480)
+                .flat_map(|y| (0..640).map(move |x| (x, y)))
+                .filter(|&(x, y)| c.get(x, y) == Some(col))
+                .count()
+        };
+        assert!(count(MESH_RGB) > 300, "mesh {}", count(MESH_RGB));
+        assert!(count(LANDMARK_RGB) >= 68);
+        for col in AXIS_RGB {
+            assert!(count(col) > 10);
+        }
+        let p = r.faces[0].landmarks.points[30];
+        assert_eq!(c.get(p[0] as usize, p[1] as usize), Some(LANDMARK_RGB));
+        let dir = std::env::temp_dir().join(format!("monotrack-overlay-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("o.png");
+        c.save_png(&path).unwrap();
+        let back = image::open(&path).unwrap().to_rgb8();
+        assert_eq!((back.width(), back.height()), (640, 480));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn frame_directories_read_in_name_order_as_contract_luma() {
+        let dir = std::env::temp_dir().join(format!("monotrack-frames-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // Written out of order; one non-image file is ignored.
+        for (name, rgb) in [
+            ("b_002.png", [10u8, 200, 30]),
+            ("a_001.PNG", [255, 0, 0]),
+            ("c_003.png", [1, 2, 3]),
+        ] {
+            let img = image::RgbImage::from_pixel(4, 3, image::Rgb(rgb));
+            img.save(dir.join(name)).unwrap();
+        }
+        std::fs::write(dir.join("notes.txt"), "x").unwrap();
+        let mut src = FrameSource::open(&dir).unwrap();
+        assert_eq!(src.len_hint(), Some(3));
+        let mut g = GrayImage::default();
+        let mut got = Vec::new();
+        while let Some((i, ts)) = src.next_frame(&mut g).unwrap() {
+            got.push((i, ts, g.get(0, 0)));
+        }
+        // 0.299·255 = 76.245 → 76; 0.299·10 + 0.587·200 + 0.114·30 = 123.81 → 124.
+        assert_eq!(got[0], (0, 0, 76));
+        assert_eq!(got[1], (1, 33_333_333, 124));
+        assert_eq!(got[2].2, 2);
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(FrameSource::open(Path::new("/nonexistent/monotrack")).is_err());
+    }
+
+    #[test]
+    fn videos_are_read_through_ffmpeg() {
+        let have = Command::new("ffmpeg").arg("-version").output().is_ok();
+        if !have {
+            eprintln!("SKIPPED videos_are_read_through_ffmpeg: ffmpeg not installed");
+            return;
+        }
+        let dir = std::env::temp_dir().join(format!("monotrack-video-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("gray.mkv");
+        // Lossless (FFV1) mid-gray 64×48 at 10 fps, 5 frames.
+        let ok = Command::new("ffmpeg")
+            .args(["-v", "error", "-y", "-f", "lavfi", "-i"])
+            .arg("color=c=0x808080:size=64x48:rate=10")
+            .args(["-frames:v", "5", "-c:v", "ffv1"])
+            .arg(&path)
+            .status()
+            .unwrap()
+            .success();
+        assert!(ok);
+        let mut src = FrameSource::open(&path).unwrap();
+        let mut g = GrayImage::default();
+        let mut n = 0;
+        while let Some((i, ts)) = src.next_frame(&mut g).unwrap() {
+            assert_eq!((g.width(), g.height()), (64, 48));
+            assert_eq!(ts, i as i64 * 100_000_000);
+            assert!(
+                (i32::from(g.get(10, 10)) - 128).abs() <= 2,
+                "{}",
+                g.get(10, 10)
+            );
+            n += 1;
+        }
+        assert_eq!(n, 5);
+        drop(src);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn probe_output_parses_and_progress_formats() {
+        let p =
+            parse_probe("width=1280\nheight=720\navg_frame_rate=25/1\nnb_frames=158\n").unwrap();
+        assert_eq!(p, (1280, 720, 25.0, Some(158)));
+        let p = parse_probe("width=640\nheight=480\navg_frame_rate=0/0\nnb_frames=N/A\n").unwrap();
+        assert_eq!(p, (640, 480, DIR_FPS, None));
+        assert!(parse_probe("").is_none());
+        assert_eq!(
+            Progress::line(Some(10), 5, 1.0),
+            format!(
+                "[{}{}] 5/10 frames  5.0 fps",
+                "#".repeat(15),
+                "-".repeat(15)
+            )
+        );
+        assert_eq!(Progress::line(None, 7, 0.0), "7 frames  0.0 fps");
+    }
+}
