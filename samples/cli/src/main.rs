@@ -1,6 +1,7 @@
 //! `monotrack`: the desktop command line of the SDK. Its JSON in and out follows
 //! `../shared/CONTRACT.md` exactly; it is how the SDK is measured from outside.
 
+mod detect;
 mod fit;
 mod json;
 
@@ -28,6 +29,20 @@ enum Command {
         /// Fitting method.
         #[arg(long, value_enum, default_value = "msbp")]
         method: fit::Method,
+    },
+    /// Detect faces in images with the SDK's detector: {"image": path} lines in, boxes + scores out.
+    Detect {
+        /// Input JSON lines: {"image": "path (absolute or relative to this file's folder)"}.
+        input: PathBuf,
+        /// Output JSON lines (default: stdout).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Smallest face to find, pixels (max side of the tight landmark box).
+        #[arg(long, default_value_t = monotrack_core::detect::DetectorConfig::default().min_face_px)]
+        min_face: f32,
+        /// Minimum face probability.
+        #[arg(long, default_value_t = monotrack_core::detect::DetectorConfig::default().score_threshold)]
+        threshold: f32,
     },
 }
 
@@ -75,6 +90,11 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Fit { input, out, method } => fit::run(&input, out.as_deref(), method),
+        Command::Detect { input, out, min_face, threshold } => detect::run(
+            &input,
+            out.as_deref(),
+            monotrack_core::detect::DetectorConfig { min_face_px: min_face, score_threshold: threshold, ..Default::default() },
+        ),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,

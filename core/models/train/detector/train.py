@@ -30,6 +30,9 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import unlabeled  # noqa: E402
+
 torch.set_num_threads(1)
 cv2.setNumThreads(1)
 
@@ -49,6 +52,11 @@ SIZE_RANGE = (7.0, 150.0)
 NET_MIN_FACE = 10.0
 MAX_ROT_DEG = 30.0
 MOSAIC_P = 0.25
+# Coarser second pass (core::detect mirrors these): when the min-face input's long side exceeds
+# PYRAMID_TRIGGER its largest faces outgrow the trained sizes (SIZE_RANGE tops at 150 px), so the
+# frame is also run with its long side at SECOND_PASS_LONG_SIDE.
+PYRAMID_TRIGGER = 200.0
+SECOND_PASS_LONG_SIDE = 128.0
 
 
 def load_split():
@@ -162,10 +170,13 @@ def make_targets(boxes, ignores, H, W):
 
 
 class Sampler:
-    def __init__(self, items, seed):
+    def __init__(self, items, seed, extra):
         self.rng = np.random.default_rng(seed)
         self.imgs = [read_gray(rel) for rel, _ in items]
         self.lms = [lms for _, lms in items]
+        # Unannotated faces (unlabeled.py) as corner points: their boxes are masked from the loss.
+        self.extra = [[np.array([[x, y], [x + w, y], [x, y + h], [x + w, y + h]], np.float32)
+                       for x, y, w, h in extra.get(rel, [])] for rel, _ in items]
 
     def sample(self):
         rng = self.rng
@@ -182,6 +193,8 @@ class Sampler:
         small = cv2.resize(img, (nw, nh), interpolation=interp)
         sx, sy = nw / w0, nh / h0
         pts = [p * np.array([sx, sy], np.float32) for p in lms]
+        n_annot = len(pts)
+        pts += [p * np.array([sx, sy], np.float32) for p in self.extra[k]]
         rp = ref * np.array([sx, sy], np.float32)
         ang = rng.uniform(-MAX_ROT_DEG, MAX_ROT_DEG) if rng.random() < 0.8 else 0.0
         c = (rp.min(0) + rp.max(0)) / 2
@@ -198,7 +211,7 @@ class Sampler:
         crop = cv2.warpAffine(small, M, (CROP, CROP), flags=cv2.INTER_LINEAR, borderMode=border,
                               borderValue=int(rng.integers(0, 256)))
         boxes, ignores = [], []
-        for p in pts:
+        for j, p in enumerate(pts):
             q = p @ M[:, :2].T + M[:, 2]
             b = tight_box(q)
             x0, y0 = max(b[0], 0), max(b[1], 0)
@@ -207,7 +220,7 @@ class Sampler:
             if vis <= 0:
                 continue
             boxes.append(b)
-            ignores.append(vis < 0.7 or max(b[2], b[3]) < LEVEL_RANGES[0][0])
+            ignores.append(j >= n_annot or vis < 0.7 or max(b[2], b[3]) < LEVEL_RANGES[0][0])
         crop = self.photometric(crop)
         return crop, boxes, ignores
 
@@ -318,8 +331,9 @@ def iou(a, b):
     return inter / u if u > 0 else 0.0
 
 
-def match(dets, gts, thr):
-    """Greedy by score: returns (true positives, false positives)."""
+def match(dets, gts, thr, ign=()):
+    """Greedy by score: returns (true positives, false positives); unmatched detections on ignore
+    boxes are not counted."""
     used = [False] * len(gts)
     tp = fp = 0
     for d in dets:
@@ -332,12 +346,45 @@ def match(dets, gts, thr):
         if bi >= 0:
             used[bi] = True
             tp += 1
-        else:
+        elif not ignored(d, ign):
             fp += 1
     return tp, fp
 
 
-def evaluate(net, items, min_face_px, thrs, nms_iou):
+def ignored(d, boxes):
+    """A detection on an unannotated face (its centre inside an unlabeled.py box) counts neither way."""
+    cx, cy = d[0] + d[2] / 2, d[1] + d[3] / 2
+    return any(x <= cx <= x + w and y <= cy <= y + h for x, y, w, h in boxes)
+
+
+def run_net(net, img, sc):
+    h0, w0 = img.shape
+    nw, nh = max(1, round(w0 * sc)), max(1, round(h0 * sc))
+    small = cv2.resize(img, (nw, nh), interpolation=cv2.INTER_AREA) if sc < 1 else img
+    x = torch.from_numpy(small[None, None].astype(np.float32) / 255.0)
+    return [o[0].numpy() for o in net(x)], w0 / nw, h0 / nh
+
+
+def pyramid_scales(w, h, min_face_px):
+    """Mirrors core::detect: the min-face scale, plus a coarser pass when that input is so large
+    that its biggest faces exceed the trained sizes."""
+    sc = min(1.0, NET_MIN_FACE / min_face_px)
+    out = [sc]
+    if max(w, h) * sc > PYRAMID_TRIGGER:
+        out.append(SECOND_PASS_LONG_SIDE / max(w, h))
+    return out
+
+
+def nms_list(dets, nms_iou):
+    dets = sorted(dets, key=lambda d: -d[4])
+    keep = []
+    for d in dets:
+        if all(iou(d, k) <= nms_iou for k in keep):
+            keep.append(d)
+    return keep
+
+
+def evaluate(net, items, min_face_px, thrs, nms_iou, extra=None):
     net.eval()
     res = {t: [0, 0] for t in thrs}
     ngt = 0
@@ -345,16 +392,13 @@ def evaluate(net, items, min_face_px, thrs, nms_iou):
         for rel, lms in items:
             img = read_gray(rel)
             h0, w0 = img.shape
-            sc = min(1.0, NET_MIN_FACE / min_face_px)
-            nw, nh = max(1, round(w0 * sc)), max(1, round(h0 * sc))
-            small = cv2.resize(img, (nw, nh), interpolation=cv2.INTER_AREA) if sc < 1 else img
-            x = torch.from_numpy(small[None, None].astype(np.float32) / 255.0)
-            outs = [o[0].numpy() for o in net(x)]
+            runs = [run_net(net, img, sc) for sc in pyramid_scales(w0, h0, min_face_px)]
             gts = [tight_box(p) for p in lms]
             ngt += len(gts)
+            ign = (extra or {}).get(rel, [])
             for t in thrs:
-                d = detect_np(outs, w0 / nw, h0 / nh, t, nms_iou)
-                tp, fp = match(d, gts, 0.5)
+                d = nms_list([x for o, rx, ry in runs for x in detect_np(o, rx, ry, t, nms_iou)], nms_iou)
+                tp, fp = match(d, gts, 0.5, ign)
                 res[t][0] += tp
                 res[t][1] += fp
     net.train()
@@ -363,7 +407,7 @@ def evaluate(net, items, min_face_px, thrs, nms_iou):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--steps", type=int, default=5000)
+    ap.add_argument("--steps", type=int, default=8000)
     ap.add_argument("--batch", type=int, default=32)
     ap.add_argument("--out", default=os.path.join(ROOT, "core/models/detector"))
     args = ap.parse_args()
@@ -382,7 +426,9 @@ def main():
     train, val = load_split()
     say(f"train images {len(train)} faces {sum(len(l) for _, l in train)}; "
         f"val images {len(val)} faces {sum(len(l) for _, l in val)}")
-    sampler = Sampler(train, SEED)
+    extra = unlabeled.load()
+    say(f"unannotated faces masked (unlabeled.py): {sum(len(v) for v in extra.values())}")
+    sampler = Sampler(train, SEED, extra)
     net = Net()
     nparam = sum(p.numel() for p in net.parameters())
     say(f"params {nparam}; steps {args.steps} batch {args.batch} crop {CROP}")
@@ -401,13 +447,13 @@ def main():
         if step % 100 == 0 or step == 20:
             say(f"step {step} focal {lf.item():.4f} reg {lr_.item():.4f} t {time.time() - t0:.0f}s")
         if step % 1000 == 0 and step < args.steps:
-            m, _ = evaluate(net, val, 16.0, [0.5], 0.4)
+            m, _ = evaluate(net, val, 16.0, [0.5], 0.4, extra)
             say(f"  val (min_face 16 px) {m}")
     thrs = [0.2, 0.3, 0.4, 0.5, 0.6, 0.7]
-    metrics = {"split": "faces68 train.jsonl lines i % 10 == 0", "match": "IoU >= 0.5 vs tight landmark box",
+    metrics = {"split": "faces68 train.jsonl lines i % 10 == 0", "match": "IoU >= 0.5 vs tight landmark box; detections on unlabeled.py faces ignored",
                "nms_iou": 0.4, "train_seconds": round(time.time() - t0)}
     for mf in (16.0, 40.0):
-        m, ngt = evaluate(net, val, mf, thrs, 0.4)
+        m, ngt = evaluate(net, val, mf, thrs, 0.4, extra)
         metrics[f"min_face_{int(mf)}px"] = m
         metrics["val_faces"] = ngt
         metrics["val_images"] = len(val)
@@ -422,7 +468,8 @@ def main():
            "strides": STRIDES, "outputs": ["p8", "p16", "p32", "p64"],
            "channels": ["face_logit", "dx_cells", "dy_cells", "log_w_over_stride", "log_h_over_stride"],
            "anchor": "stride * (i + 0.5)", "net_min_face_px": NET_MIN_FACE, "level_ranges": LEVEL_RANGES,
-           "box": "tight bounding box of the 68 landmarks", "params": nparam}
+           "box": "tight bounding box of the 68 landmarks", "params": nparam,
+           "pyramid_trigger": PYRAMID_TRIGGER, "second_pass_long_side": SECOND_PASS_LONG_SIDE}
     with open(os.path.join(args.out, "detector.json"), "w") as f:
         json.dump(cfg, f, indent=1)
     with open(os.path.join(args.out, "metrics.json"), "w") as f:
