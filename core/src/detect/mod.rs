@@ -242,7 +242,7 @@ impl FaceDetector {
         let plan: Plan = typed
             .into_runnable()
             .map_err(|e| Error::ModelLoad(format!("detector plan {w}x{h}: {e}")))?;
-        let state = SimpleState::new(&plan).map_err(internal)?;
+        let state = plan.spawn().map_err(internal)?;
         let input = Arc::new(Tensor::zero::<f32>(&[1, 1, h, w]).map_err(internal)?);
         let entry = ShapePlan {
             h,
