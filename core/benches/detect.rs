@@ -9,7 +9,9 @@ use std::hint::black_box;
 
 fn frame() -> GrayImage {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/data/astronaut.jpg");
-    let img = image::open(path).expect("samples/data/astronaut.jpg").into_luma8();
+    let img = image::open(path)
+        .expect("samples/data/astronaut.jpg")
+        .into_luma8();
     let img = image::imageops::resize(&img, 320, 320, image::imageops::FilterType::Triangle);
     let (w, h) = (640usize, 480usize);
     // Background texture so the detector sees structure everywhere, not a flat field.

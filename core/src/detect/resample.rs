@@ -50,7 +50,11 @@ impl AxisTaps {
                 k += 1;
             }
             let n = self.idx.len() as u32 - first;
-            let inv = if total > 0.0 { (1.0 / total) as f32 } else { 0.0 };
+            let inv = if total > 0.0 {
+                (1.0 / total) as f32
+            } else {
+                0.0
+            };
             for w in &mut self.weights[first as usize..] {
                 *w *= inv;
             }

@@ -90,10 +90,19 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Fit { input, out, method } => fit::run(&input, out.as_deref(), method),
-        Command::Detect { input, out, min_face, threshold } => detect::run(
+        Command::Detect {
+            input,
+            out,
+            min_face,
+            threshold,
+        } => detect::run(
             &input,
             out.as_deref(),
-            monotrack_core::detect::DetectorConfig { min_face_px: min_face, score_threshold: threshold, ..Default::default() },
+            monotrack_core::detect::DetectorConfig {
+                min_face_px: min_face,
+                score_threshold: threshold,
+                ..Default::default()
+            },
         ),
     };
     match result {

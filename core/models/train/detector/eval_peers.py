@@ -166,8 +166,8 @@ def main():
     # name -> (runner(items) at its sweep-floor threshold, default threshold, sweep)
     sweep01 = [round(t, 2) for t in np.arange(0.2, 0.96, 0.05)]
     dets = {
-        "monotrack (min face 16 px)": (lambda it: run_ours(args.bin, it, 16, 0.2), 0.5, sweep01),
-        "monotrack (min face 40 px, default)": (lambda it: run_ours(args.bin, it, 40, 0.2), 0.5, sweep01),
+        "monotrack (min face 16 px)": (lambda it: run_ours(args.bin, it, 16, 0.2), 0.6, sweep01),
+        "monotrack (min face 40 px, default)": (lambda it: run_ours(args.bin, it, 40, 0.2), 0.6, sweep01),
         "dlib HOG (upsample 1)": (lambda it: run_dlib(it, 1, -0.5), 0.0, [round(t, 2) for t in np.arange(-0.5, 1.51, 0.1)]),
         "Ultra-Light RFB-320": (lambda it: run_ultralight(it, "version-RFB-320.onnx", (320, 240), 0.2), 0.7, sweep01),
         "Ultra-Light RFB-640": (lambda it: run_ultralight(it, "version-RFB-640.onnx", (640, 480), 0.2), 0.7, sweep01),
