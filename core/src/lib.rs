@@ -12,6 +12,7 @@
 //! faces, `body` and `motion`.
 
 pub mod camera;
+pub mod detect;
 pub mod error;
 pub mod fit;
 pub mod image;

@@ -24,6 +24,9 @@
 
 pub mod flow;
 pub mod ncc;
+pub mod models;
+
+pub use models::{ModelDetector, Tracker};
 
 use crate::camera::Intrinsics;
 use crate::error::{Error, Result};

@@ -1,11 +1,11 @@
 //! `monotrack landmarks IN.jsonl [--out OUT.jsonl]`: M3 landmarks, gestures, gaze and the MSBP
 //! fit for every face of every image (CONTRACT.md). With `faces` boxes in a line, M3 runs on those
-//! boxes only (no detection); without, faces would be detected — no detector exists yet, so such
-//! lines get a per-line error. One output line per input line; a bad line yields
+//! boxes only (no detection); without, the SDK's face detector finds them. One output line per input line; a bad line yields
 //! `{"line": N, "error": "..."}` in its place, a message on stderr, and exit status 1 at the end.
 
 use crate::json::{CameraJson, intrinsics, put_fit};
 use crate::{LineSink, read_lines};
+use monotrack_core::detect::{Detection, FaceDetector};
 use monotrack_core::fit::{Msbp, MsbpConfig};
 use monotrack_core::image::{Frame, FrameDesc, GrayImage, PixelFormat, Rect};
 use monotrack_core::landmarks::{BROW_GESTURES, FaceLandmarks, M3, MOUTH_GESTURES, N_POINTS};
@@ -14,8 +14,6 @@ use serde_json::{Map, Value, json};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// The per-line error for lines without boxes until a face detector lands.
-pub const NO_DETECTOR: &str = "no face boxes given and no detector available yet";
 
 #[derive(Deserialize)]
 struct FaceIn {
@@ -36,12 +34,20 @@ struct Pipeline {
     msbp: Msbp,
     gray: GrayImage,
     lm: FaceLandmarks,
+    /// Created on the first line without boxes (lines with boxes never pay for it).
+    detector: Option<FaceDetector>,
+    found: Vec<Detection>,
 }
 
 impl Pipeline {
-    /// Face boxes and scores of a whole image. The one call a detector plugs into.
+    /// Face boxes and scores of the whole image, by the SDK's detector (default settings).
     fn detect(&mut self) -> Result<Vec<(Rect, Option<f32>)>, String> {
-        Err(NO_DETECTOR.into())
+        if self.detector.is_none() {
+            self.detector = Some(FaceDetector::new().map_err(|e| e.to_string())?);
+        }
+        let det = self.detector.as_mut().ok_or("detector unavailable")?;
+        det.detect(&self.gray, &mut self.found).map_err(|e| e.to_string())?;
+        Ok(self.found.iter().map(|d| (d.rect, Some(d.score))).collect())
     }
 }
 
@@ -188,6 +194,8 @@ pub fn run(input: &Path, out: Option<&Path>) -> Result<bool, String> {
         msbp: Msbp::new(MsbpConfig::default()),
         gray: GrayImage::default(),
         lm: FaceLandmarks::default(),
+        detector: None,
+        found: Vec::new(),
     };
     let mut ok = true;
     for (n, text) in lines {

@@ -1,10 +1,12 @@
 //! `monotrack`: the desktop command line of the SDK. Its JSON in and out follows
 //! `../shared/CONTRACT.md` exactly; it is how the SDK is measured from outside.
 
+mod detect;
 mod fit;
 mod json;
+mod demo;
 mod landmarks;
-// Generic over the tracker; the `track` subcommand is wired once core::detect and M3 land.
+// Some frame-source helpers are used by tests only.
 #[allow(dead_code)]
 mod track;
 
@@ -33,11 +35,52 @@ enum Command {
         #[arg(long, value_enum, default_value = "msbp")]
         method: fit::Method,
     },
-    /// M3 landmarks, gestures, gaze and the MSBP fit of the faces of each image.
+    /// M3 landmarks, gestures, gaze and the MSBP fit of the faces of each image (detects the faces
+    /// when a line gives no boxes).
     Landmarks {
         /// Input JSON lines: {"image", "camera"?, "faces": [{"box": [x, y, w, h]}]?}.
         input: PathBuf,
         /// Output JSON lines (default: stdout).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Detect faces in images with the SDK's detector: {"image": path} lines in, boxes + scores out.
+    Detect {
+        /// Input JSON lines: {"image": "path (absolute or relative to this file's folder)"}.
+        input: PathBuf,
+        /// Output JSON lines (default: stdout).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Smallest face to find, pixels (max side of the tight landmark box).
+        #[arg(long, default_value_t = monotrack_core::detect::DetectorConfig::default().min_face_px)]
+        min_face: f32,
+        /// Minimum face probability.
+        #[arg(long, default_value_t = monotrack_core::detect::DetectorConfig::default().score_threshold)]
+        threshold: f32,
+    },
+    /// Track faces through a video file (via ffmpeg) or a directory of frames (file-name order).
+    Track {
+        /// A video file or a directory of PNG/JPEG frames.
+        input: PathBuf,
+        /// Output JSON lines, one per frame (default: stdout).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Write PNG frames with landmarks, the projected mesh and head axes here.
+        #[arg(long)]
+        overlay: Option<PathBuf>,
+        /// Tracker settings as a JSON file (the core's `TrackerConfig`; missing fields keep defaults).
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
+    /// The whole pipeline on a clip made from the committed sample image: overlays + timing table.
+    Demo {
+        /// Where the overlay PNGs go.
+        #[arg(long, default_value = "target/demo")]
+        overlay: PathBuf,
+        /// Number of frames.
+        #[arg(long, default_value_t = 120)]
+        frames: usize,
+        /// Also write the CONTRACT `track` JSON lines here.
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -83,11 +126,56 @@ impl Drop for LineSink {
     }
 }
 
+/// `monotrack track`: the tracker over the shipped models, configured from an optional JSON file.
+fn run_track(
+    input: &Path,
+    out: Option<&Path>,
+    overlay: Option<&Path>,
+    config: Option<&Path>,
+) -> Result<bool, String> {
+    let cfg: monotrack_core::TrackerConfig = match config {
+        Some(p) => {
+            let text =
+                std::fs::read_to_string(p).map_err(|e| format!("cannot read {}: {e}", p.display()))?;
+            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", p.display()))?
+        }
+        None => monotrack_core::TrackerConfig::default(),
+    };
+    let mut tracker =
+        monotrack_core::track::Tracker::with_default_models(cfg).map_err(|e| e.to_string())?;
+    track::run(&mut tracker, input, out, overlay)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Fit { input, out, method } => fit::run(&input, out.as_deref(), method),
         Command::Landmarks { input, out } => landmarks::run(&input, out.as_deref()),
+        Command::Detect {
+            input,
+            out,
+            min_face,
+            threshold,
+        } => detect::run(
+            &input,
+            out.as_deref(),
+            monotrack_core::detect::DetectorConfig {
+                min_face_px: min_face,
+                score_threshold: threshold,
+                ..Default::default()
+            },
+        ),
+        Command::Track {
+            input,
+            out,
+            overlay,
+            config,
+        } => run_track(&input, out.as_deref(), overlay.as_deref(), config.as_deref()),
+        Command::Demo {
+            overlay,
+            frames,
+            out,
+        } => demo::run(frames, Some(&overlay), out.as_deref()),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,

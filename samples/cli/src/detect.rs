@@ -1,0 +1,79 @@
+//! `monotrack detect IN.jsonl [--out OUT.jsonl] [--min-face PX] [--threshold P]`: the SDK's face
+//! detector on still images (an extension of CONTRACT.md). Input lines are `{"image": path}` (absolute,
+//! or relative to IN.jsonl's folder), as for `landmarks`; output lines are
+//! `{"image", "width", "height", "faces": [{"box": [x, y, w, h], "score": s}], "timings_us": {"detect"}}`
+//! with boxes in the M3 convention (tight box of the 68 landmarks). A line that fails yields
+//! `{"line": N, "error": "..."}`, a message on stderr, and exit status 1 at the end.
+
+use crate::{LineSink, read_lines};
+use monotrack_core::detect::{DetectorConfig, FaceDetector};
+use monotrack_core::image::GrayImage;
+use serde::Deserialize;
+use serde_json::{Value, json};
+use std::path::Path;
+use std::time::Instant;
+
+#[derive(Deserialize)]
+struct LineIn {
+    image: String,
+}
+
+/// Reads an image file as upright luma: 0.299 R + 0.587 G + 0.114 B, rounded (`core/models/M3_IO.md`).
+fn read_luma(path: &Path) -> Result<GrayImage, String> {
+    let img = image::open(path)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?
+        .into_rgb8();
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let data = img
+        .pixels()
+        .map(|p| {
+            let [r, g, b] = p.0;
+            (0.299 * r as f32 + 0.587 * g as f32 + 0.114 * b as f32).round() as u8
+        })
+        .collect();
+    GrayImage::from_vec(w, h, data).ok_or_else(|| format!("{}: bad image size", path.display()))
+}
+
+fn round2(v: f32) -> f64 {
+    (v as f64 * 100.0).round() / 100.0
+}
+
+/// Runs the subcommand; returns whether every line succeeded.
+pub fn run(input: &Path, out: Option<&Path>, config: DetectorConfig) -> Result<bool, String> {
+    let mut sink = LineSink::new(out)?;
+    let mut det = FaceDetector::with_config(config).map_err(|e| e.to_string())?;
+    let base = input.parent().unwrap_or(Path::new("."));
+    let mut found = Vec::new();
+    let mut ok = true;
+    for (n, text) in read_lines(input)? {
+        let res = (|| -> Result<Value, String> {
+            let line: LineIn =
+                serde_json::from_str(&text).map_err(|e| format!("malformed JSON: {e}"))?;
+            let path = base.join(&line.image);
+            let img = read_luma(&path)?;
+            let t0 = Instant::now();
+            det.detect(&img, &mut found).map_err(|e| e.to_string())?;
+            let us = t0.elapsed().as_micros() as u64;
+            let faces: Vec<Value> = found
+                .iter()
+                .map(|d| {
+                    json!({
+                        "box": [round2(d.rect.x), round2(d.rect.y), round2(d.rect.w), round2(d.rect.h)],
+                        "score": (d.score as f64 * 1e4).round() / 1e4,
+                    })
+                })
+                .collect();
+            Ok(json!({
+                "image": line.image, "width": img.width(), "height": img.height(),
+                "faces": faces, "timings_us": {"detect": us},
+            }))
+        })();
+        let v = res.unwrap_or_else(|e| {
+            eprintln!("{}:{n}: {e}", input.display());
+            ok = false;
+            json!({"line": n, "error": e})
+        });
+        sink.write(&v)?;
+    }
+    Ok(ok)
+}
