@@ -1,6 +1,7 @@
 //! `monotrack`: the desktop command line of the SDK. Its JSON in and out follows
 //! `../shared/CONTRACT.md` exactly; it is how the SDK is measured from outside.
 
+mod body;
 mod fit;
 mod json;
 
@@ -28,6 +29,20 @@ enum Command {
         /// Fitting method.
         #[arg(long, value_enum, default_value = "msbp")]
         method: fit::Method,
+    },
+    /// 3D body pose and dimensions from 2D joints with a known or floor-calibrated camera.
+    BodyFit {
+        /// Input JSON lines: {"frame", "sequence"?, "camera"? | "floor"?, "joints2d": {NAME: [x, y]}}.
+        input: PathBuf,
+        /// Output JSON lines (default: stdout).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Frames at the start of each sequence used to estimate its body dimensions.
+        #[arg(long, default_value_t = 5)]
+        dimension_frames: usize,
+        /// Joint-definition convention of the input joints.
+        #[arg(long, value_enum, default_value = "humaneva")]
+        convention: body::ConventionArg,
     },
 }
 
@@ -75,6 +90,12 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Fit { input, out, method } => fit::run(&input, out.as_deref(), method),
+        Command::BodyFit {
+            input,
+            out,
+            dimension_frames,
+            convention,
+        } => body::run(&input, out.as_deref(), dimension_frames, convention),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,
