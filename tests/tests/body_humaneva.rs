@@ -19,7 +19,6 @@ mod body_common;
 
 use body_common::*;
 use monotrack_core::body::calib::calibrate_floor;
-use monotrack_core::body::skeleton::dim;
 use monotrack_core::body::{
     BodyCamera, BodyFitter, Convention, DimensionEstimator, Dimensions, Joints2d, N_JOINTS,
     Skeleton,
@@ -100,12 +99,13 @@ fn humaneva_train_with_ground_truth_2d() {
             k.cx,
             k.cy
         );
-        assert!(*rms < 2.0, "reference camera {s} C{} fits badly", c + 1);
+        // A pinhole leaves HumanEva's lens distortion unmodelled: up to about 3 px.
+        assert!(*rms < 5.0, "reference camera {s} C{} fits badly", c + 1);
     }
 
     // --- Floor calibration accuracy.
-    println!("\nFloor calibration from four corners of a 2 m x 3 m rectangle (principal point = image centre):");
-    println!("| subject | camera | noise px | focal err % | rotation err deg | centre err mm |");
+    println!("\nFloor calibration from four corners of a 2 m x 3 m rectangle:");
+    println!("| subject | camera | principal point | noise px | focal err % | rotation err deg | centre err mm |");
     let mut rng_state = 12345u64;
     let mut noise = || {
         // xorshift → uniform in [-1, 1] px; deterministic.
@@ -134,12 +134,17 @@ fn humaneva_train_with_ground_truth_2d() {
             o + Vector3::new(w, d, 0.0),
             o + Vector3::new(0.0, d, 0.0),
         ];
-        for amp in [0.0, 1.0] {
+        for (pi, amp) in [(0, 0.0), (0, 1.0), (1, 0.0), (1, 1.0)] {
+            let pp = if pi == 0 {
+                [WIDTH / 2.0, HEIGHT / 2.0]
+            } else {
+                [cam.intrinsics.cx, cam.intrinsics.cy]
+            };
             let corners = world.map(|p| {
                 let q = cam.project(&p);
                 [q[0] + amp * noise(), q[1] + amp * noise()]
             });
-            let cal = calibrate_floor(&corners, [w, d], [WIDTH / 2.0, HEIGHT / 2.0]).unwrap();
+            let cal = calibrate_floor(&corners, [w, d], pp).unwrap();
             // The calibrated frame has its origin at corner 0 (and may be turned 180° about x).
             let flip = if cal.flipped {
                 nalgebra::Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0))
@@ -151,26 +156,38 @@ fn humaneva_train_with_ground_truth_2d() {
             let fe = 100.0 * (cal.camera.intrinsics.fx / cam.intrinsics.fx - 1.0);
             let re = rotation_error_deg(&r_world, &cam.rotation);
             let ce = (centre_world - cam.center()).norm();
+            let label = ["image centre", "reference"][pi];
             println!(
-                "| {s} | C{} | {amp:.0} | {fe:+.1} | {re:.2} | {ce:.0} |",
+                "| {s} | C{} | {label} | {amp:.0} | {fe:+.2} | {re:.2} | {ce:.0} |",
                 c + 1
             );
-            calib_errors.push((amp, fe.abs(), re, ce));
+            calib_errors.push((pi, amp, fe.abs(), re, ce));
         }
     }
-    for amp in [0.0, 1.0] {
-        let e: Vec<_> = calib_errors.iter().filter(|e| e.0 == amp).collect();
+    println!("| mean | | principal point | noise px | abs focal err % | rotation err deg | centre err mm |");
+    for (pi, amp) in [(0, 0.0), (0, 1.0), (1, 0.0), (1, 1.0)] {
+        let e: Vec<_> = calib_errors
+            .iter()
+            .filter(|e| e.0 == pi && e.1 == amp)
+            .collect();
         let n = e.len() as f64;
-        println!(
-            "mean over cameras, noise {amp} px: |focal| {:.1} %, rotation {:.2} deg, centre {:.0} mm",
-            e.iter().map(|e| e.1).sum::<f64>() / n,
+        let (fe, re, ce) = (
             e.iter().map(|e| e.2).sum::<f64>() / n,
-            e.iter().map(|e| e.3).sum::<f64>() / n
+            e.iter().map(|e| e.3).sum::<f64>() / n,
+            e.iter().map(|e| e.4).sum::<f64>() / n,
         );
-        // HumanEva's principal points are up to 20 px off centre: a few percent of focal error and
-        // about a degree of tilt are what that costs; more means the calibration is broken.
-        assert!(e.iter().map(|e| e.1).sum::<f64>() / n < 8.0);
-        assert!(e.iter().map(|e| e.2).sum::<f64>() / n < 3.0);
+        println!(
+            "| all 9 | | {} | {amp:.0} | {fe:.2} | {re:.2} | {ce:.0} |",
+            ["image centre", "reference"][pi]
+        );
+        if pi == 1 {
+            // With the true principal point only the corner noise limits the calibration.
+            assert!(fe < 2.0 && re < 1.0 && ce < 60.0, "{fe} {re} {ce}");
+        } else {
+            // HumanEva's principal points sit up to 47 px off the image centre: that costs about
+            // 4° of tilt on camera C2 (atan(47 / 670)); more means the calibration is broken.
+            assert!(fe < 5.0 && re < 6.0 && ce < 150.0, "{fe} {re} {ce}");
+        }
     }
 
     // --- Fitting with the reference camera.

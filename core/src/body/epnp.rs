@@ -7,9 +7,12 @@
 //! control-point distances) and the one with the lower reprojection error of the real, non-planar
 //! template is kept. Nothing allocates: at most [`MAX_POINTS`] points.
 
-use nalgebra::{Matrix3, SMatrix, Vector3};
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
+use super::optim::{MAX_RESIDUALS, NumericLeastSquares, Residuals};
+use super::skeleton::exp_so3;
 use crate::camera::Intrinsics;
+use crate::fit::solver::LevenbergMarquardt;
 use crate::error::{Error, Result};
 
 /// Most points one call accepts.
@@ -156,7 +159,65 @@ pub fn solve_planar(
             }
         }
     }
-    best.ok_or_else(|| Error::InvalidInput("EPnP found no pose in front of the camera".into()))
+    let (pose, _) =
+        best.ok_or_else(|| Error::InvalidInput("EPnP found no pose in front of the camera".into()))?;
+    // Gauss–Newton (LM) on the real, non-planar template, as the EPnP paper recommends.
+    let problem = RefineProblem {
+        template,
+        image,
+        weights,
+        k,
+        pose,
+    };
+    let mut x = SVector::<f64, 6>::zeros();
+    LevenbergMarquardt {
+        max_iterations: 10,
+        cost_tolerance: 1e-6,
+        ..Default::default()
+    }
+    .minimize(&NumericLeastSquares(&problem), &mut x);
+    let refined = problem.pose_at(&x);
+    let err = reprojection_rms(&refined, template, image, weights, k);
+    Ok((refined, err))
+}
+
+struct RefineProblem<'a> {
+    template: &'a [Vector3<f64>],
+    image: &'a [[f64; 2]],
+    weights: &'a [f64],
+    k: &'a Intrinsics,
+    pose: Pose,
+}
+
+impl RefineProblem<'_> {
+    fn pose_at(&self, x: &SVector<f64, 6>) -> Pose {
+        Pose {
+            rotation: exp_so3(Vector3::new(x[0], x[1], x[2])) * self.pose.rotation,
+            translation: self.pose.translation + Vector3::new(x[3], x[4], x[5]),
+        }
+    }
+}
+
+impl Residuals<6> for RefineProblem<'_> {
+    fn residuals(&self, x: &SVector<f64, 6>, r: &mut [f64; MAX_RESIDUALS]) -> usize {
+        let p = self.pose_at(x);
+        let k = self.k;
+        for i in 0..self.template.len() {
+            let c = p.rotation * self.template[i] + p.translation;
+            let w = self.weights[i].max(0.0).sqrt();
+            if c.z > 1e-6 {
+                r[2 * i] = w * (k.fx * c.x / c.z + k.cx - self.image[i][0]);
+                r[2 * i + 1] = w * (k.fy * c.y / c.z + k.cy - self.image[i][1]);
+            } else {
+                r[2 * i] = w * 1e4;
+                r[2 * i + 1] = w * 1e4;
+            }
+        }
+        2 * self.template.len()
+    }
+    fn step(&self, i: usize) -> f64 {
+        if i < 3 { 1e-7 } else { 1e-4 }
+    }
 }
 
 /// Camera-frame points from the control points, sign fixed so they lie in front of the camera, then
@@ -232,7 +293,6 @@ pub fn reprojection_rms(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::body::skeleton::exp_so3;
 
     #[test]
     fn recovers_a_torso_pose_from_exact_projections() {
@@ -260,12 +320,11 @@ mod tests {
                 })
                 .collect();
             let (pose, err) = solve_planar(&tpl, &img, &[1.0; 6], &k).unwrap();
-            // The planar approximation of a 4 cm-deep template costs a few px and a few cm.
-            assert!(err < 5.0, "{err}");
-            assert!((pose.translation - t).norm() < 0.05 * t.norm(), "{pose:?} vs {t}");
+            assert!(err < 1e-3, "{err}");
+            assert!((pose.translation - t).norm() < 1.0, "{pose:?} vs {t}");
             let dr = (pose.rotation.transpose() * r).trace();
             let ang = ((dr - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees();
-            assert!(ang < 8.0, "rotation error {ang}°");
+            assert!(ang < 0.01, "rotation error {ang}°");
         }
     }
 

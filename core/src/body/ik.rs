@@ -38,7 +38,7 @@ pub fn ray_sphere(
         let p = if n > 0.0 {
             center + d * (radius / n)
         } else {
-            center
+            *center
         };
         ([p, p], false)
     }

@@ -23,6 +23,8 @@ use crate::error::{Error, Result};
 pub const N_POSE: usize = 27;
 /// Number of body-part length parameters in [`Dimensions`].
 pub const N_DIMS: usize = 12;
+/// Number of joint-limit terms (see [`Skeleton::limit_violations`]).
+pub const N_LIMITS: usize = 15;
 
 /// Root rotation (rotation vector, body-local → world), 3 parameters.
 pub const P_ROOT_ROT: usize = 0;
@@ -423,10 +425,10 @@ impl Skeleton {
         (swing * rot_y(l[2]), rot_x(l[3]))
     }
 
-    /// Joint-limit violations of pose `p`, written into `out` (16 non-negative values: spine swing
+    /// Joint-limit violations of pose `p`, written into `out` ([`N_LIMITS`] non-negative values: spine swing
     /// and twist, neck swing, and per limb (L arm, R arm, L leg, R leg) swing, twist and hinge).
     /// Swing excesses are fractions of the cone radius, twist and hinge excesses radians.
-    pub fn limit_violations(&self, p: &[f64; N_POSE], out: &mut [f64; 14]) {
+    pub fn limit_violations(&self, p: &[f64; N_POSE], out: &mut [f64; N_LIMITS]) {
         out[0] = limits::SPINE.swing_excess(p[P_SPINE], p[P_SPINE + 1]);
         out[1] = limits::SPINE.twist_excess(p[P_SPINE + 2]);
         out[2] = limits::NECK.swing_excess(p[P_NECK], p[P_NECK + 1]);
@@ -449,10 +451,32 @@ impl Skeleton {
 
     /// Total joint-limit violation (sum of [`Skeleton::limit_violations`]).
     pub fn limit_violation(&self, p: &[f64; N_POSE]) -> f64 {
-        let mut v = [0.0; 14];
+        let mut v = [0.0; N_LIMITS];
         self.limit_violations(p, &mut v);
         v.iter().sum()
     }
+}
+
+/// The neutral pose of the joints below the root (standing, arms hanging slightly forward, elbows
+/// a little bent): where the pose prior pulls parameters the 2D joints leave undetermined (twists,
+/// depth-ambiguous limbs). Root entries are unused.
+pub const NEUTRAL: [f64; N_POSE] = {
+    let mut n = [0.0; N_POSE];
+    n[P_LARM + 1] = -1.3;
+    n[P_LARM + 3] = 0.3;
+    n[P_RARM + 1] = 1.3;
+    n[P_RARM + 3] = 0.3;
+    n
+};
+
+/// First pose parameter the prior applies to (everything after the root).
+pub const P_PRIOR_START: usize = P_SPINE;
+
+/// Squared distance of the non-root parameters from [`NEUTRAL`], rad².
+pub fn prior_distance(p: &[f64; N_POSE]) -> f64 {
+    (P_PRIOR_START..N_POSE)
+        .map(|i| (p[i] - NEUTRAL[i]).powi(2))
+        .sum()
 }
 
 /// How far `t` lies outside `range`.

@@ -11,8 +11,8 @@ use nalgebra::{SMatrix, SVector};
 use crate::fit::solver::{LeastSquares, accumulate_row, symmetrize};
 
 /// Largest residual count a [`Residuals`] problem may have (the body objective has 30 reprojection,
-/// 14 joint-limit, 15 floor and 1 contact residual; the floor calibration 8).
-pub const MAX_RESIDUALS: usize = 64;
+/// 15 joint-limit, 15 floor, 1 contact and 21 prior residuals; the floor calibration 9).
+pub const MAX_RESIDUALS: usize = 96;
 
 /// A vector of residuals in N parameters; ½‖r‖² is minimised.
 pub trait Residuals<const N: usize> {
