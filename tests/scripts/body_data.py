@@ -19,7 +19,7 @@ Writes (only when missing or older than this script):
 The source formats: VideoPose3D npz files hold pickled dicts (positions_3d / positions_2d keyed
 'Train/S1' -> action -> array); HumanEva camera orientations are quaternions (w, x, y, z) of the
 camera-to-world rotation and translations the camera centres in mm (VideoPose3D's
-`world_to_camera`); cameras.h5 is Martinez et al.'s file, X_cam = R (X - T).
+`world_to_camera`); cameras.h5 is Martinez et al.'s file, X_cam = R^T (X - T) with R as stored (their loader transposes it).
 Needs numpy and h5py (pip install numpy h5py).
 """
 import json
@@ -29,7 +29,7 @@ import sys
 import numpy as np
 
 STEP_HE = 10  # 60 fps -> 6 fps: keeps the cross-crate tests around a minute
-STEP_H36M = 20  # 10 fps -> 0.5 fps
+STEP_H36M = 40  # 10 fps -> 0.25 fps
 # Human3.6M 32-joint indices for the humaneva15 order above.
 H36M_TO_HE15 = [0, 13, 17, 18, 19, 25, 26, 27, 6, 7, 8, 1, 2, 3, 15]
 
@@ -93,7 +93,7 @@ def h36m(shared, out):
             cams = []
             for c in range(1, 5):
                 g = f["subject%s/camera%d" % (s[1:], c)]
-                cams.append({"rotation": rnd(g["R"][()], 9), "center_mm": rnd(g["T"][()].ravel(), 3),
+                cams.append({"rotation": rnd(g["R"][()].T, 9), "center_mm": rnd(g["T"][()].ravel(), 3),
                              "f": rnd(g["f"][()].ravel(), 4), "c": rnd(g["c"][()].ravel(), 4)})
             cameras[s] = cams
     seqs = []

@@ -18,7 +18,7 @@ use super::optim::{MAX_RESIDUALS, NumericLeastSquares, Residuals};
 use super::skeleton::*;
 use super::{Joint, Joints2d, N_JOINTS};
 use crate::error::{Error, Result};
-use crate::fit::solver::{LevenbergMarquardt, SolverReport};
+use crate::fit::solver::{LeastSquares, LevenbergMarquardt, SolverReport};
 
 /// Pixels of residual per unit of joint-limit excess (a full cone radius, or one radian): large, so
 /// that limits act as near-hard constraints, but finite, so LM can cross a limit to a better basin.
@@ -335,12 +335,38 @@ impl BodyFitter {
             obs,
             contact: contact.map(Joint::index),
         };
+        let ls = NumericLeastSquares(&problem);
         let mut v = SVector::<f64, N_POSE>::from_column_slice(init);
-        let report = self
-            .config
-            .lm
-            .minimize(&NumericLeastSquares(&problem), &mut v);
-        let pose = PoseProblem::unpack(&v);
+        let mut report = self.config.lm.minimize(&ls, &mut v);
+        // The refinement cannot jump between the depth branches of a limb (knee in front of or
+        // behind the hip–ankle line as seen from the camera): re-run the IK choice from the refined
+        // torso, judged by the full objective, and refine again when a branch wins.
+        let mut pose = PoseProblem::unpack(&v);
+        let cost0 = report.cost;
+        let mut best = (cost0, pose);
+        for (left, arm) in [(true, true), (false, true), (true, false), (false, false)] {
+            let (base, ..) = limb_spec(left, arm, skel);
+            for cand in limb_candidates(&best.1, left, arm, obs, cam, skel)
+                .into_iter()
+                .flatten()
+            {
+                let mut q = best.1;
+                q[base..base + 4].copy_from_slice(&cand);
+                let c = ls.cost(&SVector::from_column_slice(&q));
+                if c < best.0 {
+                    best = (c, q);
+                }
+            }
+        }
+        if best.0 < cost0 {
+            v = SVector::from_column_slice(&best.1);
+            let r2 = self.config.lm.minimize(&ls, &mut v);
+            report = SolverReport {
+                iterations: report.iterations + r2.iterations,
+                ..r2
+            };
+            pose = PoseProblem::unpack(&v);
+        }
         skel.forward(&pose, &mut x);
         let mut r = [0.0; MAX_RESIDUALS];
         let m = problem.residuals(&v, &mut r);
@@ -356,6 +382,46 @@ impl BodyFitter {
             report,
         }
     }
+}
+
+/// The (up to four) depth-branch configurations of a limb, as its four parameters, with the rest
+/// of pose `p` (torso, spine) fixed; `None` where the limb is not observed.
+fn limb_candidates(
+    p: &[f64; N_POSE],
+    left: bool,
+    arm: bool,
+    obs: &Joints2d,
+    cam: &BodyCamera,
+    skel: &Skeleton,
+) -> [Option<[f64; 4]>; 4] {
+    let mut out = [None; 4];
+    let (_, root, mid, end, l1, l2) = limb_spec(left, arm, skel);
+    if !(obs.has(mid) && obs.has(end)) {
+        return out;
+    }
+    let mut x = [Vector3::zeros(); N_JOINTS];
+    skel.forward(p, &mut x);
+    let r0 = root_rotation(p);
+    let chest = r0 * skel.spine_rotation(p);
+    let o = cam.center();
+    let dm = cam.ray(obs.points[mid.index()]);
+    let de = cam.ray(obs.points[end.index()]);
+    let (mids, _) = ik::ray_sphere(&o, &dm, &x[root.index()], l1);
+    let mut k = 0;
+    for m in &mids {
+        let (ends, _) = ik::ray_sphere(&o, &de, m, l2);
+        for e in &ends {
+            let upper = m - x[root.index()];
+            let lower = e - m;
+            out[k] = Some(if arm {
+                ik::arm_angles(left, &chest, &upper, &lower)
+            } else {
+                ik::leg_angles(left, &r0, &upper, &lower)
+            });
+            k += 1;
+        }
+    }
+    out
 }
 
 /// Parameter base, root/mid/end joints and segment lengths of a limb.
