@@ -71,7 +71,13 @@ fn bench(c: &mut Criterion) {
     c.bench_function("body_pose_and_scale", |b| {
         b.iter(|| {
             let est = scale_only
-                .estimate(&fitter, std::slice::from_ref(black_box(&obs)), &cam, &mean, conv)
+                .estimate(
+                    &fitter,
+                    std::slice::from_ref(black_box(&obs)),
+                    &cam,
+                    &mean,
+                    conv,
+                )
                 .unwrap();
             let skel = Skeleton::new(est.dimensions, conv).unwrap();
             fitter.fit(&obs, &cam, &skel).unwrap()
@@ -81,7 +87,13 @@ fn bench(c: &mut Criterion) {
     c.bench_function("body_pose_and_dimensions", |b| {
         b.iter(|| {
             let est = full
-                .estimate(&fitter, std::slice::from_ref(black_box(&obs)), &cam, &mean, conv)
+                .estimate(
+                    &fitter,
+                    std::slice::from_ref(black_box(&obs)),
+                    &cam,
+                    &mean,
+                    conv,
+                )
                 .unwrap();
             let skel = Skeleton::new(est.dimensions, conv).unwrap();
             fitter.fit(&obs, &cam, &skel).unwrap()

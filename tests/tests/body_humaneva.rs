@@ -61,7 +61,10 @@ fn reference_intrinsics(he: &HumanEva) -> BTreeMap<(String, usize), (BodyCamera,
             let solve = |a: Vec<f64>, b: Vec<f64>| {
                 let a = DMatrix::from_row_slice(n, 2, &a);
                 let b = DVector::from_vec(b);
-                let x = (a.transpose() * &a).lu().solve(&(a.transpose() * &b)).unwrap();
+                let x = (a.transpose() * &a)
+                    .lu()
+                    .solve(&(a.transpose() * &b))
+                    .unwrap();
                 let res = (&a * &x - b).norm_squared();
                 (x[0], x[1], res)
             };
@@ -105,7 +108,9 @@ fn humaneva_train_with_ground_truth_2d() {
 
     // --- Floor calibration accuracy.
     println!("\nFloor calibration from four corners of a 2 m x 3 m rectangle:");
-    println!("| subject | camera | principal point | noise px | focal err % | rotation err deg | centre err mm |");
+    println!(
+        "| subject | camera | principal point | noise px | focal err % | rotation err deg | centre err mm |"
+    );
     let mut rng_state = 12345u64;
     let mut noise = || {
         // xorshift → uniform in [-1, 1] px; deterministic.
@@ -119,7 +124,11 @@ fn humaneva_train_with_ground_truth_2d() {
         // Centre the rectangle on the subject's mean floor position.
         let mut centre = Vector3::zeros();
         let mut count = 0.0;
-        for q in he.sequences.iter().filter(|q| &q.subject == s && q.camera == *c) {
+        for q in he
+            .sequences
+            .iter()
+            .filter(|q| &q.subject == s && q.camera == *c)
+        {
             for f in &q.joints3d_mm {
                 centre += v3(&f[0]);
                 count += 1.0;
@@ -164,7 +173,9 @@ fn humaneva_train_with_ground_truth_2d() {
             calib_errors.push((pi, amp, fe.abs(), re, ce));
         }
     }
-    println!("| mean | | principal point | noise px | abs focal err % | rotation err deg | centre err mm |");
+    println!(
+        "| mean | | principal point | noise px | abs focal err % | rotation err deg | centre err mm |"
+    );
     for (pi, amp) in [(0, 0.0), (0, 1.0), (1, 0.0), (1, 1.0)] {
         let e: Vec<_> = calib_errors
             .iter()
@@ -252,7 +263,12 @@ fn humaneva_train_with_ground_truth_2d() {
             pa_all.push(pa / N_JOINTS as f64);
             let ft = fitter.fit(o, &cam, &skel_true).unwrap();
             let at = procrustes(&ft.joints, &truth);
-            pa_truedims.push((0..N_JOINTS).map(|j| (at[j] - truth[j]).norm()).sum::<f64>() / N_JOINTS as f64);
+            pa_truedims.push(
+                (0..N_JOINTS)
+                    .map(|j| (at[j] - truth[j]).norm())
+                    .sum::<f64>()
+                    / N_JOINTS as f64,
+            );
             abs_all.push(ab / N_JOINTS as f64);
             for (g, (_, joints)) in LIMB_GROUPS.iter().enumerate() {
                 for &j in *joints {

@@ -44,9 +44,12 @@ impl BodyCamera {
         translation: Vector3<f64>,
     ) -> Result<Self> {
         intrinsics.validate()?;
-        let err = (rotation.transpose() * rotation - Matrix3::identity()).abs().max();
-        if !(err < 1e-3 && (rotation.determinant() - 1.0).abs() < 1e-3)
-            || !translation.iter().all(|v| v.is_finite())
+        let err = (rotation.transpose() * rotation - Matrix3::identity())
+            .abs()
+            .max();
+        if !(err < 1e-3
+            && (rotation.determinant() - 1.0).abs() < 1e-3
+            && translation.iter().all(|v| v.is_finite()))
         {
             return Err(Error::InvalidCamera(format!(
                 "camera rotation must be orthonormal with det +1 and the translation finite (R: {rotation:?}, t: {translation:?})"
@@ -234,28 +237,10 @@ fn floor_homography(c: &[[f64; 2]; 4], size: [f64; 2], pp: [f64; 2]) -> Matrix3<
     for k in 0..4 {
         let (x, y) = (wn[k][0], wn[k][1]);
         let (u, v) = (im[k][0], im[k][1]);
-        let r1 = SVector::<f64, 9>::from_column_slice(&[
-            -x,
-            -y,
-            -1.0,
-            0.0,
-            0.0,
-            0.0,
-            u * x,
-            u * y,
-            u,
-        ]);
-        let r2 = SVector::<f64, 9>::from_column_slice(&[
-            0.0,
-            0.0,
-            0.0,
-            -x,
-            -y,
-            -1.0,
-            v * x,
-            v * y,
-            v,
-        ]);
+        let r1 =
+            SVector::<f64, 9>::from_column_slice(&[-x, -y, -1.0, 0.0, 0.0, 0.0, u * x, u * y, u]);
+        let r2 =
+            SVector::<f64, 9>::from_column_slice(&[0.0, 0.0, 0.0, -x, -y, -1.0, v * x, v * y, v]);
         ata += r1 * r1.transpose() + r2 * r2.transpose();
     }
     let eig = ata.symmetric_eigen();
@@ -266,7 +251,9 @@ fn floor_homography(c: &[[f64; 2]; 4], size: [f64; 2], pp: [f64; 2]) -> Matrix3<
         }
     }
     let hv = eig.eigenvectors.column(imin);
-    let hn = Matrix3::new(hv[0], hv[1], hv[2], hv[3], hv[4], hv[5], hv[6], hv[7], hv[8]);
+    let hn = Matrix3::new(
+        hv[0], hv[1], hv[2], hv[3], hv[4], hv[5], hv[6], hv[7], hv[8],
+    );
     let ti_inv = ti.try_inverse().unwrap_or_else(Matrix3::identity);
     let h = ti_inv * hn * tw;
     h / h.norm()
@@ -499,7 +486,12 @@ mod tests {
         assert!(calibrate_floor(&repeated, [2000.0, 3000.0], [640.0, 360.0]).is_err());
         assert!(calibrate_floor(&good, [0.0, 3000.0], [640.0, 360.0]).is_err());
         // A fronto-parallel square: no perspective, no focal length.
-        let square = [[100.0, 100.0], [300.0, 100.0], [300.0, 300.0], [100.0, 300.0]];
+        let square = [
+            [100.0, 100.0],
+            [300.0, 100.0],
+            [300.0, 300.0],
+            [100.0, 300.0],
+        ];
         assert!(matches!(
             calibrate_floor(&square, [1000.0, 1000.0], [200.0, 200.0]),
             Err(Error::InvalidCamera(_))

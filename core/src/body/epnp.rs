@@ -12,8 +12,8 @@ use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use super::optim::{MAX_RESIDUALS, NumericLeastSquares, Residuals};
 use super::skeleton::exp_so3;
 use crate::camera::Intrinsics;
-use crate::fit::solver::LevenbergMarquardt;
 use crate::error::{Error, Result};
+use crate::fit::solver::LevenbergMarquardt;
 
 /// Most points one call accepts.
 pub const MAX_POINTS: usize = 8;
@@ -113,7 +113,8 @@ pub fn solve_planar(
     ev.sort_by(|&a, &b| me.eigenvalues[a].total_cmp(&me.eigenvalues[b]));
     let v1 = me.eigenvectors.column(ev[0]).into_owned();
     let v2 = me.eigenvectors.column(ev[1]).into_owned();
-    let ctrl = |v: &SMatrix<f64, 9, 1>, j: usize| Vector3::new(v[3 * j], v[3 * j + 1], v[3 * j + 2]);
+    let ctrl =
+        |v: &SMatrix<f64, 9, 1>, j: usize| Vector3::new(v[3 * j], v[3 * j + 1], v[3 * j + 2]);
     let pairs = [(0, 1), (0, 2), (1, 2)];
     let dist = [s1, s2, (s1 * s1 + s2 * s2).sqrt()];
 
@@ -159,8 +160,8 @@ pub fn solve_planar(
             }
         }
     }
-    let (pose, _) =
-        best.ok_or_else(|| Error::InvalidInput("EPnP found no pose in front of the camera".into()))?;
+    let (pose, _) = best
+        .ok_or_else(|| Error::InvalidInput("EPnP found no pose in front of the camera".into()))?;
     // Gauss–Newton (LM) on the real, non-planar template, as the EPnP paper recommends.
     let problem = RefineProblem {
         template,
@@ -307,8 +308,14 @@ mod tests {
         ];
         let k = Intrinsics::new(1000.0, 1000.0, 320.0, 240.0).unwrap();
         for (rv, t) in [
-            (Vector3::new(3.0, 0.2, 0.1), Vector3::new(100.0, -200.0, 4000.0)),
-            (Vector3::new(2.8, -0.9, 0.3), Vector3::new(-300.0, 100.0, 3000.0)),
+            (
+                Vector3::new(3.0, 0.2, 0.1),
+                Vector3::new(100.0, -200.0, 4000.0),
+            ),
+            (
+                Vector3::new(2.8, -0.9, 0.3),
+                Vector3::new(-300.0, 100.0, 3000.0),
+            ),
             (Vector3::new(0.1, 1.4, 2.9), Vector3::new(0.0, 0.0, 5000.0)),
         ] {
             let r = exp_so3(rv);

@@ -425,11 +425,7 @@ fn limb_candidates(
 }
 
 /// Parameter base, root/mid/end joints and segment lengths of a limb.
-fn limb_spec(
-    left: bool,
-    arm: bool,
-    skel: &Skeleton,
-) -> (usize, Joint, Joint, Joint, f64, f64) {
+fn limb_spec(left: bool, arm: bool, skel: &Skeleton) -> (usize, Joint, Joint, Joint, f64, f64) {
     match (arm, left) {
         (true, true) => (
             P_LARM,
@@ -582,8 +578,10 @@ impl DimensionEstimator {
             f.validate()?;
         }
         start.validate()?;
-        if !(self.scale_range.0 > 0.0 && self.scale_range.0 < self.scale_range.1)
-            || !(self.part_range > 0.0 && self.part_range < 1.0)
+        if !(self.scale_range.0 > 0.0
+            && self.scale_range.0 < self.scale_range.1
+            && self.part_range > 0.0
+            && self.part_range < 1.0)
         {
             return Err(Error::InvalidConfig(format!(
                 "dimension search ranges: scale {:?}, parts ±{}",
@@ -633,8 +631,8 @@ impl DimensionEstimator {
             let x0 = vec![0.0; N_DIMS];
             let to_dims = |x: &[f64]| {
                 let mut d = scaled;
-                for i in 0..N_DIMS {
-                    d.lengths[i] *= x[i].exp();
+                for (l, v) in d.lengths.iter_mut().zip(x) {
+                    *l *= v.exp();
                 }
                 d
             };
@@ -730,8 +728,8 @@ mod tests {
 
     #[test]
     fn exact_projections_of_the_model_are_fitted_to_millimetres() {
-        let skel = Skeleton::new(Dimensions::mean(Convention::HumanEva), Convention::HumanEva)
-            .unwrap();
+        let skel =
+            Skeleton::new(Dimensions::mean(Convention::HumanEva), Convention::HumanEva).unwrap();
         let cam = camera();
         let p = truth_pose(&skel);
         let mut x = [Vector3::zeros(); N_JOINTS];
@@ -759,15 +757,21 @@ mod tests {
             separate_dimensions: false,
             ..Default::default()
         }
-        .estimate(&BodyFitter::default(), &[obs], &cam, &Dimensions::mean(conv), conv)
+        .estimate(
+            &BodyFitter::default(),
+            &[obs],
+            &cam,
+            &Dimensions::mean(conv),
+            conv,
+        )
         .unwrap();
         assert!((est.scale - 1.12).abs() < 0.03, "{est:?}");
     }
 
     #[test]
     fn bad_observations_are_typed_errors() {
-        let skel = Skeleton::new(Dimensions::mean(Convention::HumanEva), Convention::HumanEva)
-            .unwrap();
+        let skel =
+            Skeleton::new(Dimensions::mean(Convention::HumanEva), Convention::HumanEva).unwrap();
         let cam = camera();
         let p = truth_pose(&skel);
         let mut x = [Vector3::zeros(); N_JOINTS];

@@ -150,7 +150,10 @@ pub fn arm_angles(
         (-ws.y).atan2(ws.z)
     };
     // twist τ = sgn·φ; the alternative flips the hinge.
-    let cand = [(sgn * phi, theta), (sgn * wrap(phi + std::f64::consts::PI), -theta)];
+    let cand = [
+        (sgn * phi, theta),
+        (sgn * wrap(phi + std::f64::consts::PI), -theta),
+    ];
     let m = sgn;
     let best = cand
         .iter()
@@ -245,11 +248,8 @@ mod tests {
 
     #[test]
     fn angles_from_positions_invert_forward_kinematics() {
-        let s = Skeleton::new(
-            Dimensions::mean(Convention::HumanEva),
-            Convention::HumanEva,
-        )
-        .unwrap();
+        let s =
+            Skeleton::new(Dimensions::mean(Convention::HumanEva), Convention::HumanEva).unwrap();
         let mut p = [0.0; N_POSE];
         p[P_ROOT_ROT] = 0.3;
         p[P_ROOT_ROT + 1] = -1.1;

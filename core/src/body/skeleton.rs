@@ -376,7 +376,11 @@ impl Skeleton {
         out[1] = thorax;
         out[14] = thorax + rn * Vector3::new(0.0, self.len(dim::NECK), 0.0);
         for left in [true, false] {
-            let (base, sh, el, wr) = if left { (P_LARM, 2, 3, 4) } else { (P_RARM, 5, 6, 7) };
+            let (base, sh, el, wr) = if left {
+                (P_LARM, 2, 3, 4)
+            } else {
+                (P_RARM, 5, 6, 7)
+            };
             out[sh] = thorax + rs * self.shoulder_offset(left);
             let (ra, re) = self.arm_rotations(left, &p[base..base + 4]);
             let ra = rs * ra;
@@ -389,7 +393,11 @@ impl Skeleton {
             out[el] = out[sh] + ra * Vector3::new(sgn * lu, 0.0, 0.0);
             out[wr] = out[el] + ra * re * Vector3::new(sgn * lf, 0.0, 0.0);
 
-            let (base, hip, kn, an) = if left { (P_LLEG, 8, 9, 10) } else { (P_RLEG, 11, 12, 13) };
+            let (base, hip, kn, an) = if left {
+                (P_LLEG, 8, 9, 10)
+            } else {
+                (P_RLEG, 11, 12, 13)
+            };
             out[hip] = pelvis + r0 * self.hip_offset(left);
             let (rl, rk) = self.leg_rotations(&p[base..base + 4]);
             let rl = r0 * rl;
@@ -490,11 +498,7 @@ mod tests {
     use super::*;
 
     fn skel() -> Skeleton {
-        Skeleton::new(
-            Dimensions::mean(Convention::Human36M),
-            Convention::Human36M,
-        )
-        .unwrap()
+        Skeleton::new(Dimensions::mean(Convention::Human36M), Convention::Human36M).unwrap()
     }
 
     #[test]

@@ -151,7 +151,9 @@ fn parse_line(text: &str) -> Result<Frame, String> {
                 "camera without rotation/translation_mm needs a \"floor\" to place it".into(),
             );
         }
-        (None, None) => return Err("need \"camera\" (with rotation, translation_mm) or \"floor\"".into()),
+        (None, None) => {
+            return Err("need \"camera\" (with rotation, translation_mm) or \"floor\"".into());
+        }
     };
     Ok(Frame {
         frame: line.frame.unwrap_or(Value::Null),
@@ -211,7 +213,10 @@ pub fn run(
             .iter()
             .filter_map(|&i| parsed[i].1.as_ref().ok().map(|f| f.joints))
             .collect();
-        let Some(Ok(cam)) = first.first().map(|&i| parsed[i].1.as_ref().map(|f| f.camera)) else {
+        let Some(Ok(cam)) = first
+            .first()
+            .map(|&i| parsed[i].1.as_ref().map(|f| f.camera))
+        else {
             continue;
         };
         let t0 = Instant::now();
@@ -227,10 +232,7 @@ pub fn run(
             .map_err(|e| format!("dimension estimation: {e}"));
         let us = t0.elapsed().as_micros() as u64;
         for (k, &i) in idx.iter().enumerate() {
-            skeletons.insert(
-                i,
-                est.clone().map(|s| (s, if k == 0 { us } else { 0 })),
-            );
+            skeletons.insert(i, est.clone().map(|s| (s, if k == 0 { us } else { 0 })));
         }
     }
     let mut sink = LineSink::new(out)?;

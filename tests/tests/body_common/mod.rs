@@ -113,7 +113,8 @@ pub fn procrustes(
     let d = (u * vt).determinant().signum();
     let s = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d));
     let r = u * s * vt;
-    let scale = (svd.singular_values[0] + svd.singular_values[1] + d * svd.singular_values[2]) / var;
+    let scale =
+        (svd.singular_values[0] + svd.singular_values[1] + d * svd.singular_values[2]) / var;
     std::array::from_fn(|i| mt + r * (pred[i] - mp) * scale)
 }
 

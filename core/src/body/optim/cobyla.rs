@@ -153,7 +153,8 @@ mod tests {
 
     #[test]
     fn minimises_a_shifted_quadratic_and_respects_bounds() {
-        let f = |x: &[f64]| (x[0] - 0.3).powi(2) + 10.0 * (x[1] + 0.2).powi(2) + (x[2] - 2.0).powi(2);
+        let f =
+            |x: &[f64]| (x[0] - 0.3).powi(2) + 10.0 * (x[1] + 0.2).powi(2) + (x[2] - 2.0).powi(2);
         let c = Cobyla {
             max_evaluations: 500,
             cost_tolerance: 1e-10,

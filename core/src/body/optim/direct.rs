@@ -195,7 +195,7 @@ impl DirectL {
             }
         }
         // Ascending size.
-        per_level.sort_by(|a, b| b.0.cmp(&a.0));
+        per_level.sort_by_key(|e| std::cmp::Reverse(e.0));
         let pts: Vec<(f64, f64, usize)> = per_level
             .iter()
             .map(|&(_, i)| (rects[i].size(), rects[i].value, i))
@@ -307,7 +307,11 @@ mod tests {
     fn minimises_branin_to_a_global_minimum() {
         // Branin: three global minima of value 0.397887.
         let f = |x: &[f64]| {
-            let (a, b, c) = (1.0, 5.1 / (4.0 * std::f64::consts::PI.powi(2)), 5.0 / std::f64::consts::PI);
+            let (a, b, c) = (
+                1.0,
+                5.1 / (4.0 * std::f64::consts::PI.powi(2)),
+                5.0 / std::f64::consts::PI,
+            );
             let (r, s, t) = (6.0, 10.0, 1.0 / (8.0 * std::f64::consts::PI));
             a * (x[1] - b * x[0] * x[0] + c * x[0] - r).powi(2) + s * (1.0 - t) * x[0].cos() + s
         };
@@ -331,7 +335,11 @@ mod tests {
         .minimize(|x| (x[0] - 0.3).powi(2), &[-1.0], &[1.0])
         .unwrap();
         assert_eq!(rep.termination, DirectTermination::StopValue);
-        assert!(DirectL::default().minimize(|x| x[0], &[1.0], &[0.0]).is_err());
+        assert!(
+            DirectL::default()
+                .minimize(|x| x[0], &[1.0], &[0.0])
+                .is_err()
+        );
         assert!(
             DirectL::default()
                 .minimize(|x| x[0], &[f64::NAN], &[0.0])
