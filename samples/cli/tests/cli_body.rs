@@ -72,7 +72,8 @@ fn body_fit_example_recovers_the_walker() {
         }
     }
     // World-frame error without any alignment: camera, scale and pose all estimated.
-    assert!(total < 150.0, "mean joint error {total:.1} mm");
+    // Measured: 57.8 mm.
+    assert!(total < 100.0, "mean joint error {total:.1} mm");
 }
 
 #[test]
