@@ -4,5 +4,8 @@
 # JVM (bindings/tests/run-kotlin.sh installs kotlinc, JNA and JUnit 5 when missing).
 set -euo pipefail
 cd "$(dirname "$0")"
+# The body tests convert ../shared/data/body with numpy + h5py (tests/scripts/body_data.py).
+python3 -c "import numpy, h5py" 2>/dev/null || python3 -m pip install --quiet numpy h5py \
+  || echo "numpy/h5py unavailable: the body data tests will skip"
 cargo test --workspace
 bash bindings/tests/run-kotlin.sh

@@ -1,6 +1,7 @@
 //! `monotrack`: the desktop command line of the SDK. Its JSON in and out follows
 //! `../shared/CONTRACT.md` exactly; it is how the SDK is measured from outside.
 
+mod body;
 mod detect;
 mod fit;
 mod json;
@@ -83,6 +84,20 @@ enum Command {
         /// Also write the CONTRACT `track` JSON lines here.
         #[arg(long)]
         out: Option<PathBuf>,
+    },
+    /// 3D body pose and dimensions from 2D joints with a known or floor-calibrated camera.
+    BodyFit {
+        /// Input JSON lines: {"frame", "sequence"?, "camera"? | "floor"?, "joints2d": {NAME: [x, y]}}.
+        input: PathBuf,
+        /// Output JSON lines (default: stdout).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Frames at the start of each sequence used to estimate its body dimensions.
+        #[arg(long, default_value_t = 5)]
+        dimension_frames: usize,
+        /// Joint-definition convention of the input joints.
+        #[arg(long, value_enum, default_value = "humaneva")]
+        convention: body::ConventionArg,
     },
 }
 
@@ -176,6 +191,12 @@ fn main() -> ExitCode {
             frames,
             out,
         } => demo::run(frames, Some(&overlay), out.as_deref()),
+        Command::BodyFit {
+            input,
+            out,
+            dimension_frames,
+            convention,
+        } => body::run(&input, out.as_deref(), dimension_frames, convention),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,

@@ -1,0 +1,145 @@
+//! Shared by the `body_*` tests: converting ../shared/data/body with `tests/scripts/body_data.py`
+//! (numpy + h5py) into JSON under the cargo target dir, reading it, and 3D error helpers.
+#![allow(dead_code)]
+
+use monotrack_core::body::N_JOINTS;
+use nalgebra::{Matrix3, Vector3};
+use serde::Deserialize;
+use std::path::PathBuf;
+use std::process::Command;
+
+/// HumanEva-I cameras: world → camera rotation and camera centre.
+#[derive(Deserialize)]
+pub struct HeCamera {
+    pub rotation: [[f64; 3]; 3],
+    pub center_mm: [f64; 3],
+}
+
+/// One HumanEva-I chunk seen by one camera.
+#[derive(Deserialize)]
+pub struct HeSequence {
+    pub subject: String,
+    pub action: String,
+    pub camera: usize,
+    pub frames: Vec<usize>,
+    pub joints3d_mm: Vec<[[f64; 3]; N_JOINTS]>,
+    pub joints2d: Vec<[[f64; 2]; N_JOINTS]>,
+}
+
+/// HumanEva-I Train, subsampled.
+#[derive(Deserialize)]
+pub struct HumanEva {
+    pub cameras: std::collections::BTreeMap<String, Vec<HeCamera>>,
+    pub sequences: Vec<HeSequence>,
+}
+
+/// Human3.6M camera (Martinez et al.'s cameras.h5): X_cam = R (X − T).
+#[derive(Deserialize)]
+pub struct H36mCamera {
+    pub rotation: [[f64; 3]; 3],
+    pub center_mm: [f64; 3],
+    pub f: [f64; 2],
+    pub c: [f64; 2],
+}
+
+/// One Human3.6M action, mapped to the 15 joints.
+#[derive(Deserialize)]
+pub struct H36mSequence {
+    pub subject: String,
+    pub action: String,
+    pub joints3d_mm: Vec<[[f64; 3]; N_JOINTS]>,
+}
+
+/// Human3.6M, subsampled.
+#[derive(Deserialize)]
+pub struct H36m {
+    pub cameras: std::collections::BTreeMap<String, Vec<H36mCamera>>,
+    pub sequences: Vec<H36mSequence>,
+}
+
+/// Runs the converter (once; it skips up-to-date outputs) and returns the cache folder, or `None`
+/// with a printed `SKIPPED` reason.
+pub fn converted(test: &str) -> Option<PathBuf> {
+    let shared = monotrack_tests::shared_data_or_skip(test)?;
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("body-data");
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scripts/body_data.py");
+    let status = Command::new("python3")
+        .arg(&script)
+        .arg(&shared)
+        .arg(&out)
+        .status();
+    match status {
+        Ok(s) if s.success() => Some(out),
+        other => {
+            eprintln!(
+                "SKIPPED {test}: {} failed ({other:?}); it needs python3 with numpy and h5py",
+                script.display()
+            );
+            None
+        }
+    }
+}
+
+pub fn load<T: for<'de> Deserialize<'de>>(dir: &std::path::Path, name: &str) -> T {
+    let text = std::fs::read_to_string(dir.join(name)).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+pub fn v3(p: &[f64; 3]) -> Vector3<f64> {
+    Vector3::new(p[0], p[1], p[2])
+}
+
+pub fn m3(r: &[[f64; 3]; 3]) -> Matrix3<f64> {
+    Matrix3::from_fn(|i, j| r[i][j])
+}
+
+/// `pred` aligned to `truth` by the similarity (rotation, translation, scale) minimising the squared
+/// distances (Umeyama), as in PA-MPJPE.
+pub fn procrustes(
+    pred: &[Vector3<f64>; N_JOINTS],
+    truth: &[Vector3<f64>; N_JOINTS],
+) -> [Vector3<f64>; N_JOINTS] {
+    let n = N_JOINTS as f64;
+    let mp = pred.iter().sum::<Vector3<f64>>() / n;
+    let mt = truth.iter().sum::<Vector3<f64>>() / n;
+    let mut cov = Matrix3::zeros();
+    let mut var = 0.0;
+    for i in 0..N_JOINTS {
+        cov += (truth[i] - mt) * (pred[i] - mp).transpose();
+        var += (pred[i] - mp).norm_squared();
+    }
+    let svd = cov.svd(true, true);
+    let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
+    let d = (u * vt).determinant().signum();
+    let s = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d));
+    let r = u * s * vt;
+    let scale =
+        (svd.singular_values[0] + svd.singular_values[1] + d * svd.singular_values[2]) / var;
+    std::array::from_fn(|i| mt + r * (pred[i] - mp) * scale)
+}
+
+/// Joint groups for per-limb errors (thesis Table 5.3's rows).
+pub const LIMB_GROUPS: [(&str, &[usize]); 6] = [
+    ("torso", &[0, 1, 2, 5, 8, 11]),
+    ("head", &[14]),
+    ("upper arms (elbows)", &[3, 6]),
+    ("forearms (wrists)", &[4, 7]),
+    ("thighs (knees)", &[9, 12]),
+    ("shins (ankles)", &[10, 13]),
+];
+
+/// Bones whose lengths are compared (pairs of joint indices) with their [`dim`] index.
+pub const BONES: [(&str, usize, usize, usize); 12] = [
+    ("back", 0, 1, 0),
+    ("neck", 1, 14, 1),
+    ("shoulder width", 2, 5, 2),
+    ("hip width", 8, 11, 3),
+    ("left upper arm", 2, 3, 4),
+    ("right upper arm", 5, 6, 5),
+    ("left forearm", 3, 4, 6),
+    ("right forearm", 6, 7, 7),
+    ("left thigh", 8, 9, 8),
+    ("right thigh", 11, 12, 9),
+    ("left shin", 9, 10, 10),
+    ("right shin", 12, 13, 11),
+];

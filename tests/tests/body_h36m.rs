@@ -1,0 +1,132 @@
+//! CLFBA on synthetic 2D from Human3.6M: every (subsampled) pose of S1, S5, S6, S7, S8 projected
+//! exactly through one of its subject's four real cameras (pinhole, no distortion), then fitted with
+//! the known camera. Reports the recovered 3D error per joint, absolute (world frame, no
+//! alignment) and after Procrustes, with the true body dimensions and with dimensions estimated on
+//! each sequence's first frames.
+//!
+//! Run: `cargo test -p monotrack-tests --test body_h36m -- --nocapture`.
+
+mod body_common;
+
+use body_common::*;
+use monotrack_core::body::{
+    BodyCamera, BodyFitter, Convention, DimensionEstimator, Dimensions, JOINT_NAMES, Joints2d,
+    N_JOINTS, Skeleton,
+};
+use monotrack_core::camera::Intrinsics;
+use nalgebra::Vector3;
+
+/// Frames per sequence used for the dimension estimation (0.25 fps subsampling: 20 s of action).
+const DIMENSION_FRAMES: usize = 5;
+
+/// The subject's true dimensions: mean bone lengths over the sequence (Human3.6M's skeleton is
+/// rigid, so these are exact up to rounding).
+fn true_dimensions(frames: &[[[f64; 3]; N_JOINTS]]) -> Dimensions {
+    let mut d = Dimensions::mean(Convention::Human36M);
+    for (_, a, b, di) in BONES {
+        d.lengths[di] = frames
+            .iter()
+            .map(|f| (v3(&f[a]) - v3(&f[b])).norm())
+            .sum::<f64>()
+            / frames.len() as f64;
+    }
+    d
+}
+
+#[test]
+fn human36m_synthetic_projections() {
+    let Some(dir) = converted("body_h36m") else {
+        return;
+    };
+    let h: H36m = load(&dir, "h36m.json");
+    let conv = Convention::Human36M;
+    let fitter = BodyFitter::default();
+    let estimator = DimensionEstimator::default();
+    let mut err_true = [0.0f64; N_JOINTS];
+    let mut err_est = [0.0f64; N_JOINTS];
+    let mut pa_true = 0.0;
+    let mut pa_est = 0.0;
+    let mut reproj = 0.0;
+    let mut n = 0usize;
+    let mut scale_err = vec![];
+    // Every fifth action keeps the test under a minute; the camera rotates through the four.
+    for (si, seq) in h.sequences.iter().enumerate().step_by(5) {
+        let cams = &h.cameras[&seq.subject];
+        let dims_true = true_dimensions(&seq.joints3d_mm);
+        let skel_true = Skeleton::new(dims_true, conv).unwrap();
+        // One camera per sequence, rotating through the four.
+        let c = &cams[(si / 5) % 4];
+        let r = m3(&c.rotation);
+        let cam = BodyCamera::new(
+            Intrinsics::new(c.f[0], c.f[1], c.c[0], c.c[1]).unwrap(),
+            r,
+            -(r * v3(&c.center_mm)),
+        )
+        .unwrap();
+        let obs: Vec<Joints2d> = seq
+            .joints3d_mm
+            .iter()
+            .map(|f| Joints2d::full(std::array::from_fn(|j| cam.project(&v3(&f[j])))))
+            .collect();
+        let k = DIMENSION_FRAMES.min(obs.len());
+        let est = estimator
+            .estimate(&fitter, &obs[..k], &cam, &Dimensions::mean(conv), conv)
+            .unwrap();
+        let skel_est = Skeleton::new(est.dimensions, conv).unwrap();
+        let height = |d: &Dimensions| d.lengths.iter().sum::<f64>();
+        scale_err.push(height(&est.dimensions) / height(&dims_true) - 1.0);
+        for (o, x3) in obs.iter().zip(&seq.joints3d_mm) {
+            let truth: [Vector3<f64>; N_JOINTS] = std::array::from_fn(|j| v3(&x3[j]));
+            let ft = fitter.fit(o, &cam, &skel_true).unwrap();
+            let fe = fitter.fit(o, &cam, &skel_est).unwrap();
+            let (at, ae) = (
+                procrustes(&ft.joints, &truth),
+                procrustes(&fe.joints, &truth),
+            );
+            for j in 0..N_JOINTS {
+                err_true[j] += (ft.joints[j] - truth[j]).norm();
+                err_est[j] += (fe.joints[j] - truth[j]).norm();
+                pa_true += (at[j] - truth[j]).norm() / N_JOINTS as f64;
+                pa_est += (ae[j] - truth[j]).norm() / N_JOINTS as f64;
+            }
+            reproj += ft.reprojection_rms_px;
+            n += 1;
+        }
+    }
+    let nf = n as f64;
+    println!(
+        "\nHuman3.6M synthetic (exact 2D, real cameras): {n} frames, {} sequences",
+        h.sequences.len().div_ceil(5)
+    );
+    println!("| joint | 3D error, true dimensions, mm | 3D error, estimated dimensions, mm |");
+    for j in 0..N_JOINTS {
+        println!(
+            "| {} | {:.1} | {:.1} |",
+            JOINT_NAMES[j],
+            err_true[j] / nf,
+            err_est[j] / nf
+        );
+    }
+    let mt = err_true.iter().sum::<f64>() / (nf * N_JOINTS as f64);
+    let me = err_est.iter().sum::<f64>() / (nf * N_JOINTS as f64);
+    println!("| mean | {mt:.1} | {me:.1} |");
+    println!(
+        "after Procrustes: {:.1} mm (true dimensions), {:.1} mm (estimated); reprojection {:.2} px",
+        pa_true / nf,
+        pa_est / nf,
+        reproj / nf
+    );
+    let mean_abs_scale = scale_err.iter().map(|e| e.abs()).sum::<f64>() / scale_err.len() as f64;
+    println!(
+        "estimated total length vs truth: mean |error| {:.1} %",
+        100.0 * mean_abs_scale
+    );
+    // Regression bounds around what was measured (README): the absolute error is dominated by depth
+    // (the floor fixes it only through the assumed foot contact, wrong when sitting or mid-step).
+    assert!(
+        mt < 300.0,
+        "mean joint error {mt:.1} mm with true dimensions"
+    );
+    assert!(pa_true / nf < 90.0, "PA {:.1} mm", pa_true / nf);
+    assert!(mean_abs_scale < 0.06);
+}
