@@ -18,6 +18,7 @@ pub const EMBEDDED_FILES: &[(&str, &[u8])] = &[
     ("brows.onnx", include_bytes!("../../models/m3/brows.onnx")),
     ("eye.onnx", include_bytes!("../../models/m3/eye.onnx")),
     ("mouth.onnx", include_bytes!("../../models/m3/mouth.onnx")),
+    ("face.onnx", include_bytes!("../../models/m3/face.onnx")),
 ];
 
 /// Number of level-1 landmarks (`M3_IO.md`).
