@@ -17,9 +17,10 @@ OpenCV is the yardstick):
   handling rounds differently on ~1 % of the pixels of the `border` case).
 - `patch_<w>x<h>.pgm` (crops of src at the zone sizes), `bilateral_<w>x<h>.pgm` =
   `cv2.bilateralFilter(patch, 5, 20, 3, borderType=BORDER_REFLECT_101)` (the zones' filter):
-  OpenCV's vectorised kernel sums in another order with fused multiply-adds and a polynomial exp,
-  so results within float rounding of a half level may round the other way.
-  Tolerance: |diff| <= 1 everywhere and on at most 1 % of the pixels.
+  the installed OpenCV 5 truncates the weighted mean to u8 (so does core::landmarks::filter); its
+  vectorised kernel sums in another order with fused multiply-adds and a polynomial exp, so results
+  within float rounding of an integer land one level off: measured ~3 % of the pixels.
+  Tolerance: |diff| <= 1 everywhere and on at most 5 % of the pixels.
 - `equalize_<w>x<h>.pgm` = `cv2.equalizeHist(bilateral_<w>x<h>)`. Tolerance: exact.
 """
 import json
