@@ -6,15 +6,17 @@
 //! `java.nio.ByteBuffer` in Kotlin) plus a `FrameDesc`. A Rust panic surfaces as an exception
 //! (uniffi catches unwinding panics; every profile keeps `panic = "unwind"`).
 //!
-//! Exported so far: frame conversion, default intrinsics, and the 3D fit of given landmarks. The
-//! `FaceTracker` object of `API.md` arrives with the tracking pipeline (issue 4).
+//! Exported: the `FaceTracker` object (detector → fast tracker → M3 → flow filter → MSBP), the shared
+//! benchmark, frame conversion, default intrinsics, and the 3D fit of given landmarks (`API.md`).
 
 uniffi::setup_scaffolding!();
 
 mod error;
+mod tracker;
 mod types;
 
 pub use error::MonotrackError;
+pub use tracker::*;
 pub use types::*;
 
 use monotrack_core::camera::Intrinsics;

@@ -10,7 +10,8 @@ ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$ROOT"
 GOLDEN="$ROOT/bindings/tests/swift-golden"
 OUT="$ROOT/target/swift-gen"
-cargo build -q -p monotrack-ffi --lib
+# The whole workspace, as `cargo test --workspace` built it: same feature set, so nothing rebuilds.
+cargo build -q --workspace --lib
 rm -rf "$OUT" && mkdir -p "$OUT"
 cargo run -q -p monotrack-uniffi-bindgen -- generate --library "$ROOT/target/debug/libmonotrack_ffi.so" \
   --language swift --out-dir "$OUT" --no-format

@@ -26,7 +26,8 @@ fi
 KOTLIN_LIB="$TOOLS/node_modules/kotlin-compiler/lib"
 
 echo "== building monotrack-ffi (host)"
-cargo build -q -p monotrack-ffi --lib
+# The whole workspace, as `cargo test --workspace` built it: same feature set, so nothing rebuilds.
+cargo build -q --workspace --lib
 LIB="$ROOT/target/debug/libmonotrack_ffi.so"
 
 echo "== generating Kotlin"
@@ -39,7 +40,7 @@ JUNIT=/usr/share/java/junit-platform-console-standalone.jar
 echo "== compiling Kotlin"
 "$KOTLINC" -jvm-target 17 -nowarn -cp "$JNA:$JUNIT" \
   $(find "$WORK/gen" -name '*.kt') $(find "$ROOT/bindings/tests/kotlin" -name '*.kt') \
-  $(find "$ROOT/android/monotrack/src/jvmMain" "$ROOT/android/monotrack/src/jvmTest" -name 'FrameMapping*.kt') \
+  $(find "$ROOT/android/monotrack/src/jvmMain" "$ROOT/android/monotrack/src/jvmTest" \( -name 'FrameMapping*.kt' -o -name 'Results*.kt' \)) \
   -d "$WORK/classes" 2>&1 | grep -v '^warning' || true
 [ -d "$WORK/classes" ] || { echo "kotlinc failed"; echo "0 passed, 1 failed"; exit 1; }
 

@@ -11,6 +11,7 @@
 //! [`image`] → `detect` → `landmarks` → `track` → [`model`] / [`fit`] → results; and apart from
 //! faces, `body` and `motion`.
 
+pub mod bench;
 pub mod body;
 pub mod camera;
 pub mod detect;

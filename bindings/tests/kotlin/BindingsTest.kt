@@ -4,6 +4,11 @@
 package io.monotrack.tests
 
 import io.monotrack.CameraIntrinsics
+import io.monotrack.FaceState
+import io.monotrack.FaceTracker
+import io.monotrack.RunningMode
+import io.monotrack.defaultTrackerConfig
+import io.monotrack.runBenchmark
 import io.monotrack.FitMethod
 import io.monotrack.FrameDesc
 import io.monotrack.MonotrackException
@@ -164,5 +169,57 @@ class BindingsTest {
         assertThrows(MonotrackException.InvalidConfig::class.java) {
             fitLandmarks(exampleLandmarks(0), 640u, 480u, nanCamera, FitMethod.MSBP)
         }
+    }
+
+    @Test
+    fun trackerFindsTracksAndRejectsBadInput() {
+        FaceTracker(defaultTrackerConfig()).use { t ->
+            val (buf, stride) = rgbaFrame()
+            val d = desc(PixelFormat.RGBA8, stride, 0)
+            val first = t.processFrame(buf, d, 1_000_000L)
+            assertEquals(1, first.faces.size, "one face in the astronaut portrait")
+            val f = first.faces[0]
+            assertEquals(FaceState.DETECTED, f.state)
+            assertEquals(68, f.landmarks.size)
+            // The nose tip lies inside the face the detector's golden test expects: [176.6, 88.3, 96.3, 91.8].
+            val nose = f.landmarks[30]
+            assertTrue(nose.x in 176f..273f && nose.y in 88f..181f, "nose at $nose")
+            assertTrue(kotlin.math.abs(f.pose.yawDeg) < 30.0, "frontal: yaw ${f.pose.yawDeg}")
+            assertTrue(f.pose.translationMm.z in 200.0..2000.0)
+            assertEquals(11, f.shapeUnits.size)
+            assertEquals(6, f.actionUnits.size)
+            val second = t.processFrame(buf, d, 2_000_000L)
+            assertEquals(FaceState.TRACKED, second.faces[0].state)
+            assertEquals(f.id, second.faces[0].id)
+            assertThrows(MonotrackException.InvalidFrame::class.java) { t.processFrame(buf, d, 2_000_000L) }
+            assertThrows(MonotrackException.InvalidFrame::class.java) {
+                t.processFrame(direct(ByteArray(10)), d, 3_000_000L)
+            }
+            val (nv, s2) = nv21Frame()
+            val still = t.processImage(nv, desc(PixelFormat.NV21, s2, 90, uvRowStride = s2, uvPixelStride = 2))
+            assertEquals(1, still.faces.size, "the face in the rotated NV21 frame")
+            assertEquals(image.height.toUInt(), still.frameWidth)
+            t.reset()
+            assertEquals(FaceState.DETECTED, t.processFrame(buf, d, 1L).faces[0].state)
+        }
+    }
+
+    @Test
+    fun badTrackerConfigRaisesInvalidConfig() {
+        assertThrows(MonotrackException.InvalidConfig::class.java) {
+            FaceTracker(defaultTrackerConfig().copy(maxFaces = 0u))
+        }
+        assertThrows(MonotrackException.InvalidConfig::class.java) {
+            FaceTracker(defaultTrackerConfig().copy(runningMode = RunningMode.IMAGE, minFaceSizePx = 2u))
+        }
+    }
+
+    @Test
+    fun benchmarkReportsEveryStage() {
+        val (buf, stride) = rgbaFrame()
+        val r = runBenchmark(buf, desc(PixelFormat.RGBA8, stride, 0), 3u)
+        assertEquals(1u, r.faces)
+        assertEquals(14, r.stages.size)
+        assertTrue(r.stages.first { it.name == "redetect/detect" }.medianUs > 0.0)
     }
 }

@@ -23,8 +23,8 @@
 //! allocated (the result's face list keeps its capacity).
 
 pub mod flow;
-pub mod ncc;
 pub mod models;
+pub mod ncc;
 
 pub use models::{ModelDetector, Tracker};
 
@@ -709,6 +709,16 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                         }
                     }
                     None => {
+                        let free = self.slots.iter().any(|s| !s.active || (!video && !s.seen));
+                        // A new face must also pass the classifier tracked windows are checked
+                        // with (M3's face confidence): the compact detector scores some face-like
+                        // clutter above real faces (core/models/MODEL_CARD.md).
+                        if !free
+                            || self.estimator.face_confidence(image, &rect)?
+                                < self.config.min_face_confidence
+                        {
+                            continue;
+                        }
                         // A free slot; in image mode also one whose face was not seen this call.
                         if let Some(s) = self
                             .slots

@@ -5,12 +5,12 @@
 //! the middle to force a re-detection — writes overlay PNGs and prints a per-stage timing table.
 //! Nothing is downloaded and `../shared` is not needed.
 
-use crate::track::{Canvas, draw_overlay, frame_json};
 use crate::LineSink;
+use crate::track::{Canvas, draw_overlay, frame_json};
+use monotrack_core::TrackerConfig;
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::image::{Frame, FrameDesc, GrayImage, PixelFormat};
 use monotrack_core::track::{FaceState, StageTimings, Tracker};
-use monotrack_core::TrackerConfig;
 use std::path::Path;
 
 /// The committed public-domain portrait (NASA; see samples/data/README.md).
@@ -28,7 +28,9 @@ fn source() -> Result<GrayImage, String> {
         .to_rgb8();
     let desc = FrameDesc::packed(rgb.width(), rgb.height(), PixelFormat::Rgb8);
     let mut out = GrayImage::default();
-    Frame::new(rgb.as_raw(), desc).map_err(|e| e.to_string())?.to_luma(&mut out);
+    Frame::new(rgb.as_raw(), desc)
+        .map_err(|e| e.to_string())?
+        .to_luma(&mut out);
     Ok(out)
 }
 
@@ -58,7 +60,10 @@ fn render(src: &GrayImage, t: usize, cut: usize, out: &mut GrayImage) {
                 96
             } else {
                 let (x0, y0) = (sx.floor() as usize, sy.floor() as usize);
-                let (x1, y1) = ((x0 + 1).min(src.width() - 1), (y0 + 1).min(src.height() - 1));
+                let (x1, y1) = (
+                    (x0 + 1).min(src.width() - 1),
+                    (y0 + 1).min(src.height() - 1),
+                );
                 let (fx, fy) = (sx - x0 as f64, sy - y0 as f64);
                 let p = |xx: usize, yy: usize| f64::from(src.get(xx, yy));
                 let v = (1.0 - fy) * ((1.0 - fx) * p(x0, y0) + fx * p(x1, y0))
@@ -84,7 +89,8 @@ pub fn run(frames: usize, overlay: Option<&Path>, out: Option<&Path>) -> Result<
     }
     let src = source()?;
     let t_load = std::time::Instant::now();
-    let mut tracker = Tracker::with_default_models(TrackerConfig::default()).map_err(|e| e.to_string())?;
+    let mut tracker =
+        Tracker::with_default_models(TrackerConfig::default()).map_err(|e| e.to_string())?;
     let load_ms = t_load.elapsed().as_secs_f64() * 1e3;
     if let Some(dir) = overlay {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
@@ -98,7 +104,9 @@ pub fn run(frames: usize, overlay: Option<&Path>, out: Option<&Path>) -> Result<
     let (mut n_tracked, mut n_detected, mut n_lost) = (0, 0, 0);
     for t in 0..frames {
         render(&src, t, cut, &mut frame);
-        let r = tracker.process(&frame, t as i64 * FRAME_NS).map_err(|e| e.to_string())?;
+        let r = tracker
+            .process(&frame, t as i64 * FRAME_NS)
+            .map_err(|e| e.to_string())?;
         if r.faces.is_empty() {
             n_lost += 1;
         } else if r.faces.iter().all(|f| f.state == FaceState::Tracked) {
@@ -121,9 +129,16 @@ pub fn run(frames: usize, overlay: Option<&Path>, out: Option<&Path>) -> Result<
             canvas.save_png(&dir.join(format!("frame_{t:06}.png")))?;
         }
     }
-    println!("monotrack demo: {frames} frames of {W}x{H} made from samples/data/astronaut.jpg (public domain)");
-    println!("frames: {n_detected} detected, {n_tracked} tracked, {n_lost} without a face (the blank cut at frame {cut}); models loaded in {load_ms:.1} ms");
-    println!("{:<12} {:>16} {:>22}", "stage", "tracked frame µs", "detector frame µs");
+    println!(
+        "monotrack demo: {frames} frames of {W}x{H} made from samples/data/astronaut.jpg (public domain)"
+    );
+    println!(
+        "frames: {n_detected} detected, {n_tracked} tracked, {n_lost} without a face (the blank cut at frame {cut}); models loaded in {load_ms:.1} ms"
+    );
+    println!(
+        "{:<12} {:>16} {:>22}",
+        "stage", "tracked frame µs", "detector frame µs"
+    );
     type Get = fn(&StageTimings) -> u64;
     let rows: [(&str, Get); 6] = [
         ("detect", |t| t.detect_us),
@@ -138,7 +153,9 @@ pub fn run(frames: usize, overlay: Option<&Path>, out: Option<&Path>) -> Result<
         let mut b: Vec<u64> = detected.iter().map(get).collect();
         println!("{name:<12} {:>16} {:>22}", median(&mut a), median(&mut b));
     }
-    println!("(medians; debug builds are slower: use `cargo run --release -p monotrack-cli -- demo`)");
+    println!(
+        "(medians; debug builds are slower: use `cargo run --release -p monotrack-cli -- demo`)"
+    );
     if let Some(dir) = overlay {
         println!("overlays: {}", dir.display());
     }

@@ -14,6 +14,9 @@ use serde_json::{Map, Value, json};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+/// M3 face probability a detection needs (the tracker's default `min_face_confidence`: the
+/// classifier's decision point, trained on balanced faces / non-faces).
+const MIN_FACE_CONFIDENCE: f32 = 0.5;
 
 #[derive(Deserialize)]
 struct FaceIn {
@@ -46,8 +49,21 @@ impl Pipeline {
             self.detector = Some(FaceDetector::new().map_err(|e| e.to_string())?);
         }
         let det = self.detector.as_mut().ok_or("detector unavailable")?;
-        det.detect(&self.gray, &mut self.found).map_err(|e| e.to_string())?;
-        Ok(self.found.iter().map(|d| (d.rect, Some(d.score))).collect())
+        det.detect(&self.gray, &mut self.found)
+            .map_err(|e| e.to_string())?;
+        // As in the tracker: a detection must also pass M3's face classifier, which rejects the
+        // face-like clutter the compact detector scores high (core/models/MODEL_CARD.md).
+        let mut faces = Vec::with_capacity(self.found.len());
+        for d in &self.found {
+            let p = self
+                .m3
+                .face_confidence(&self.gray, &d.rect)
+                .map_err(|e| e.to_string())?;
+            if p >= MIN_FACE_CONFIDENCE {
+                faces.push((d.rect, Some(d.score)));
+            }
+        }
+        Ok(faces)
     }
 }
 

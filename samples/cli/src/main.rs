@@ -2,10 +2,10 @@
 //! `../shared/CONTRACT.md` exactly; it is how the SDK is measured from outside.
 
 mod body;
+mod demo;
 mod detect;
 mod fit;
 mod json;
-mod demo;
 mod landmarks;
 // Some frame-source helpers are used by tests only.
 #[allow(dead_code)]
@@ -150,8 +150,8 @@ fn run_track(
 ) -> Result<bool, String> {
     let cfg: monotrack_core::TrackerConfig = match config {
         Some(p) => {
-            let text =
-                std::fs::read_to_string(p).map_err(|e| format!("cannot read {}: {e}", p.display()))?;
+            let text = std::fs::read_to_string(p)
+                .map_err(|e| format!("cannot read {}: {e}", p.display()))?;
             serde_json::from_str(&text).map_err(|e| format!("{}: {e}", p.display()))?
         }
         None => monotrack_core::TrackerConfig::default(),
@@ -185,7 +185,12 @@ fn main() -> ExitCode {
             out,
             overlay,
             config,
-        } => run_track(&input, out.as_deref(), overlay.as_deref(), config.as_deref()),
+        } => run_track(
+            &input,
+            out.as_deref(),
+            overlay.as_deref(),
+            config.as_deref(),
+        ),
         Command::Demo {
             overlay,
             frames,

@@ -129,12 +129,20 @@ fn landmarks_on_given_boxes_follow_the_contract() {
     );
 
     let err = |i: usize| lines[i]["error"].as_str().unwrap().to_string();
-    assert_eq!(lines[2]["line"], 3);
-    assert!(err(2).contains("no face boxes given and no detector available yet"));
+    // No boxes: the detector (+ M3's face check) finds the one face, inside the box given above.
+    let detected = lines[2]["faces"].as_array().unwrap();
+    assert_eq!(detected.len(), 1, "{}", lines[2]);
+    let nose = &detected[0]["landmarks68"][30];
+    let (nx, ny) = (nose[0].as_f64().unwrap(), nose[1].as_f64().unwrap());
+    assert!(
+        nx > b[0] && nx < b[0] + b[2] && ny > b[1] && ny < b[1] + b[3],
+        "nose {nx},{ny}"
+    );
+    assert!(lines[2]["timings_us"]["detect"].as_u64().unwrap() > 0);
     assert!(err(3).contains("malformed JSON"));
     assert!(err(4).contains("missing.jpg"));
     assert!(err(5).contains("invalid input"), "{}", err(5));
     let stderr = String::from_utf8(out.stderr).unwrap();
-    assert!(stderr.contains(":3:") && stderr.contains(":4:") && stderr.contains(":6:"));
+    assert!(stderr.contains(":4:") && stderr.contains(":5:") && stderr.contains(":6:"));
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -1,0 +1,466 @@
+//! The `FaceTracker` object (`bindings/API.md`): `monotrack_core::track::Tracker` behind a Mutex
+//! (uniffi objects are shared across threads), its config and result records, and the shared
+//! benchmark (`monotrack_core::bench`) for the device benchmark apps.
+
+use crate::MonotrackError;
+use crate::types::{CameraIntrinsics, FrameDesc, HeadPose, NamedValue, Point2, Vec3};
+use monotrack_core::camera::Intrinsics;
+use monotrack_core::detect::DetectorConfig;
+use monotrack_core::image::{Frame, Rect as CoreRect};
+use monotrack_core::model::{ANIM_UNIT_NAMES, SHAPE_UNIT_NAMES};
+use monotrack_core::track::{self as core_track, TrackedFace, Tracker};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+/// Image (detect every call) or video (track between calls; timestamps must increase).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum RunningMode {
+    /// Independent stills.
+    Image,
+    /// A camera stream.
+    Video,
+}
+
+/// Tracker settings (the rest of the core's `TrackerConfig` keeps its defaults).
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct TrackerConfig {
+    /// Image or video mode.
+    pub running_mode: RunningMode,
+    /// Most faces tracked at once (1..=16).
+    pub max_faces: u32,
+    /// Intrinsics of the upright image, pixels; `None`: fx = fy = 0.9·max side, centred.
+    pub camera: Option<CameraIntrinsics>,
+    /// Smallest face the detector looks for, pixels of the upright image (16..=4096).
+    pub min_face_size_px: u32,
+    /// Optical-flow landmark filter on or off.
+    pub flow_filter: bool,
+    /// Frames over which a new track's shape units are estimated before being held (1..=1000).
+    pub shape_frames: u32,
+}
+
+/// The default settings: video mode, one face, default intrinsics, filter on.
+#[uniffi::export]
+pub fn default_tracker_config() -> TrackerConfig {
+    let c = core_track::TrackerConfig::default();
+    TrackerConfig {
+        running_mode: RunningMode::Video,
+        max_faces: c.max_faces as u32,
+        camera: None,
+        min_face_size_px: DetectorConfig::default().min_face_px.round() as u32,
+        flow_filter: c.flow_filter,
+        shape_frames: c.shape_frames as u32,
+    }
+}
+
+fn to_core(
+    c: &TrackerConfig,
+) -> Result<(core_track::TrackerConfig, DetectorConfig), MonotrackError> {
+    if !(16..=4096).contains(&c.min_face_size_px) {
+        return Err(MonotrackError::InvalidConfig {
+            msg: format!(
+                "min_face_size_px must be 16..=4096, got {}",
+                c.min_face_size_px
+            ),
+        });
+    }
+    let core = core_track::TrackerConfig {
+        mode: match c.running_mode {
+            RunningMode::Image => core_track::Mode::Image,
+            RunningMode::Video => core_track::Mode::Video,
+        },
+        max_faces: c.max_faces as usize,
+        camera: c.camera.map(Intrinsics::from),
+        flow_filter: c.flow_filter,
+        shape_frames: c.shape_frames as usize,
+        ..core_track::TrackerConfig::default()
+    };
+    let det = DetectorConfig {
+        min_face_px: c.min_face_size_px as f32,
+        ..DetectorConfig::default()
+    };
+    core.validate()?;
+    Ok((core, det))
+}
+
+/// An axis-aligned box, pixels of the upright image.
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct Rect {
+    /// Left.
+    pub x: f32,
+    /// Top.
+    pub y: f32,
+    /// Width.
+    pub width: f32,
+    /// Height.
+    pub height: f32,
+}
+
+impl From<CoreRect> for Rect {
+    fn from(r: CoreRect) -> Self {
+        Self {
+            x: r.x,
+            y: r.y,
+            width: r.w,
+            height: r.h,
+        }
+    }
+}
+
+/// How a face's region was found this frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
+pub enum FaceState {
+    /// By the whole-frame detector.
+    Detected,
+    /// By the fast (NCC) tracker.
+    Tracked,
+}
+
+/// Gesture probabilities (mouth: smile, frown, kiss, neutral; brows: raise, frown, neutral).
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct Gestures {
+    /// Smile.
+    pub smile: f32,
+    /// Mouth frown.
+    pub frown: f32,
+    /// Kiss (pucker).
+    pub kiss: f32,
+    /// Neutral mouth.
+    pub mouth_neutral: f32,
+    /// Raised brows.
+    pub brow_raise: f32,
+    /// Frowning brows.
+    pub brow_frown: f32,
+    /// Neutral brows.
+    pub brow_neutral: f32,
+}
+
+/// Unit gaze vectors, camera frame (looking at the camera is about (0, 0, −1)).
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct Gaze {
+    /// The subject's left eye.
+    pub left: Vec3,
+    /// The subject's right eye.
+    pub right: Vec3,
+    /// Both eyes.
+    pub combined: Vec3,
+}
+
+/// One face of a frame.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct Face {
+    /// Stable while the track lasts.
+    pub id: u64,
+    /// Detected or tracked.
+    pub state: FaceState,
+    /// Face box (the tight box of the 68 landmarks' convention).
+    pub bbox: Rect,
+    /// Detector score (detected) or face confidence (tracked), 0..1.
+    pub score: f32,
+    /// 68 points, iBUG order, pixels of the upright image.
+    pub landmarks: Vec<Point2>,
+    /// Most probable head-yaw class, degrees (−60, −30, 0, 30, 60).
+    pub yaw_class_deg: i32,
+    /// Yaw class probabilities in that order.
+    pub yaw_probs: Vec<f32>,
+    /// Gestures.
+    pub gestures: Gestures,
+    /// Gaze.
+    pub gaze: Gaze,
+    /// Head pose.
+    pub pose: HeadPose,
+    /// The 11 shape units.
+    pub shape_units: Vec<NamedValue>,
+    /// The 6 action (animation) units.
+    pub action_units: Vec<NamedValue>,
+    /// RMS reprojection error of the 3D fit, pixels.
+    pub fit_rms_px: f64,
+}
+
+fn v3(v: &[f32; 3]) -> Vec3 {
+    Vec3 {
+        x: f64::from(v[0]),
+        y: f64::from(v[1]),
+        z: f64::from(v[2]),
+    }
+}
+
+fn named(names: &[&str], values: &[f64]) -> Vec<NamedValue> {
+    names
+        .iter()
+        .zip(values)
+        .map(|(n, v)| NamedValue {
+            name: (*n).to_string(),
+            value: *v,
+        })
+        .collect()
+}
+
+impl From<&TrackedFace> for Face {
+    fn from(f: &TrackedFace) -> Self {
+        let l = &f.landmarks;
+        Self {
+            id: f.id,
+            state: match f.state {
+                core_track::FaceState::Detected => FaceState::Detected,
+                core_track::FaceState::Tracked => FaceState::Tracked,
+            },
+            bbox: f.rect.into(),
+            score: f.score,
+            landmarks: l
+                .points
+                .iter()
+                .map(|p| Point2 { x: p[0], y: p[1] })
+                .collect(),
+            yaw_class_deg: l.yaw_class_deg(),
+            yaw_probs: l.yaw_probs.to_vec(),
+            gestures: Gestures {
+                smile: l.mouth[0],
+                frown: l.mouth[1],
+                kiss: l.mouth[2],
+                mouth_neutral: l.mouth[3],
+                brow_raise: l.brows[0],
+                brow_frown: l.brows[1],
+                brow_neutral: l.brows[2],
+            },
+            gaze: Gaze {
+                left: v3(&l.gaze_left),
+                right: v3(&l.gaze_right),
+                combined: v3(&l.gaze_combined),
+            },
+            pose: HeadPose::from(&f.fit.pose),
+            shape_units: named(&SHAPE_UNIT_NAMES, &f.fit.shape),
+            action_units: named(&ANIM_UNIT_NAMES, &f.fit.animation),
+            fit_rms_px: f.fit.report.rms_px,
+        }
+    }
+}
+
+/// Per-stage wall time of one call, microseconds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Record)]
+pub struct StageTimings {
+    /// Frame → upright luma.
+    pub convert_us: u64,
+    /// Whole-frame detector.
+    pub detect_us: u64,
+    /// Fast tracker (NCC search + face check).
+    pub track_us: u64,
+    /// M3 landmarks.
+    pub landmarks_us: u64,
+    /// Optical-flow filter.
+    pub flow_us: u64,
+    /// 3D fit.
+    pub fit_us: u64,
+    /// The whole call.
+    pub total_us: u64,
+}
+
+/// The faces of one frame.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct TrackingResult {
+    /// Upright frame width (after rotation).
+    pub frame_width: u32,
+    /// Upright frame height.
+    pub frame_height: u32,
+    /// Faces, in a stable order while tracks last.
+    pub faces: Vec<Face>,
+    /// Per-stage timings.
+    pub timings: StageTimings,
+}
+
+fn result(r: &core_track::TrackingResult, w: u32, h: u32) -> TrackingResult {
+    let t = &r.timings;
+    TrackingResult {
+        frame_width: w,
+        frame_height: h,
+        faces: r.faces.iter().map(Face::from).collect(),
+        timings: StageTimings {
+            convert_us: t.image_us,
+            detect_us: t.detect_us,
+            track_us: t.region_us.saturating_sub(t.detect_us),
+            landmarks_us: t.landmarks_us,
+            flow_us: t.flow_us,
+            fit_us: t.fit_us,
+            total_us: t.total_us,
+        },
+    }
+}
+
+struct State {
+    config: TrackerConfig,
+    video: Tracker,
+    /// For `process_image`: a separate image-mode tracker, made on first use, so stills never
+    /// disturb the video tracks.
+    stills: Option<Tracker>,
+}
+
+/// The face tracker (thread-safe: calls are serialised by a Mutex; feed it from one camera thread).
+#[derive(uniffi::Object)]
+pub struct FaceTracker {
+    state: Mutex<State>,
+}
+
+fn upright_size(desc: &FrameDesc) -> (u32, u32) {
+    if desc.rotation_degrees % 180 == 90 {
+        (desc.height, desc.width)
+    } else {
+        (desc.width, desc.height)
+    }
+}
+
+impl FaceTracker {
+    fn lock(&self) -> MutexGuard<'_, State> {
+        // A panic inside a call (caught by uniffi) poisons the lock; the state may be half-updated,
+        // so the tracks are dropped and the tracker goes on from a clean slate.
+        match self.state.lock() {
+            Ok(g) => g,
+            Err(poisoned) => {
+                let mut g = poisoned.into_inner();
+                g.video.reset();
+                g.stills = None;
+                self.state.clear_poison();
+                g
+            }
+        }
+    }
+}
+
+#[uniffi::export]
+impl FaceTracker {
+    /// Loads the models and builds a tracker.
+    ///
+    /// # Errors
+    /// `InvalidConfig` for out-of-range settings, `ModelLoad` if the embedded models cannot load.
+    #[uniffi::constructor]
+    pub fn new(config: TrackerConfig) -> Result<Arc<Self>, MonotrackError> {
+        let (core, det) = to_core(&config)?;
+        let video = Tracker::with_detector_config(core, det)?;
+        Ok(Arc::new(Self {
+            state: Mutex::new(State {
+                config,
+                video,
+                stills: None,
+            }),
+        }))
+    }
+
+    /// Processes one camera frame taken at `timestamp_ns` (video mode: strictly increasing).
+    ///
+    /// # Errors
+    /// `InvalidFrame` when the description does not match the bytes or the timestamp does not
+    /// increase in video mode.
+    pub fn process_frame(
+        &self,
+        bytes: &[u8],
+        desc: FrameDesc,
+        timestamp_ns: i64,
+    ) -> Result<TrackingResult, MonotrackError> {
+        let (w, h) = upright_size(&desc);
+        let frame = Frame::new(bytes, desc.try_into()?)?;
+        let mut g = self.lock();
+        let r = g
+            .video
+            .process_frame(&frame, timestamp_ns)
+            .map_err(|e| match e {
+                monotrack_core::Error::InvalidInput(msg) => MonotrackError::InvalidFrame { msg },
+                e => e.into(),
+            })?;
+        Ok(result(r, w, h))
+    }
+
+    /// Processes a still image: detection on every call, no video track touched.
+    ///
+    /// # Errors
+    /// `InvalidFrame` when the description does not match the bytes.
+    pub fn process_image(
+        &self,
+        bytes: &[u8],
+        desc: FrameDesc,
+    ) -> Result<TrackingResult, MonotrackError> {
+        let (w, h) = upright_size(&desc);
+        let frame = Frame::new(bytes, desc.try_into()?)?;
+        let mut g = self.lock();
+        if g.stills.is_none() {
+            let (mut core, det) = to_core(&g.config)?;
+            core.mode = core_track::Mode::Image;
+            g.stills = Some(Tracker::with_detector_config(core, det)?);
+        }
+        let stills = g.stills.as_mut().ok_or_else(|| MonotrackError::Internal {
+            msg: "no image tracker".into(),
+        })?;
+        let r = stills.process_frame(&frame, 0)?;
+        Ok(result(r, w, h))
+    }
+
+    /// Ends every track and forgets the user's shape and the timestamp history.
+    pub fn reset(&self) {
+        let mut g = self.lock();
+        g.video.reset();
+        if let Some(s) = g.stills.as_mut() {
+            s.reset();
+        }
+    }
+
+    /// The settings this tracker was built with.
+    pub fn config(&self) -> TrackerConfig {
+        self.lock().config
+    }
+}
+
+/// One stage's statistics, microseconds.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct StageStat {
+    /// `tracking/<stage>` or `redetect/<stage>`.
+    pub name: String,
+    /// Median.
+    pub median_us: f64,
+    /// 90th percentile.
+    pub p90_us: f64,
+    /// Mean.
+    pub mean_us: f64,
+}
+
+/// What `run_benchmark` measured.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct BenchReport {
+    /// Where it ran (OS / architecture).
+    pub device: String,
+    /// Iterations per path.
+    pub iterations: u32,
+    /// Faces found on the frame.
+    pub faces: u32,
+    /// Per-stage statistics: the tracking path, then the re-detect path.
+    pub stages: Vec<StageStat>,
+}
+
+/// The shared benchmark (the same code as `monotrack bench`): `iterations` tracked frames and
+/// `iterations` re-detect frames of this frame, per-stage median / p90 / mean.
+///
+/// # Errors
+/// `InvalidFrame` for a bad frame, `InvalidConfig` for 0 or too many iterations.
+#[uniffi::export]
+pub fn run_benchmark(
+    bytes: &[u8],
+    desc: FrameDesc,
+    iterations: u32,
+) -> Result<BenchReport, MonotrackError> {
+    let frame = Frame::new(bytes, desc.try_into()?)?;
+    let r = monotrack_core::bench::run_benchmark(
+        &frame,
+        iterations,
+        &core_track::TrackerConfig::default(),
+    )?;
+    Ok(BenchReport {
+        device: format!("{} {}", std::env::consts::OS, std::env::consts::ARCH),
+        iterations: r.iterations,
+        faces: r.faces,
+        stages: r
+            .stages
+            .into_iter()
+            .map(|s| StageStat {
+                name: s.name,
+                median_us: s.median_us,
+                p90_us: s.p90_us,
+                mean_us: s.mean_us,
+            })
+            .collect(),
+    })
+}
