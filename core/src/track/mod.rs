@@ -467,6 +467,8 @@ pub struct FaceTracker<D: RegionDetector, L: LandmarkEstimator> {
     frames_since_detect: u32,
     redetect_next: bool,
     detections: Vec<(Rect, f32)>,
+    /// Detections that passed M3's face check: (box, detector score, face confidence).
+    ranked: Vec<(Rect, f32, f32)>,
     pyr_prev: Pyramid,
     pyr_cur: Pyramid,
     luma: GrayImage,
@@ -503,6 +505,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             frames_since_detect: 0,
             redetect_next: true,
             detections: Vec::with_capacity(64),
+            ranked: Vec::with_capacity(64),
             pyr_prev: Pyramid::new(),
             pyr_cur: Pyramid::new(),
             luma: GrayImage::default(),
@@ -681,9 +684,19 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             self.detections.retain(|(r, s)| {
                 r.is_valid() && s.is_finite() && *s >= self.config.min_detection_score
             });
-            self.detections.sort_by(|a, b| b.1.total_cmp(&a.1));
-            for k in 0..self.detections.len() {
-                let (rect, score) = self.detections[k];
+            // Every detection must pass the classifier tracked windows are checked with (M3's
+            // face confidence), and they are ranked by it: the compact detector scores some
+            // face-like clutter and oversized boxes above the real face (core/models/MODEL_CARD.md).
+            self.ranked.clear();
+            for &(rect, score) in &self.detections {
+                let conf = self.estimator.face_confidence(image, &rect)?;
+                if conf >= self.config.min_face_confidence {
+                    self.ranked.push((rect, score, conf));
+                }
+            }
+            self.ranked.sort_by(|a, b| b.2.total_cmp(&a.2));
+            for k in 0..self.ranked.len() {
+                let (rect, score, _) = self.ranked[k];
                 // The track this detection belongs to, by overlap with its region this frame
                 // (video: the tracked window; image: last call's box).
                 let mut best: Option<(usize, f32)> = None;
@@ -709,16 +722,6 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                         }
                     }
                     None => {
-                        let free = self.slots.iter().any(|s| !s.active || (!video && !s.seen));
-                        // A new face must also pass the classifier tracked windows are checked
-                        // with (M3's face confidence): the compact detector scores some face-like
-                        // clutter above real faces (core/models/MODEL_CARD.md).
-                        if !free
-                            || self.estimator.face_confidence(image, &rect)?
-                                < self.config.min_face_confidence
-                        {
-                            continue;
-                        }
                         // A free slot; in image mode also one whose face was not seen this call.
                         if let Some(s) = self
                             .slots

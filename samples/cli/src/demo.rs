@@ -34,7 +34,8 @@ fn source() -> Result<GrayImage, String> {
     Ok(out)
 }
 
-/// Frame `t`: the source under a smooth similarity (centre path, scale 0.55–0.75, roll ±12°),
+/// Frame `t`: the source under a smooth similarity (centre path, scale 0.88–1.12 — a face of about
+/// 100 px, a front camera at arm's length — roll ±12°),
 /// bilinear, on a mid-grey background. Frame `cut` is blank (the face leaves the picture).
 fn render(src: &GrayImage, t: usize, cut: usize, out: &mut GrayImage) {
     out.resize(W, H);
@@ -43,7 +44,7 @@ fn render(src: &GrayImage, t: usize, cut: usize, out: &mut GrayImage) {
         return;
     }
     let tf = t as f64;
-    let scale = 0.65 + 0.1 * (tf * std::f64::consts::TAU / 90.0).sin();
+    let scale = 1.0 + 0.12 * (tf * std::f64::consts::TAU / 90.0).sin();
     let angle = (12.0f64).to_radians() * (tf * std::f64::consts::TAU / 120.0).sin();
     let cx = W as f64 / 2.0 + 90.0 * (tf * std::f64::consts::TAU / 100.0).sin();
     let cy = H as f64 / 2.0 + 40.0 * (tf * std::f64::consts::TAU / 70.0).sin();
