@@ -687,6 +687,8 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             // Every detection must pass the classifier tracked windows are checked with (M3's
             // face confidence), and they are ranked by it: the compact detector scores some
             // face-like clutter and oversized boxes above the real face (core/models/MODEL_CARD.md).
+            // Detector score order first, so equal confidences keep it (the sort below is stable).
+            self.detections.sort_by(|a, b| b.1.total_cmp(&a.1));
             self.ranked.clear();
             for &(rect, score) in &self.detections {
                 let conf = self.estimator.face_confidence(image, &rect)?;
