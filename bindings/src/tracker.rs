@@ -3,7 +3,7 @@
 //! benchmark (`monotrack_core::bench`) for the device benchmark apps.
 
 use crate::MonotrackError;
-use crate::types::{CameraIntrinsics, FrameDesc, HeadPose, NamedValue, Point2, Vec3};
+use crate::types::{CameraIntrinsics, FrameDesc, HeadPose, NamedValue, Point2, Vec3, named};
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::detect::DetectorConfig;
 use monotrack_core::image::{Frame, Rect as CoreRect};
@@ -181,17 +181,6 @@ fn v3(v: &[f32; 3]) -> Vec3 {
         y: f64::from(v[1]),
         z: f64::from(v[2]),
     }
-}
-
-fn named(names: &[&str], values: &[f64]) -> Vec<NamedValue> {
-    names
-        .iter()
-        .zip(values)
-        .map(|(n, v)| NamedValue {
-            name: (*n).to_string(),
-            value: *v,
-        })
-        .collect()
 }
 
 impl From<&TrackedFace> for Face {

@@ -205,7 +205,8 @@ pub struct FitResult {
     pub converged: bool,
 }
 
-fn named(names: &[&str], values: &[f64]) -> Vec<NamedValue> {
+/// Unit values paired with their names (shared by every record that lists units).
+pub(crate) fn named(names: &[&str], values: &[f64]) -> Vec<NamedValue> {
     names
         .iter()
         .zip(values)
