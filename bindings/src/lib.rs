@@ -7,14 +7,17 @@
 //! (uniffi catches unwinding panics; every profile keeps `panic = "unwind"`).
 //!
 //! Exported: the `FaceTracker` object (detector → fast tracker → M3 → flow filter → MSBP), the shared
-//! benchmark, frame conversion, default intrinsics, and the 3D fit of given landmarks (`API.md`).
+//! benchmark, frame conversion, default intrinsics, the 3D fit of given landmarks, and body fitting
+//! (floor calibration, `BodyTracker`) (`API.md`).
 
 uniffi::setup_scaffolding!();
 
+mod body;
 mod error;
 mod tracker;
 mod types;
 
+pub use body::*;
 pub use error::MonotrackError;
 pub use tracker::*;
 pub use types::*;

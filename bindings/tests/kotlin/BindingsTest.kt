@@ -3,7 +3,12 @@
 // and NV21 with padded strides, through every rotation; bad input must raise the typed exception.
 package io.monotrack.tests
 
+import io.monotrack.BodyJoint
+import io.monotrack.BodyJoint2d
+import io.monotrack.BodyTracker
 import io.monotrack.CameraIntrinsics
+import io.monotrack.calibrateFloorCamera
+import io.monotrack.defaultBodyTrackerConfig
 import io.monotrack.FaceState
 import io.monotrack.FaceTracker
 import io.monotrack.RunningMode
@@ -97,6 +102,22 @@ private fun exampleLandmarks(line: Int): List<Point2> {
     val body = text.substringAfter("\"landmarks68\": [").substringBefore("]]")
     val nums = Regex("-?[0-9.]+").findAll(body).map { it.value.toFloat() }.toList()
     return nums.chunked(2).map { Point2(it[0], it[1]) }
+}
+
+private fun numbers(text: String): List<Double> =
+    Regex("-?[0-9]+(\\.[0-9]+)?").findAll(text).map { it.value.toDouble() }.toList()
+
+/** CONTRACT joint names in `BodyJoint` order. */
+private val jointNames = listOf(
+    "pelvis", "thorax", "lshoulder", "lelbow", "lwrist", "rshoulder", "relbow", "rwrist",
+    "lhip", "lknee", "lankle", "rhip", "rknee", "rankle", "head",
+)
+
+/** `"name": [x, y(, z)]` pairs of the JSON object that follows `key` in `line`. */
+private fun namedPoints(line: String, key: String): Map<String, List<Double>> {
+    val obj = line.substringAfter("\"$key\": {").substringBefore("}")
+    return Regex("\"(\\w+)\": \\[([^\\]]*)\\]").findAll(obj)
+        .associate { it.groupValues[1] to numbers(it.groupValues[2]) }
 }
 
 class BindingsTest {
@@ -222,5 +243,46 @@ class BindingsTest {
         assertEquals(14, r.stages.size)
         assertTrue(r.stages.first { it.name == "tracking/landmarks" }.medianUs > 0.0, "a face was tracked")
         assertTrue(r.stages.first { it.name == "redetect/detect" }.medianUs > 0.0)
+    }
+
+    @Test
+    fun bodyTrackerFitsTheExampleSequence() {
+        // examples/body_fit_example.jsonl: a synthetic walk seen by a 760 px camera, 4 floor corners
+        // of a 2 x 3 m rectangle, exact 2D joints and the true 3D joints in the floor's frame.
+        val lines = File(root, "examples/body_fit_example.jsonl").readLines().filter { it.isNotBlank() }
+        val corners = numbers(lines[0].substringAfter("\"corners_px\": [").substringBefore("]]"))
+            .chunked(2).map { Point2(it[0].toFloat(), it[1].toFloat()) }
+        val size = numbers(lines[0].substringAfter("\"size_mm\": [").substringBefore("]"))
+        val cal = calibrateFloorCamera(corners, size[0], size[1], 640u, 480u, null)
+        assertEquals(760.0, cal.camera.intrinsics.fx, 8.0)
+        assertTrue(cal.rmsPx < 0.5, "corner rms ${cal.rmsPx}")
+        BodyTracker(cal.camera, defaultBodyTrackerConfig().copy(dimensionFrames = 3u)).use { t ->
+            for ((k, line) in lines.withIndex()) {
+                val joints = namedPoints(line, "joints2d").map { (name, p) ->
+                    BodyJoint2d(BodyJoint.values()[jointNames.indexOf(name)], Point2(p[0].toFloat(), p[1].toFloat()))
+                }
+                val r = t.fit(joints)
+                assertEquals(15, r.joints.size)
+                assertEquals(k >= 2, r.dimensionsEstimated, "frame $k")
+                assertTrue(r.reprojectionRmsPx < 2.0, "frame $k rms ${r.reprojectionRmsPx}")
+                if (k >= 2) {
+                    val truth = namedPoints(line.substringAfter("\"truth\""), "joints3d_mm")
+                    val err = r.joints.map { j ->
+                        val p = truth.getValue(jointNames[j.joint.ordinal])
+                        val d = listOf(j.positionMm.x - p[0], j.positionMm.y - p[1], j.positionMm.z - p[2])
+                        kotlin.math.sqrt(d.sumOf { it * it })
+                    }.average()
+                    // The CLI reaches 40-85 mm on these frames; a wrong fit is off by metres.
+                    assertTrue(err < 120.0, "frame $k mean joint error $err mm")
+                }
+            }
+            assertThrows(MonotrackException.InvalidConfig::class.java) { t.fit(emptyList()) }
+        }
+        assertThrows(MonotrackException.InvalidConfig::class.java) {
+            calibrateFloorCamera(corners.take(3), size[0], size[1], 640u, 480u, null)
+        }
+        assertThrows(MonotrackException.InvalidConfig::class.java) {
+            BodyTracker(cal.camera, defaultBodyTrackerConfig().copy(dimensionFrames = 0u))
+        }
     }
 }

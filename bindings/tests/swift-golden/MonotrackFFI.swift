@@ -650,6 +650,183 @@ fileprivate struct FfiConverterData: FfiConverterRustBuffer {
 
 
 /**
+ * Fits a body seen by one calibrated camera, frame after frame. Thread-safe (state behind a
+ * mutex); one instance per person and camera.
+ */
+public protocol BodyTrackerProtocol: AnyObject, Sendable {
+    
+    /**
+     * Fits one frame's observed joints (at least the torso: pelvis or both hips, thorax or both
+     * shoulders). On the `dimension_frames`-th frame the dimensions are estimated over the frames
+     * so far (pose + dimensions, thesis Alg. 10) and held afterwards.
+     *
+     * # Errors
+     * `InvalidConfig` for a joint given twice, non-finite positions, or too few joints to place
+     * the torso.
+     */
+    func fit(joints: [BodyJoint2d]) throws  -> BodyFitResult
+    
+    /**
+     * Forgets the estimated dimensions (a new person): the next frames estimate them again.
+     */
+    func reset() 
+    
+}
+/**
+ * Fits a body seen by one calibrated camera, frame after frame. Thread-safe (state behind a
+ * mutex); one instance per person and camera.
+ */
+open class BodyTracker: BodyTrackerProtocol, @unchecked Sendable {
+    fileprivate let handle: UInt64
+
+    /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public struct NoHandle {
+        public init() {}
+    }
+
+    // TODO: We'd like this to be `private` but for Swifty reasons,
+    // we can't implement `FfiConverter` without making this `required` and we can't
+    // make it `required` without making it `public`.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    required public init(unsafeFromHandle handle: UInt64) {
+        self.handle = handle
+    }
+
+    // This constructor can be used to instantiate a fake object.
+    // - Parameter noHandle: Placeholder value so we can have a constructor separate from the default empty one that may be implemented for classes extending [FFIObject].
+    //
+    // - Warning:
+    //     Any object instantiated with this constructor cannot be passed to an actual Rust-backed object. Since there isn't a backing handle the FFI lower functions will crash.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public init(noHandle: NoHandle) {
+        self.handle = 0
+    }
+
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public func uniffiCloneHandle() -> UInt64 {
+        return try! rustCall { uniffi_monotrack_ffi_fn_clone_bodytracker(self.handle, $0) }
+    }
+    /**
+     * A tracker for `camera` (from `calibrate_floor_camera` or known) with `config`.
+     *
+     * # Errors
+     * `InvalidConfig` for a camera whose rotation is not a rotation, bad intrinsics, or
+     * `dimension_frames` of 0.
+     */
+public convenience init(camera: BodyCameraPose, config: BodyTrackerConfig)throws  {
+    let handle =
+        try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_constructor_bodytracker_new(
+        FfiConverterTypeBodyCameraPose_lower(camera),
+        FfiConverterTypeBodyTrackerConfig_lower(config),uniffiCallStatus
+    )
+}
+    self.init(unsafeFromHandle: handle)
+}
+
+    deinit {
+        if handle == 0 {
+            // Mock objects have handle=0 don't try to free them
+            return
+        }
+
+        try! rustCall { uniffi_monotrack_ffi_fn_free_bodytracker(handle, $0) }
+    }
+
+    
+
+    
+    /**
+     * Fits one frame's observed joints (at least the torso: pelvis or both hips, thorax or both
+     * shoulders). On the `dimension_frames`-th frame the dimensions are estimated over the frames
+     * so far (pose + dimensions, thesis Alg. 10) and held afterwards.
+     *
+     * # Errors
+     * `InvalidConfig` for a joint given twice, non-finite positions, or too few joints to place
+     * the torso.
+     */
+open func fit(joints: [BodyJoint2d])throws  -> BodyFitResult  {
+    return try  FfiConverterTypeBodyFitResult_lift(try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_bodytracker_fit(
+            self.uniffiCloneHandle(),
+        FfiConverterSequenceTypeBodyJoint2d.lower(joints),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Forgets the estimated dimensions (a new person): the next frames estimate them again.
+     */
+open func reset()  {try! rustCall() {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_bodytracker_reset(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+}
+}
+    
+
+    
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeBodyTracker: FfiConverter {
+    typealias FfiType = UInt64
+    typealias SwiftType = BodyTracker
+
+    public static func lift(_ handle: UInt64) throws -> BodyTracker {
+        return BodyTracker(unsafeFromHandle: handle)
+    }
+
+    public static func lower(_ value: BodyTracker) -> UInt64 {
+        return value.uniffiCloneHandle()
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> BodyTracker {
+        let handle: UInt64 = try readInt(&buf)
+        return try lift(handle)
+    }
+
+    public static func write(_ value: BodyTracker, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyTracker_lift(_ handle: UInt64) throws -> BodyTracker {
+    return try FfiConverterTypeBodyTracker.lift(handle)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyTracker_lower(_ value: BodyTracker) -> UInt64 {
+    return FfiConverterTypeBodyTracker.lower(value)
+}
+
+
+
+
+
+
+/**
  * The face tracker (thread-safe: calls are serialised by a Mutex; feed it from one camera thread).
  */
 public protocol FaceTrackerProtocol: AnyObject, Sendable {
@@ -942,6 +1119,425 @@ public func FfiConverterTypeBenchReport_lift(_ buf: RustBuffer) throws -> BenchR
 #endif
 public func FfiConverterTypeBenchReport_lower(_ value: BenchReport) -> RustBuffer {
     return FfiConverterTypeBenchReport.lower(value)
+}
+
+
+/**
+ * A calibrated camera in a world frame whose floor is z = 0 with z up: X_cam = R·X + t.
+ */
+public struct BodyCameraPose: Equatable, Hashable {
+    /**
+     * Intrinsics, pixels.
+     */
+    public var intrinsics: CameraIntrinsics
+    /**
+     * World → camera rotation R, 9 values row-major.
+     */
+    public var rotation: [Double]
+    /**
+     * World → camera translation t, millimetres.
+     */
+    public var translationMm: Vec3
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Intrinsics, pixels.
+         */intrinsics: CameraIntrinsics, 
+        /**
+         * World → camera rotation R, 9 values row-major.
+         */rotation: [Double], 
+        /**
+         * World → camera translation t, millimetres.
+         */translationMm: Vec3) {
+        self.intrinsics = intrinsics
+        self.rotation = rotation
+        self.translationMm = translationMm
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension BodyCameraPose: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeBodyCameraPose: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> BodyCameraPose {
+        return
+            try BodyCameraPose(
+                intrinsics: FfiConverterTypeCameraIntrinsics.read(from: &buf), 
+                rotation: FfiConverterSequenceDouble.read(from: &buf), 
+                translationMm: FfiConverterTypeVec3.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: BodyCameraPose, into buf: inout [UInt8]) {
+        FfiConverterTypeCameraIntrinsics.write(value.intrinsics, into: &buf)
+        FfiConverterSequenceDouble.write(value.rotation, into: &buf)
+        FfiConverterTypeVec3.write(value.translationMm, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyCameraPose_lift(_ buf: RustBuffer) throws -> BodyCameraPose {
+    return try FfiConverterTypeBodyCameraPose.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyCameraPose_lower(_ value: BodyCameraPose) -> RustBuffer {
+    return FfiConverterTypeBodyCameraPose.lower(value)
+}
+
+
+/**
+ * One frame's body fit.
+ */
+public struct BodyFitResult: Equatable, Hashable {
+    /**
+     * The 15 joints, world frame (floor z = 0, z up), mm.
+     */
+    public var joints: [BodyJoint3d]
+    /**
+     * The body-part lengths used, mm (snake_case names as in the CLI's `dimensions_mm`).
+     */
+    public var dimensionsMm: [NamedValue]
+    /**
+     * Whether `dimensions_mm` are this body's estimate (false: mean adult dimensions, still
+     * collecting frames).
+     */
+    public var dimensionsEstimated: Bool
+    /**
+     * RMS reprojection error over the observed joints, pixels.
+     */
+    public var reprojectionRmsPx: Double
+    /**
+     * The foot assumed on the floor, if any.
+     */
+    public var contact: BodyJoint?
+    /**
+     * Time of the pose fit, µs.
+     */
+    public var poseUs: UInt64
+    /**
+     * Time of the dimension estimation if it ran on this frame (else 0), µs.
+     */
+    public var dimensionsUs: UInt64
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The 15 joints, world frame (floor z = 0, z up), mm.
+         */joints: [BodyJoint3d], 
+        /**
+         * The body-part lengths used, mm (snake_case names as in the CLI's `dimensions_mm`).
+         */dimensionsMm: [NamedValue], 
+        /**
+         * Whether `dimensions_mm` are this body's estimate (false: mean adult dimensions, still
+         * collecting frames).
+         */dimensionsEstimated: Bool, 
+        /**
+         * RMS reprojection error over the observed joints, pixels.
+         */reprojectionRmsPx: Double, 
+        /**
+         * The foot assumed on the floor, if any.
+         */contact: BodyJoint?, 
+        /**
+         * Time of the pose fit, µs.
+         */poseUs: UInt64, 
+        /**
+         * Time of the dimension estimation if it ran on this frame (else 0), µs.
+         */dimensionsUs: UInt64) {
+        self.joints = joints
+        self.dimensionsMm = dimensionsMm
+        self.dimensionsEstimated = dimensionsEstimated
+        self.reprojectionRmsPx = reprojectionRmsPx
+        self.contact = contact
+        self.poseUs = poseUs
+        self.dimensionsUs = dimensionsUs
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension BodyFitResult: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeBodyFitResult: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> BodyFitResult {
+        return
+            try BodyFitResult(
+                joints: FfiConverterSequenceTypeBodyJoint3d.read(from: &buf), 
+                dimensionsMm: FfiConverterSequenceTypeNamedValue.read(from: &buf), 
+                dimensionsEstimated: FfiConverterBool.read(from: &buf), 
+                reprojectionRmsPx: FfiConverterDouble.read(from: &buf), 
+                contact: FfiConverterOptionTypeBodyJoint.read(from: &buf), 
+                poseUs: FfiConverterUInt64.read(from: &buf), 
+                dimensionsUs: FfiConverterUInt64.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: BodyFitResult, into buf: inout [UInt8]) {
+        FfiConverterSequenceTypeBodyJoint3d.write(value.joints, into: &buf)
+        FfiConverterSequenceTypeNamedValue.write(value.dimensionsMm, into: &buf)
+        FfiConverterBool.write(value.dimensionsEstimated, into: &buf)
+        FfiConverterDouble.write(value.reprojectionRmsPx, into: &buf)
+        FfiConverterOptionTypeBodyJoint.write(value.contact, into: &buf)
+        FfiConverterUInt64.write(value.poseUs, into: &buf)
+        FfiConverterUInt64.write(value.dimensionsUs, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyFitResult_lift(_ buf: RustBuffer) throws -> BodyFitResult {
+    return try FfiConverterTypeBodyFitResult.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyFitResult_lower(_ value: BodyFitResult) -> RustBuffer {
+    return FfiConverterTypeBodyFitResult.lower(value)
+}
+
+
+/**
+ * One observed 2D joint, pixels (CONTRACT image convention). Joints not observed are left out.
+ */
+public struct BodyJoint2d: Equatable, Hashable {
+    /**
+     * Which joint.
+     */
+    public var joint: BodyJoint
+    /**
+     * Position, pixels.
+     */
+    public var position: Point2
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Which joint.
+         */joint: BodyJoint, 
+        /**
+         * Position, pixels.
+         */position: Point2) {
+        self.joint = joint
+        self.position = position
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension BodyJoint2d: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeBodyJoint2d: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> BodyJoint2d {
+        return
+            try BodyJoint2d(
+                joint: FfiConverterTypeBodyJoint.read(from: &buf), 
+                position: FfiConverterTypePoint2.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: BodyJoint2d, into buf: inout [UInt8]) {
+        FfiConverterTypeBodyJoint.write(value.joint, into: &buf)
+        FfiConverterTypePoint2.write(value.position, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyJoint2d_lift(_ buf: RustBuffer) throws -> BodyJoint2d {
+    return try FfiConverterTypeBodyJoint2d.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyJoint2d_lower(_ value: BodyJoint2d) -> RustBuffer {
+    return FfiConverterTypeBodyJoint2d.lower(value)
+}
+
+
+/**
+ * One fitted 3D joint, world frame, millimetres.
+ */
+public struct BodyJoint3d: Equatable, Hashable {
+    /**
+     * Which joint.
+     */
+    public var joint: BodyJoint
+    /**
+     * Position, mm.
+     */
+    public var positionMm: Vec3
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Which joint.
+         */joint: BodyJoint, 
+        /**
+         * Position, mm.
+         */positionMm: Vec3) {
+        self.joint = joint
+        self.positionMm = positionMm
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension BodyJoint3d: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeBodyJoint3d: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> BodyJoint3d {
+        return
+            try BodyJoint3d(
+                joint: FfiConverterTypeBodyJoint.read(from: &buf), 
+                positionMm: FfiConverterTypeVec3.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: BodyJoint3d, into buf: inout [UInt8]) {
+        FfiConverterTypeBodyJoint.write(value.joint, into: &buf)
+        FfiConverterTypeVec3.write(value.positionMm, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyJoint3d_lift(_ buf: RustBuffer) throws -> BodyJoint3d {
+    return try FfiConverterTypeBodyJoint3d.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyJoint3d_lower(_ value: BodyJoint3d) -> RustBuffer {
+    return FfiConverterTypeBodyJoint3d.lower(value)
+}
+
+
+/**
+ * `BodyTracker` settings.
+ */
+public struct BodyTrackerConfig: Equatable, Hashable {
+    /**
+     * Frames over which the body's dimensions are estimated before being held (≥ 1). Until then
+     * frames are fitted with mean adult dimensions.
+     */
+    public var dimensionFrames: UInt32
+    /**
+     * How the joints are defined.
+     */
+    public var convention: BodyConvention
+    /**
+     * Assume the lower foot touches the floor (standing, walking; false for jumps or sitting).
+     */
+    public var assumeContact: Bool
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Frames over which the body's dimensions are estimated before being held (≥ 1). Until then
+         * frames are fitted with mean adult dimensions.
+         */dimensionFrames: UInt32, 
+        /**
+         * How the joints are defined.
+         */convention: BodyConvention, 
+        /**
+         * Assume the lower foot touches the floor (standing, walking; false for jumps or sitting).
+         */assumeContact: Bool) {
+        self.dimensionFrames = dimensionFrames
+        self.convention = convention
+        self.assumeContact = assumeContact
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension BodyTrackerConfig: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeBodyTrackerConfig: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> BodyTrackerConfig {
+        return
+            try BodyTrackerConfig(
+                dimensionFrames: FfiConverterUInt32.read(from: &buf), 
+                convention: FfiConverterTypeBodyConvention.read(from: &buf), 
+                assumeContact: FfiConverterBool.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: BodyTrackerConfig, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.dimensionFrames, into: &buf)
+        FfiConverterTypeBodyConvention.write(value.convention, into: &buf)
+        FfiConverterBool.write(value.assumeContact, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyTrackerConfig_lift(_ buf: RustBuffer) throws -> BodyTrackerConfig {
+    return try FfiConverterTypeBodyTrackerConfig.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyTrackerConfig_lower(_ value: BodyTrackerConfig) -> RustBuffer {
+    return FfiConverterTypeBodyTrackerConfig.lower(value)
 }
 
 
@@ -1319,6 +1915,85 @@ public func FfiConverterTypeFitResult_lift(_ buf: RustBuffer) throws -> FitResul
 #endif
 public func FfiConverterTypeFitResult_lower(_ value: FitResult) -> RustBuffer {
     return FfiConverterTypeFitResult.lower(value)
+}
+
+
+/**
+ * A floor calibration's result.
+ */
+public struct FloorCalibrationResult: Equatable, Hashable {
+    /**
+     * The camera, in the floor rectangle's frame (origin at corner 0, x towards corner 1, z up).
+     */
+    public var camera: BodyCameraPose
+    /**
+     * RMS reprojection error of the four corners, pixels.
+     */
+    public var rmsPx: Double
+    /**
+     * Whether the corners ran clockwise seen from above.
+     */
+    public var flipped: Bool
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The camera, in the floor rectangle's frame (origin at corner 0, x towards corner 1, z up).
+         */camera: BodyCameraPose, 
+        /**
+         * RMS reprojection error of the four corners, pixels.
+         */rmsPx: Double, 
+        /**
+         * Whether the corners ran clockwise seen from above.
+         */flipped: Bool) {
+        self.camera = camera
+        self.rmsPx = rmsPx
+        self.flipped = flipped
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension FloorCalibrationResult: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeFloorCalibrationResult: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> FloorCalibrationResult {
+        return
+            try FloorCalibrationResult(
+                camera: FfiConverterTypeBodyCameraPose.read(from: &buf), 
+                rmsPx: FfiConverterDouble.read(from: &buf), 
+                flipped: FfiConverterBool.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: FloorCalibrationResult, into buf: inout [UInt8]) {
+        FfiConverterTypeBodyCameraPose.write(value.camera, into: &buf)
+        FfiConverterDouble.write(value.rmsPx, into: &buf)
+        FfiConverterBool.write(value.flipped, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFloorCalibrationResult_lift(_ buf: RustBuffer) throws -> FloorCalibrationResult {
+    return try FfiConverterTypeFloorCalibrationResult.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFloorCalibrationResult_lower(_ value: FloorCalibrationResult) -> RustBuffer {
+    return FfiConverterTypeFloorCalibrationResult.lower(value)
 }
 
 
@@ -2543,6 +3218,286 @@ public func FfiConverterTypeVec3_lower(_ value: Vec3) -> RustBuffer {
 
 
 /**
+ * How the caller's joints are defined.
+ */
+
+public enum BodyConvention: Equatable, Hashable {
+    
+    /**
+     * HumanEva-I (CONTRACT.md's `body-fit`).
+     */
+    case humanEva
+    /**
+     * Human3.6M (pelvis at the hips' midpoint).
+     */
+    case human36m
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension BodyConvention: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeBodyConvention: FfiConverterRustBuffer {
+    typealias SwiftType = BodyConvention
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> BodyConvention {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .humanEva
+        
+        case 2: return .human36m
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: BodyConvention, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .humanEva:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .human36m:
+            writeInt(&buf, Int32(2))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyConvention_lift(_ buf: RustBuffer) throws -> BodyConvention {
+    return try FfiConverterTypeBodyConvention.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyConvention_lower(_ value: BodyConvention) -> RustBuffer {
+    return FfiConverterTypeBodyConvention.lower(value)
+}
+
+
+
+/**
+ * The 15 body joints (CONTRACT.md names; HumanEva-I definitions by default).
+ */
+
+public enum BodyJoint: Equatable, Hashable {
+    
+    /**
+     * Pelvis (the root).
+     */
+    case pelvis
+    /**
+     * Top of the spine.
+     */
+    case thorax
+    /**
+     * Left shoulder.
+     */
+    case lShoulder
+    /**
+     * Left elbow.
+     */
+    case lElbow
+    /**
+     * Left wrist.
+     */
+    case lWrist
+    /**
+     * Right shoulder.
+     */
+    case rShoulder
+    /**
+     * Right elbow.
+     */
+    case rElbow
+    /**
+     * Right wrist.
+     */
+    case rWrist
+    /**
+     * Left hip.
+     */
+    case lHip
+    /**
+     * Left knee.
+     */
+    case lKnee
+    /**
+     * Left ankle.
+     */
+    case lAnkle
+    /**
+     * Right hip.
+     */
+    case rHip
+    /**
+     * Right knee.
+     */
+    case rKnee
+    /**
+     * Right ankle.
+     */
+    case rAnkle
+    /**
+     * Head.
+     */
+    case head
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension BodyJoint: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeBodyJoint: FfiConverterRustBuffer {
+    typealias SwiftType = BodyJoint
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> BodyJoint {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .pelvis
+        
+        case 2: return .thorax
+        
+        case 3: return .lShoulder
+        
+        case 4: return .lElbow
+        
+        case 5: return .lWrist
+        
+        case 6: return .rShoulder
+        
+        case 7: return .rElbow
+        
+        case 8: return .rWrist
+        
+        case 9: return .lHip
+        
+        case 10: return .lKnee
+        
+        case 11: return .lAnkle
+        
+        case 12: return .rHip
+        
+        case 13: return .rKnee
+        
+        case 14: return .rAnkle
+        
+        case 15: return .head
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: BodyJoint, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .pelvis:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .thorax:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .lShoulder:
+            writeInt(&buf, Int32(3))
+        
+        
+        case .lElbow:
+            writeInt(&buf, Int32(4))
+        
+        
+        case .lWrist:
+            writeInt(&buf, Int32(5))
+        
+        
+        case .rShoulder:
+            writeInt(&buf, Int32(6))
+        
+        
+        case .rElbow:
+            writeInt(&buf, Int32(7))
+        
+        
+        case .rWrist:
+            writeInt(&buf, Int32(8))
+        
+        
+        case .lHip:
+            writeInt(&buf, Int32(9))
+        
+        
+        case .lKnee:
+            writeInt(&buf, Int32(10))
+        
+        
+        case .lAnkle:
+            writeInt(&buf, Int32(11))
+        
+        
+        case .rHip:
+            writeInt(&buf, Int32(12))
+        
+        
+        case .rKnee:
+            writeInt(&buf, Int32(13))
+        
+        
+        case .rAnkle:
+            writeInt(&buf, Int32(14))
+        
+        
+        case .head:
+            writeInt(&buf, Int32(15))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyJoint_lift(_ buf: RustBuffer) throws -> BodyJoint {
+    return try FfiConverterTypeBodyJoint.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeBodyJoint_lower(_ value: BodyJoint) -> RustBuffer {
+    return FfiConverterTypeBodyJoint.lower(value)
+}
+
+
+
+/**
  * How a face's region was found this frame.
  */
 
@@ -3052,6 +4007,30 @@ fileprivate struct FfiConverterOptionTypeCameraIntrinsics: FfiConverterRustBuffe
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionTypeBodyJoint: FfiConverterRustBuffer {
+    typealias SwiftType = BodyJoint?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeBodyJoint.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeBodyJoint.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceFloat: FfiConverterRustBuffer {
     typealias SwiftType = [Float]
 
@@ -3094,6 +4073,56 @@ fileprivate struct FfiConverterSequenceDouble: FfiConverterRustBuffer {
         seq.reserveCapacity(Int(len))
         for _ in 0 ..< len {
             seq.append(try FfiConverterDouble.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeBodyJoint2d: FfiConverterRustBuffer {
+    typealias SwiftType = [BodyJoint2d]
+
+    public static func write(_ value: [BodyJoint2d], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeBodyJoint2d.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [BodyJoint2d] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [BodyJoint2d]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeBodyJoint2d.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeBodyJoint3d: FfiConverterRustBuffer {
+    typealias SwiftType = [BodyJoint3d]
+
+    public static func write(_ value: [BodyJoint3d], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeBodyJoint3d.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [BodyJoint3d] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [BodyJoint3d]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeBodyJoint3d.read(from: &buf))
         }
         return seq
     }
@@ -3262,6 +4291,38 @@ public func sdkVersion() -> String  {
 })
 }
 /**
+ * Calibrates the camera from the four image corners of a floor rectangle (thesis 5.1.1): corner 1
+ * is `width_mm` from corner 0, corner 2 is `depth_mm` from corner 1. With `intrinsics` only the
+ * pose is solved; without, the focal length too, with the principal point at the image centre.
+ *
+ * # Errors
+ * `InvalidConfig` for not exactly four corners, non-finite or degenerate corners, sizes that are
+ * not positive, an empty image, or corners that admit no camera.
+ */
+public func calibrateFloorCamera(cornersPx: [Point2], widthMm: Double, depthMm: Double, imageWidth: UInt32, imageHeight: UInt32, intrinsics: CameraIntrinsics?)throws  -> FloorCalibrationResult  {
+    return try  FfiConverterTypeFloorCalibrationResult_lift(try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_func_calibrate_floor_camera(
+        FfiConverterSequenceTypePoint2.lower(cornersPx),
+        FfiConverterDouble.lower(widthMm),
+        FfiConverterDouble.lower(depthMm),
+        FfiConverterUInt32.lower(imageWidth),
+        FfiConverterUInt32.lower(imageHeight),
+        FfiConverterOptionTypeCameraIntrinsics.lower(intrinsics),uniffiCallStatus
+    )
+})
+}
+/**
+ * `BodyTrackerConfig` defaults: 5 dimension frames, HumanEva joints, floor contact.
+ */
+public func defaultBodyTrackerConfig() -> BodyTrackerConfig  {
+    return try!  FfiConverterTypeBodyTrackerConfig_lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_func_default_body_tracker_config(uniffiCallStatus
+    )
+})
+}
+/**
  * The default settings: video mode, one face, default intrinsics, filter on.
  */
 public func defaultTrackerConfig() -> TrackerConfig  {
@@ -3318,10 +4379,22 @@ private let initializationResult: InitializationResult = {
     if (uniffi_monotrack_ffi_checksum_func_sdk_version() != 62043) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_monotrack_ffi_checksum_func_calibrate_floor_camera() != 61981) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_func_default_body_tracker_config() != 23637) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_monotrack_ffi_checksum_func_default_tracker_config() != 13976) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_func_run_benchmark() != 17130) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_bodytracker_fit() != 61277) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_bodytracker_reset() != 62891) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_method_facetracker_config() != 53659) {
@@ -3334,6 +4407,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_method_facetracker_reset() != 56240) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_constructor_bodytracker_new() != 21048) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_constructor_facetracker_new() != 34358) {

@@ -243,6 +243,31 @@ typedef void (*UniffiForeignFutureCompleteVoid)(uint64_t, UniffiForeignFutureRes
     );
 
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_BODYTRACKER
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_BODYTRACKER
+uint64_t uniffi_monotrack_ffi_fn_clone_bodytracker(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FREE_BODYTRACKER
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FREE_BODYTRACKER
+void uniffi_monotrack_ffi_fn_free_bodytracker(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CONSTRUCTOR_BODYTRACKER_NEW
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CONSTRUCTOR_BODYTRACKER_NEW
+uint64_t uniffi_monotrack_ffi_fn_constructor_bodytracker_new(RustBuffer camera, RustBuffer config, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_BODYTRACKER_FIT
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_BODYTRACKER_FIT
+RustBuffer uniffi_monotrack_ffi_fn_method_bodytracker_fit(uint64_t ptr, RustBuffer joints, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_BODYTRACKER_RESET
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_BODYTRACKER_RESET
+void uniffi_monotrack_ffi_fn_method_bodytracker_reset(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_FACETRACKER
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_FACETRACKER
 uint64_t uniffi_monotrack_ffi_fn_clone_facetracker(uint64_t handle, RustCallStatus *_Nonnull out_status
@@ -296,6 +321,17 @@ RustBuffer uniffi_monotrack_ffi_fn_func_luma_image(ForeignBytes bytes, RustBuffe
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_SDK_VERSION
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_SDK_VERSION
 RustBuffer uniffi_monotrack_ffi_fn_func_sdk_version(RustCallStatus *_Nonnull out_status
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_CALIBRATE_FLOOR_CAMERA
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_CALIBRATE_FLOOR_CAMERA
+RustBuffer uniffi_monotrack_ffi_fn_func_calibrate_floor_camera(RustBuffer corners_px, double width_mm, double depth_mm, uint32_t image_width, uint32_t image_height, RustBuffer intrinsics, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_DEFAULT_BODY_TRACKER_CONFIG
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_DEFAULT_BODY_TRACKER_CONFIG
+RustBuffer uniffi_monotrack_ffi_fn_func_default_body_tracker_config(RustCallStatus *_Nonnull out_status
     
 );
 #endif
@@ -594,6 +630,18 @@ uint16_t uniffi_monotrack_ffi_checksum_func_sdk_version(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_CALIBRATE_FLOOR_CAMERA
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_CALIBRATE_FLOOR_CAMERA
+uint16_t uniffi_monotrack_ffi_checksum_func_calibrate_floor_camera(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_DEFAULT_BODY_TRACKER_CONFIG
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_DEFAULT_BODY_TRACKER_CONFIG
+uint16_t uniffi_monotrack_ffi_checksum_func_default_body_tracker_config(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_DEFAULT_TRACKER_CONFIG
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_DEFAULT_TRACKER_CONFIG
 uint16_t uniffi_monotrack_ffi_checksum_func_default_tracker_config(void
@@ -603,6 +651,18 @@ uint16_t uniffi_monotrack_ffi_checksum_func_default_tracker_config(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_RUN_BENCHMARK
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_RUN_BENCHMARK
 uint16_t uniffi_monotrack_ffi_checksum_func_run_benchmark(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_BODYTRACKER_FIT
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_BODYTRACKER_FIT
+uint16_t uniffi_monotrack_ffi_checksum_method_bodytracker_fit(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_BODYTRACKER_RESET
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_BODYTRACKER_RESET
+uint16_t uniffi_monotrack_ffi_checksum_method_bodytracker_reset(void
     
 );
 #endif
@@ -627,6 +687,12 @@ uint16_t uniffi_monotrack_ffi_checksum_method_facetracker_process_image(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_RESET
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_RESET
 uint16_t uniffi_monotrack_ffi_checksum_method_facetracker_reset(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_CONSTRUCTOR_BODYTRACKER_NEW
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_CONSTRUCTOR_BODYTRACKER_NEW
+uint16_t uniffi_monotrack_ffi_checksum_constructor_bodytracker_new(void
     
 );
 #endif
