@@ -21,3 +21,4 @@ pub fn shared_data_or_skip(test: &str) -> Option<PathBuf> {
 }
 
 pub mod synth;
+pub mod trackeval;

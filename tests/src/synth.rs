@@ -186,6 +186,15 @@ pub struct SeqConfig {
     pub min_period_frames: f32,
     /// Seed.
     pub seed: u64,
+    /// Standard deviation of Gaussian sensor noise added to every pixel, grey levels, fresh per
+    /// frame (0 = none). Without it a still face gives identical frames, and landmark jitter on
+    /// still segments would measure nothing for a deterministic estimator.
+    pub noise_sigma: f32,
+    /// Draw only the source pixels within this margin (a fraction of the face box's larger side)
+    /// around the annotated face, background elsewhere; `None` draws the whole source image. Source
+    /// images may show other, unannotated people, whom a detector rightly finds but the truth does
+    /// not know.
+    pub crop_margin: Option<f32>,
 }
 
 impl Default for SeqConfig {
@@ -202,6 +211,8 @@ impl Default for SeqConfig {
             rotation_deg: 12.0,
             min_period_frames: 60.0,
             seed: 7,
+            noise_sigma: 0.0,
+            crop_margin: None,
         }
     }
 }
@@ -399,6 +410,21 @@ impl Sequence {
         image.data_mut().copy_from_slice(self.background.data());
         let src = &face.image;
         let (sw, sh) = (src.width() as f32, src.height() as f32);
+        // Source region drawn: the whole image, or the face box with a margin.
+        let (qx0, qy0, qx1, qy1) = match cfg.crop_margin {
+            Some(m) => {
+                let d = m * src_box.w.max(src_box.h);
+                (
+                    src_box.x - d - 0.5,
+                    src_box.y - d - 0.5,
+                    src_box.x + src_box.w + d - 0.5,
+                    src_box.y + src_box.h + d - 0.5,
+                )
+            }
+            None => (0.0, 0.0, sw - 1.0, sh - 1.0),
+        };
+        let (qx0, qy0) = (qx0.max(0.0), qy0.max(0.0));
+        let (qx1, qy1) = (qx1.min(sw - 1.0), qy1.min(sh - 1.0));
         let inv = 1.0 / s;
         let out = image.data_mut();
         for y in 0..cfg.height {
@@ -408,7 +434,7 @@ impl Sequence {
                 // Inverse: q = Rᵀ·(p − c)/s + qc, then to pixel-index coordinates (− 0.5).
                 let qx = inv * (cos * px + sin * py) + qc[0] - 0.5;
                 let qy = inv * (-sin * px + cos * py) + qc[1] - 0.5;
-                if qx < 0.0 || qy < 0.0 || qx >= sw - 1.0 || qy >= sh - 1.0 {
+                if qx < qx0 || qy < qy0 || qx >= qx1 || qy >= qy1 {
                     continue;
                 }
                 let (ix, iy) = (qx as usize, qy as usize);
@@ -422,6 +448,13 @@ impl Sequence {
                 let v =
                     (1.0 - fy) * ((1.0 - fx) * v00 + fx * v10) + fy * ((1.0 - fx) * v01 + fx * v11);
                 out[y * cfg.width + x] = (v + 0.5) as u8;
+            }
+        }
+        if cfg.noise_sigma > 0.0 {
+            let mut rng = SplitMix::new(cfg.seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            for v in out.iter_mut() {
+                let n = f32::from(*v) + cfg.noise_sigma * rng.normal();
+                *v = n.round().clamp(0.0, 255.0) as u8;
             }
         }
         truth
@@ -534,7 +567,12 @@ impl LandmarkEstimator for OracleLandmarks {
         Ok(())
     }
 
-    fn face_confidence(&mut self, _image: &GrayImage, face: &Rect) -> Result<f32> {
+    fn face_confidence(
+        &mut self,
+        _image: &GrayImage,
+        face: &Rect,
+        _out: &mut FaceLandmarks,
+    ) -> Result<f32> {
         self.confidence_calls += 1;
         Ok(if face.iou(&self.truth.get().face_box) >= ORACLE_MIN_IOU {
             0.95

@@ -579,20 +579,53 @@ impl M3 {
         Ok(self.run_level1(image, face)?.face_prob)
     }
 
-    /// Landmarks, yaw, face confidence, gestures and gaze of the face in `face` (one call per
-    /// face), written into `out`.
+    /// Level 1 alone on `face`: writes its points (at their 68-point indices), the yaw
+    /// probabilities and the face probability into `out` and returns the face probability. The
+    /// tracker checks a window with it and then, if the window holds a face, finishes the same
+    /// face with [`M3::refine`] instead of running level 1 twice.
     ///
     /// # Errors
-    /// [`Error::InvalidInput`] for an empty image or a non-finite / empty box;
-    /// [`Error::Internal`] if a network fails to run or level 1 gives non-finite points.
-    pub fn estimate(
+    /// As [`M3::face_confidence`].
+    pub fn level1(
         &mut self,
         image: &GrayImage,
         face: &Rect,
         out: &mut FaceLandmarks,
-    ) -> Result<()> {
+    ) -> Result<f32> {
         let l1 = self.run_level1(image, face)?;
-        let yaw = l1.yaw;
+        for &i in &self.cfg.level1.indices68 {
+            out.points[i] = [self.pts[i][0] as f32, self.pts[i][1] as f32];
+        }
+        out.yaw_probs = l1.yaw;
+        out.face_prob = l1.face_prob;
+        Ok(l1.face_prob)
+    }
+
+    /// Level 2 on a face whose level-1 outputs are in `out` (from [`M3::level1`] on the same
+    /// image): the zone landmarks replace level 1's in their zones, and the gestures and gaze are
+    /// filled in.
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] for an empty image or non-finite level-1 points in `out`;
+    /// [`Error::Internal`] if a network fails to run.
+    pub fn refine(&mut self, image: &GrayImage, out: &mut FaceLandmarks) -> Result<()> {
+        if image.width() == 0 || image.height() == 0 {
+            return Err(Error::InvalidInput(format!(
+                "empty image {}x{}",
+                image.width(),
+                image.height()
+            )));
+        }
+        for &i in &self.cfg.level1.indices68 {
+            let p = out.points[i];
+            if !(p[0].is_finite() && p[1].is_finite()) {
+                return Err(Error::InvalidInput(format!(
+                    "level-1 point {i} is not finite: {p:?}"
+                )));
+            }
+            self.pts[i] = [f64::from(p[0]), f64::from(p[1])];
+        }
+        let yaw = out.yaw_probs;
         // Zone reference points always come from level 1 (M3_IO.md).
         self.ref_pts = self.pts;
         let (refs, pts) = (&self.ref_pts, &mut self.pts);
@@ -617,9 +650,31 @@ impl M3 {
         for (o, p) in out.points.iter_mut().zip(&self.pts) {
             *o = [p[0] as f32, p[1] as f32];
         }
-        out.yaw_probs = yaw;
-        out.face_prob = l1.face_prob;
         Ok(())
+    }
+
+    /// Landmarks, yaw, face confidence, gestures and gaze of the face in `face` (one call per
+    /// face), written into `out`: [`M3::level1`] then [`M3::refine`].
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] for an empty image or a non-finite / empty box;
+    /// [`Error::Internal`] if a network fails to run or level 1 gives non-finite points.
+    pub fn estimate(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        out: &mut FaceLandmarks,
+    ) -> Result<()> {
+        self.level1(image, face, out)?;
+        if let Some(&i) = self.cfg.level1.indices68.iter().find(|&&i| {
+            let p = out.points[i];
+            !(p[0].is_finite() && p[1].is_finite())
+        }) {
+            return Err(Error::Internal(format!(
+                "level 1 gave a non-finite point {i}"
+            )));
+        }
+        self.refine(image, out)
     }
 }
 

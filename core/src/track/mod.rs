@@ -67,11 +67,26 @@ pub trait LandmarkEstimator {
     fn estimate(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()>;
 
     /// Probability (0..1) that `face` holds a face — the cheap check the tracker runs on the window
-    /// NCC found (M3 level 1's face confidence).
+    /// NCC found and on each detection (M3 level 1's face confidence). Whatever the check computes
+    /// on the way (M3: the level-1 points and yaw) may be left in `out` for [`Self::complete`].
     ///
     /// # Errors
     /// Whatever the estimator reports.
-    fn face_confidence(&mut self, image: &GrayImage, face: &Rect) -> Result<f32>;
+    fn face_confidence(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        out: &mut FaceLandmarks,
+    ) -> Result<f32>;
+
+    /// Finishes `out` for the same `image` and `face` that [`Self::face_confidence`] just filled
+    /// it for, reusing that work (M3: level 2 only). The default runs [`Self::estimate`].
+    ///
+    /// # Errors
+    /// Whatever the estimator reports.
+    fn complete(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
+        self.estimate(image, face, out)
+    }
 }
 
 /// Processing mode (MediaPipe-like).
@@ -391,6 +406,8 @@ struct Slot {
     /// Whether the calibration is still to be taken from this frame's fit.
     calib_pending: bool,
     landmarks: FaceLandmarks,
+    /// `landmarks` holds the face check's output for `rect` on this frame.
+    level1_ready: bool,
     fit: Option<FaceFit>,
     ncc: NccMatcher,
     filter: FlowFilter,
@@ -413,6 +430,7 @@ impl Slot {
             calib: BoxCalib::IDENTITY,
             calib_pending: true,
             landmarks: FaceLandmarks::default(),
+            level1_ready: false,
             fit: None,
             ncc: NccMatcher::new(cfg.ncc_template_px),
             filter: FlowFilter::new(cfg.lk)?,
@@ -429,6 +447,7 @@ impl Slot {
     /// Starts a new track on a detection.
     fn start(&mut self, id: u64, rect: Rect, score: f32) {
         self.active = true;
+        self.level1_ready = false;
         self.seen = true;
         self.id = id;
         self.state = FaceState::Detected;
@@ -446,6 +465,7 @@ impl Slot {
 
     fn end(&mut self) {
         self.active = false;
+        self.level1_ready = false;
         self.seen = false;
         self.fit = None;
         self.ncc.clear();
@@ -467,8 +487,11 @@ pub struct FaceTracker<D: RegionDetector, L: LandmarkEstimator> {
     frames_since_detect: u32,
     redetect_next: bool,
     detections: Vec<(Rect, f32)>,
-    /// Detections that passed M3's face check: (box, detector score, face confidence).
-    ranked: Vec<(Rect, f32, f32)>,
+    /// Detections that passed M3's face check: (box, detector score, face confidence, what the
+    /// check left for [`LandmarkEstimator::complete`]).
+    ranked: Vec<(Rect, f32, f32, FaceLandmarks)>,
+    /// Scratch output of the detections' face checks.
+    checked: FaceLandmarks,
     pyr_prev: Pyramid,
     pyr_cur: Pyramid,
     luma: GrayImage,
@@ -506,6 +529,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             redetect_next: true,
             detections: Vec::with_capacity(64),
             ranked: Vec::with_capacity(64),
+            checked: FaceLandmarks::default(),
             pyr_prev: Pyramid::new(),
             pyr_cur: Pyramid::new(),
             luma: GrayImage::default(),
@@ -644,7 +668,9 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                     continue;
                 }
                 let region = s.calib.apply(&hit.rect);
-                let conf = self.estimator.face_confidence(image, &region)?;
+                let conf = self
+                    .estimator
+                    .face_confidence(image, &region, &mut s.landmarks)?;
                 if conf < self.config.min_face_confidence {
                     s.end();
                     lost_now = true;
@@ -654,6 +680,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 s.rect = region;
                 s.score = conf;
                 s.state = FaceState::Tracked;
+                s.level1_ready = true;
             }
         } else {
             for s in &mut self.slots {
@@ -691,14 +718,16 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             self.detections.sort_by(|a, b| b.1.total_cmp(&a.1));
             self.ranked.clear();
             for &(rect, score) in &self.detections {
-                let conf = self.estimator.face_confidence(image, &rect)?;
+                let conf = self
+                    .estimator
+                    .face_confidence(image, &rect, &mut self.checked)?;
                 if conf >= self.config.min_face_confidence {
-                    self.ranked.push((rect, score, conf));
+                    self.ranked.push((rect, score, conf, self.checked));
                 }
             }
             self.ranked.sort_by(|a, b| b.2.total_cmp(&a.2));
             for k in 0..self.ranked.len() {
-                let (rect, score, _) = self.ranked[k];
+                let (rect, score, _, checked) = self.ranked[k];
                 // The track this detection belongs to, by overlap with its region this frame
                 // (video: the tracked window; image: last call's box).
                 let mut best: Option<(usize, f32)> = None;
@@ -721,6 +750,8 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                             s.score = score;
                             s.state = FaceState::Detected;
                             s.fit = None;
+                            s.landmarks = checked;
+                            s.level1_ready = true;
                         }
                     }
                     None => {
@@ -731,6 +762,8 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                             .find(|s| !s.active || (!video && !s.seen))
                         {
                             s.start(self.next_id, rect, score);
+                            s.landmarks = checked;
+                            s.level1_ready = true;
                             self.next_id += 1;
                         }
                     }
@@ -759,7 +792,13 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         let ref_scale = self.config.flow_threshold_px / FLOW_REFERENCE_FACE_PX;
         for s in self.slots.iter_mut().filter(|s| s.active) {
             let t = Instant::now();
-            self.estimator.estimate(image, &s.rect, &mut s.landmarks)?;
+            if s.level1_ready {
+                // The face check on this region already ran M3's level 1.
+                self.estimator.complete(image, &s.rect, &mut s.landmarks)?;
+            } else {
+                self.estimator.estimate(image, &s.rect, &mut s.landmarks)?;
+            }
+            s.level1_ready = false;
             timings.landmarks_us += us(t);
 
             let t = Instant::now();
@@ -956,7 +995,12 @@ mod tests {
             Ok(())
         }
 
-        fn face_confidence(&mut self, _: &GrayImage, face: &Rect) -> Result<f32> {
+        fn face_confidence(
+            &mut self,
+            _: &GrayImage,
+            face: &Rect,
+            _: &mut FaceLandmarks,
+        ) -> Result<f32> {
             Ok(if self.find(face).is_some() { 0.9 } else { 0.1 })
         }
     }

@@ -13,8 +13,17 @@ impl LandmarkEstimator for M3 {
         M3::estimate(self, image, face, out)
     }
 
-    fn face_confidence(&mut self, image: &GrayImage, face: &Rect) -> Result<f32> {
-        M3::face_confidence(self, image, face)
+    fn face_confidence(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        out: &mut FaceLandmarks,
+    ) -> Result<f32> {
+        M3::level1(self, image, face, out)
+    }
+
+    fn complete(&mut self, image: &GrayImage, _face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
+        M3::refine(self, image, out)
     }
 }
 

@@ -1,0 +1,170 @@
+//! Issue 4's tracking measurements with the shipped models (detector + M3 + MSBP): correct-frame
+//! rate, per-frame time per stage and still-face jitter for tracking vs re-detect-every-frame, on
+//! synthetic sequences made from faces68 validation images and, optionally, on a real video scored
+//! against reference landmarks.
+//!
+//! ```text
+//! cargo run --profile bench -p monotrack-tests --example track_eval -- \
+//!     [--video ../shared/data/video/obama_3ddfa_demo.mp4 --reference REF.jsonl]
+//! ```
+//! `REF.jsonl` comes from `tests/scripts/video_reference.py VIDEO REF.jsonl` (dlib's 68 points as
+//! pseudo ground truth). Video frames are decoded with `ffmpeg` (rgb24, CONTRACT luma). Prints
+//! markdown tables; timings are single-threaded means over all frames on this machine.
+
+use monotrack_core::image::GrayImage;
+use monotrack_core::track::{Mode, Tracker, TrackerConfig};
+use monotrack_tests::shared_data;
+use monotrack_tests::synth::{SeqConfig, load_validation_faces, rgb_to_luma};
+use monotrack_tests::trackeval::{ClipFrame, run_clip, synthetic_clip, table_header, table_row};
+use std::io::Read;
+use std::process::{Command, Stdio};
+
+/// NME below which a frame counts as correct (see `tests/tests/track_models.rs`).
+const CORRECT_NME: f32 = 0.10;
+
+fn configs() -> Vec<(&'static str, TrackerConfig)> {
+    let video = TrackerConfig::default();
+    vec![
+        ("tracking (re-detect next frame, default)", video),
+        (
+            "tracking, re-detect immediately",
+            TrackerConfig {
+                redetect_immediately: true,
+                ..video
+            },
+        ),
+        (
+            "tracking, flow filter off",
+            TrackerConfig {
+                flow_filter: false,
+                ..video
+            },
+        ),
+        (
+            "re-detect every frame (image mode)",
+            TrackerConfig {
+                mode: Mode::Image,
+                ..video
+            },
+        ),
+    ]
+}
+
+fn report(title: &str, clip: &[ClipFrame]) -> Result<(), String> {
+    println!("\n### {title}\n\n{}", table_header());
+    for (name, cfg) in configs() {
+        let mut tracker = Tracker::with_default_models(cfg).map_err(|e| e.to_string())?;
+        // Warm-up pass (plans, buffers), then the measured pass.
+        run_clip(&mut tracker, clip, CORRECT_NME).map_err(|e| e.to_string())?;
+        let s = run_clip(&mut tracker, clip, CORRECT_NME).map_err(|e| e.to_string())?;
+        println!("{}", table_row(name, &s));
+    }
+    Ok(())
+}
+
+fn video_clip(video: &str, reference: &str) -> Result<Vec<ClipFrame>, String> {
+    let probe = Command::new("ffprobe")
+        .args(["-v", "error", "-select_streams", "v:0", "-show_entries"])
+        .args(["stream=width,height", "-of", "csv=p=0", video])
+        .output()
+        .map_err(|e| format!("ffprobe: {e}"))?;
+    let dims = String::from_utf8_lossy(&probe.stdout);
+    let mut it = dims.trim().split(',').map(|v| v.parse::<usize>());
+    let (Some(Ok(w)), Some(Ok(h))) = (it.next(), it.next()) else {
+        return Err(format!("ffprobe gave {dims:?}"));
+    };
+    let mut child = Command::new("ffmpeg")
+        .args([
+            "-v", "error", "-i", video, "-f", "rawvideo", "-pix_fmt", "rgb24", "-",
+        ])
+        .stdout(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("ffmpeg: {e}"))?;
+    let mut raw = Vec::new();
+    child
+        .stdout
+        .take()
+        .ok_or("no ffmpeg stdout")?
+        .read_to_end(&mut raw)
+        .map_err(|e| e.to_string())?;
+    child.wait().map_err(|e| e.to_string())?;
+    let text = std::fs::read_to_string(reference).map_err(|e| format!("{reference}: {e}"))?;
+    let mut truth = Vec::new();
+    for line in text.lines().filter(|l| !l.trim().is_empty()) {
+        let v: serde_json::Value = serde_json::from_str(line).map_err(|e| e.to_string())?;
+        let pts = v["landmarks68"].as_array().map(|a| {
+            let mut p = [[0.0f32; 2]; 68];
+            for (o, q) in p.iter_mut().zip(a) {
+                *o = [
+                    q[0].as_f64().unwrap_or(f64::NAN) as f32,
+                    q[1].as_f64().unwrap_or(f64::NAN) as f32,
+                ];
+            }
+            p
+        });
+        truth.push(pts);
+    }
+    let n = raw.len() / (w * h * 3);
+    if n != truth.len() {
+        return Err(format!("{n} frames but {} reference lines", truth.len()));
+    }
+    Ok(raw
+        .chunks_exact(w * h * 3)
+        .zip(truth)
+        .map(|(rgb, t)| {
+            let mut image = GrayImage::new(w, h);
+            rgb_to_luma(rgb, image.data_mut());
+            ClipFrame {
+                image,
+                truth: t,
+                still_run: None,
+            }
+        })
+        .collect())
+}
+
+fn main() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().collect();
+    let arg = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1).cloned())
+    };
+    println!("correct frame: NME (inter-ocular) < {CORRECT_NME}");
+    if let Some(data) = shared_data() {
+        let faces = load_validation_faces(&data, 24, 100.0)?;
+        let cfg = SeqConfig {
+            segments: 6,
+            segment_frames: 60,
+            still_frames: 20,
+            face_px: (100.0, 200.0),
+            noise_sigma: 2.0,
+            crop_margin: Some(0.5),
+            seed: 21,
+            ..Default::default()
+        };
+        let clip = synthetic_clip(cfg, faces)?;
+        report(
+            &format!(
+                "synthetic: {} frames 640x480, {} segments (cuts), faces 100-200 px, sensor noise 2 grey levels",
+                clip.len(),
+                cfg.segments
+            ),
+            &clip,
+        )?;
+    } else {
+        println!("../shared/data not found: synthetic sequences skipped");
+    }
+    if let (Some(video), Some(reference)) = (arg("--video"), arg("--reference")) {
+        let clip = video_clip(&video, &reference)?;
+        let (w, h) = (clip[0].image.width(), clip[0].image.height());
+        report(
+            &format!(
+                "{video}: {} frames {w}x{h}, reference {reference}",
+                clip.len()
+            ),
+            &clip,
+        )?;
+    }
+    Ok(())
+}
