@@ -63,6 +63,22 @@ fn bench(c: &mut Criterion) {
     c.bench_function("body_pose_only", |b| {
         b.iter(|| fitter.fit(black_box(&obs), &cam, &truth).unwrap())
     });
+    // The two halves of a pose fit: EPnP + IK initialisation, then the LM refinement.
+    c.bench_function("body_pose_initialise", |b| {
+        b.iter(|| fitter.initialise(black_box(&obs), &cam, &truth).unwrap())
+    });
+    let init = fitter.initialise(&obs, &cam, &truth).unwrap();
+    c.bench_function("body_pose_refine", |b| {
+        b.iter(|| {
+            fitter
+                .fit_from(black_box(&obs), &cam, &truth, &init)
+                .unwrap()
+        })
+    });
+    let mut joints = [Vector3::zeros(); N_JOINTS];
+    c.bench_function("body_forward_kinematics", |b| {
+        b.iter(|| truth.forward(black_box(&init), &mut joints))
+    });
     let scale_only = DimensionEstimator {
         separate_dimensions: false,
         ..Default::default()

@@ -536,7 +536,10 @@ impl Default for DimensionEstimator {
                 stop_value: f64::NEG_INFINITY,
                 improvement_tolerance: 0.01,
                 patience: 3,
-                size_tolerance: 1e-3,
+                // Alg. 10's "0.01 change" read on the scale: stop once the best interval is 1 % of
+                // the scale range (±0.3 % of scale). The finer 1e-3 ran to the evaluation cap (61
+                // evaluations vs 29) for 0.7 mm of HumanEva Procrustes error (111.5 vs 112.2 mm).
+                size_tolerance: 1e-2,
                 epsilon: 1e-4,
             },
             cobyla: Cobyla {

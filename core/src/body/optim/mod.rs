@@ -8,7 +8,7 @@ pub mod direct;
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::fit::solver::{LeastSquares, accumulate_row, symmetrize};
+use crate::fit::solver::{LeastSquares, symmetrize};
 
 /// Largest residual count a [`Residuals`] problem may have (the body objective has 30 reprojection,
 /// 15 joint-limit, 15 floor, 1 contact and 21 prior residuals; the floor calibration 9).
@@ -58,12 +58,27 @@ impl<const N: usize, P: Residuals<N>> LeastSquares<N> for NumericLeastSquares<'_
         }
         jtj.fill(0.0);
         jtr.fill(0.0);
-        let mut row = SVector::<f64, N>::zeros();
+        // Rows are sparse (a limb's parameters move only its own joints; prior and limit rows have
+        // one to three entries; inactive floor rows none): accumulate over the non-zeros only, in
+        // ascending order so the upper triangle is what gets written.
+        let mut nz = [0usize; N];
         for k in 0..m {
-            for i in 0..N {
-                row[i] = jac[i][k];
+            let mut n = 0;
+            for (i, col) in jac.iter().enumerate() {
+                if col[k] != 0.0 {
+                    nz[n] = i;
+                    n += 1;
+                }
             }
-            accumulate_row(jtj, jtr, &row, r0[k]);
+            let r = r0[k];
+            for a in 0..n {
+                let ia = nz[a];
+                let ja = jac[ia][k];
+                jtr[ia] += ja * r;
+                for &ib in &nz[a..n] {
+                    jtj[(ia, ib)] += ja * jac[ib][k];
+                }
+            }
         }
         symmetrize(jtj);
         0.5 * r0[..m].iter().map(|v| v * v).sum::<f64>()
@@ -100,5 +115,60 @@ mod tests {
             (x[0] - 1.0).abs() < 1e-4 && (x[1] - 1.0).abs() < 1e-4,
             "{x:?} {rep:?}"
         );
+    }
+
+    /// Residuals with the sparsity of the body objective: each depends on a few parameters.
+    struct Sparse;
+    impl Residuals<4> for Sparse {
+        fn residuals(&self, x: &SVector<f64, 4>, r: &mut [f64; MAX_RESIDUALS]) -> usize {
+            r[0] = x[0] * x[1] - 1.0;
+            r[1] = x[2].sin() + x[0];
+            r[2] = 0.0;
+            r[3] = 3.0 * x[3] - x[1] * x[1];
+            r[4] = x[3];
+            5
+        }
+        fn step(&self, _: usize) -> f64 {
+            1e-6
+        }
+    }
+
+    #[test]
+    fn sparse_normal_equations_equal_the_dense_product() {
+        let x = SVector::<f64, 4>::new(0.3, -1.2, 0.7, 2.0);
+        let mut jtj = SMatrix::<f64, 4, 4>::zeros();
+        let mut jtr = SVector::<f64, 4>::zeros();
+        let cost = NumericLeastSquares(&Sparse).normal_equations(&x, &mut jtj, &mut jtr);
+        // Analytic Jacobian of `Sparse`.
+        let j = nalgebra::SMatrix::<f64, 5, 4>::from_row_slice(&[
+            x[1],
+            x[0],
+            0.0,
+            0.0, //
+            1.0,
+            0.0,
+            x[2].cos(),
+            0.0, //
+            0.0,
+            0.0,
+            0.0,
+            0.0, //
+            0.0,
+            -2.0 * x[1],
+            0.0,
+            3.0, //
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+        ]);
+        let mut r = [0.0; MAX_RESIDUALS];
+        Sparse.residuals(&x, &mut r);
+        let rv = nalgebra::SVector::<f64, 5>::from_column_slice(&r[..5]);
+        let want_jtj = j.transpose() * j;
+        let want_jtr = j.transpose() * rv;
+        assert!((jtj - want_jtj).abs().max() < 1e-4, "{jtj} vs {want_jtj}");
+        assert!((jtr - want_jtr).abs().max() < 1e-4, "{jtr} vs {want_jtr}");
+        assert!((cost - 0.5 * rv.norm_squared()).abs() < 1e-12);
     }
 }
