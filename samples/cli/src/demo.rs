@@ -9,7 +9,7 @@ use crate::LineSink;
 use crate::track::{Canvas, draw_overlay, frame_json};
 use monotrack_core::TrackerConfig;
 use monotrack_core::camera::Intrinsics;
-use monotrack_core::image::{Frame, FrameDesc, GrayImage, PixelFormat};
+use monotrack_core::image::GrayImage;
 use monotrack_core::track::{FaceState, StageTimings, Tracker};
 use std::path::Path;
 
@@ -23,14 +23,9 @@ const FRAME_NS: i64 = 33_333_333;
 
 /// The demo's source image as luma.
 fn source() -> Result<GrayImage, String> {
-    let rgb = image::load_from_memory(ASTRONAUT_JPG)
-        .map_err(|e| format!("embedded astronaut.jpg: {e}"))?
-        .to_rgb8();
-    let desc = FrameDesc::packed(rgb.width(), rgb.height(), PixelFormat::Rgb8);
     let mut out = GrayImage::default();
-    Frame::new(rgb.as_raw(), desc)
-        .map_err(|e| e.to_string())?
-        .to_luma(&mut out);
+    crate::luma::decode_luma(ASTRONAUT_JPG, &mut out)
+        .map_err(|e| format!("embedded astronaut.jpg: {e}"))?;
     Ok(out)
 }
 

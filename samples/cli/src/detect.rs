@@ -18,22 +18,6 @@ struct LineIn {
     image: String,
 }
 
-/// Reads an image file as upright luma: 0.299 R + 0.587 G + 0.114 B, rounded (`core/models/M3_IO.md`).
-fn read_luma(path: &Path) -> Result<GrayImage, String> {
-    let img = image::open(path)
-        .map_err(|e| format!("cannot read {}: {e}", path.display()))?
-        .into_rgb8();
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let data = img
-        .pixels()
-        .map(|p| {
-            let [r, g, b] = p.0;
-            (0.299 * r as f32 + 0.587 * g as f32 + 0.114 * b as f32).round() as u8
-        })
-        .collect();
-    GrayImage::from_vec(w, h, data).ok_or_else(|| format!("{}: bad image size", path.display()))
-}
-
 fn round2(v: f32) -> f64 {
     (v as f64 * 100.0).round() / 100.0
 }
@@ -50,7 +34,8 @@ pub fn run(input: &Path, out: Option<&Path>, config: DetectorConfig) -> Result<b
             let line: LineIn =
                 serde_json::from_str(&text).map_err(|e| format!("malformed JSON: {e}"))?;
             let path = base.join(&line.image);
-            let img = read_luma(&path)?;
+            let mut img = GrayImage::default();
+            crate::luma::load_luma(&path, &mut img)?;
             let t0 = Instant::now();
             det.detect(&img, &mut found).map_err(|e| e.to_string())?;
             let us = t0.elapsed().as_micros() as u64;

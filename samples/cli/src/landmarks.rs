@@ -7,7 +7,7 @@ use crate::json::{CameraJson, intrinsics, put_fit};
 use crate::{LineSink, read_lines};
 use monotrack_core::detect::{Detection, FaceDetector};
 use monotrack_core::fit::{Msbp, MsbpConfig};
-use monotrack_core::image::{Frame, FrameDesc, GrayImage, PixelFormat, Rect};
+use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::{BROW_GESTURES, FaceLandmarks, M3, MOUTH_GESTURES, N_POINTS};
 use serde::Deserialize;
 use serde_json::{Map, Value, json};
@@ -70,18 +70,6 @@ impl Pipeline {
 fn round(v: f64, digits: i32) -> f64 {
     let p = 10f64.powi(digits);
     (v * p).round() / p
-}
-
-/// Decodes an image file into the upright luma image (the core's BT.601 conversion).
-fn load_gray(path: &Path, out: &mut GrayImage) -> Result<(), String> {
-    let rgb = image::open(path)
-        .map_err(|e| format!("cannot read image {}: {e}", path.display()))?
-        .to_rgb8();
-    let desc = FrameDesc::packed(rgb.width(), rgb.height(), PixelFormat::Rgb8);
-    Frame::new(rgb.as_raw(), desc)
-        .map_err(|e| e.to_string())?
-        .to_luma(out);
-    Ok(())
 }
 
 fn probs(names: &[&str], p: &[f32]) -> Value {
@@ -149,7 +137,7 @@ fn landmarks_line(text: &str, base: &Path, p: &mut Pipeline) -> Result<Value, St
         let pb = PathBuf::from(&line.image);
         if pb.is_absolute() { pb } else { base.join(pb) }
     };
-    load_gray(&path, &mut p.gray)?;
+    crate::luma::load_luma(&path, &mut p.gray)?;
     let (w, h) = (p.gray.width() as u32, p.gray.height() as u32);
     let cam = intrinsics(line.camera, w, h).map_err(|e| e.to_string())?;
     let t_detect = Instant::now();

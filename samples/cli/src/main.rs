@@ -7,6 +7,7 @@ mod detect;
 mod fit;
 mod json;
 mod landmarks;
+mod luma;
 // Some frame-source helpers are used by tests only.
 #[allow(dead_code)]
 mod track;

@@ -30,11 +30,6 @@ pub const DIR_FPS: f64 = 30.0;
 const NO_FFMPEG: &str = "reading video files needs ffmpeg and ffprobe (Debian/Ubuntu: \
      apt-get install ffmpeg); a directory of PNG/JPEG frames always works";
 
-/// `round(0.299 R + 0.587 G + 0.114 B)` — the CONTRACT luma of 8-bit RGB.
-fn luma(r: u8, g: u8, b: u8) -> u8 {
-    (0.299 * f32::from(r) + 0.587 * f32::from(g) + 0.114 * f32::from(b)).round() as u8
-}
-
 /// The frame files of `dir` (PNG/JPEG by extension, any case), in file-name order.
 ///
 /// # Errors
@@ -57,21 +52,6 @@ pub fn list_frames(dir: &Path) -> Result<Vec<PathBuf>, String> {
         return Err(format!("{} holds no PNG or JPEG frame", dir.display()));
     }
     Ok(files)
-}
-
-/// Decodes an image file into upright luma (`out` is resized, its allocation reused).
-///
-/// # Errors
-/// A message when the file cannot be decoded.
-pub fn load_luma(path: &Path, out: &mut GrayImage) -> Result<(), String> {
-    let img = image::open(path)
-        .map_err(|e| format!("{}: {e}", path.display()))?
-        .to_rgb8();
-    out.resize(img.width() as usize, img.height() as usize);
-    for (o, p) in out.data_mut().iter_mut().zip(img.as_raw().chunks_exact(3)) {
-        *o = luma(p[0], p[1], p[2]);
-    }
-    Ok(())
 }
 
 /// Where frames come from.
@@ -229,7 +209,7 @@ impl FrameSource {
                 let Some(path) = files.get(*next) else {
                     return Ok(None);
                 };
-                load_luma(path, out)?;
+                crate::luma::load_luma(path, out)?;
                 let i = *next;
                 *next += 1;
                 Ok(Some((i, (i as f64 * 1e9 / DIR_FPS).round() as i64)))

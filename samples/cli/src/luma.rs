@@ -1,0 +1,61 @@
+//! Image files → upright luma, the one decoder every subcommand uses: `round(0.299 R + 0.587 G +
+//! 0.114 B)` per pixel, exactly the conversion of `core/models/M3_IO.md` that the models were
+//! trained with (the core's camera path uses a fixed-point form within ±1 of it, for speed).
+
+use monotrack_core::image::GrayImage;
+use std::path::Path;
+
+/// The M3_IO luma of one RGB pixel.
+pub fn luma(r: u8, g: u8, b: u8) -> u8 {
+    (0.299 * f32::from(r) + 0.587 * f32::from(g) + 0.114 * f32::from(b)).round() as u8
+}
+
+/// Converts a decoded image into `out` (resized; its allocation reused).
+pub fn to_luma(img: &image::DynamicImage, out: &mut GrayImage) {
+    let rgb = img.to_rgb8();
+    out.resize(rgb.width() as usize, rgb.height() as usize);
+    for (o, p) in out.data_mut().iter_mut().zip(rgb.as_raw().chunks_exact(3)) {
+        *o = luma(p[0], p[1], p[2]);
+    }
+}
+
+/// Decodes the image file at `path` (PNG or JPEG) into `out`.
+///
+/// # Errors
+/// A message naming the file when it cannot be read or decoded.
+pub fn load_luma(path: &Path, out: &mut GrayImage) -> Result<(), String> {
+    let img =
+        image::open(path).map_err(|e| format!("cannot read image {}: {e}", path.display()))?;
+    to_luma(&img, out);
+    Ok(())
+}
+
+/// Decodes an encoded image held in memory into `out`.
+///
+/// # Errors
+/// A message when the bytes are not a PNG or JPEG image.
+pub fn decode_luma(bytes: &[u8], out: &mut GrayImage) -> Result<(), String> {
+    let img = image::load_from_memory(bytes).map_err(|e| format!("cannot decode image: {e}"))?;
+    to_luma(&img, out);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn luma_rounds_the_bt601_weights() {
+        // 0.299·255 = 76.245 → 76; 0.299·10 + 0.587·200 + 0.114·30 = 123.81 → 124.
+        assert_eq!(luma(255, 0, 0), 76);
+        assert_eq!(luma(10, 200, 30), 124);
+        assert_eq!(luma(255, 255, 255), 255);
+    }
+
+    #[test]
+    fn bad_bytes_are_an_error_not_a_panic() {
+        let mut out = GrayImage::default();
+        assert!(decode_luma(b"not an image", &mut out).is_err());
+        assert!(load_luma(Path::new("/nonexistent/x.png"), &mut out).is_err());
+    }
+}
