@@ -25,11 +25,14 @@ const CORRECT_NME: f32 = 0.10;
 fn configs() -> Vec<(&'static str, TrackerConfig)> {
     let video = TrackerConfig::default();
     vec![
-        ("tracking (re-detect next frame, default)", video),
         (
-            "tracking, re-detect immediately",
+            "tracking (default: re-detect in the frame of a loss)",
+            video,
+        ),
+        (
+            "tracking, re-detect on the next frame (thesis)",
             TrackerConfig {
-                redetect_immediately: true,
+                redetect_immediately: false,
                 ..video
             },
         ),

@@ -62,8 +62,8 @@ fn shipped_models_track_synthetic_sequences() {
     println!("{}", table_row("re-detect every frame", &every));
 
     let cuts = cfg.segments - 1;
-    // The detector runs at the start, on the frame after each cut (the loss is noticed on the cut
-    // frame), and at most a few more times (a lost face re-detected).
+    // The detector runs at the start, on each cut frame (the loss is noticed there and, by
+    // default, the face re-detected at once), and at most a few more times.
     assert!(
         (1 + cuts..=1 + cuts + 3).contains(&tracking.detector_runs),
         "{tracking:?}"
@@ -71,10 +71,10 @@ fn shipped_models_track_synthetic_sequences() {
     assert_eq!(every.detector_runs, clip.len());
     // Re-detecting every frame must itself work on these faces, or the comparison means nothing.
     assert!(every.correct_rate() > 0.8, "{every:?}");
-    // Tracking loses at most the cut frames (re-detection waits for the next frame) relative to
-    // re-detecting every frame.
+    // Tracking with immediate re-detection finds correct faces as often as re-detecting every
+    // frame (a margin of 2 frames for M3's noise on near-threshold frames).
     assert!(
-        tracking.correct + cuts + 2 >= every.correct,
+        tracking.correct + 2 >= every.correct,
         "tracking {tracking:?} vs re-detect {every:?}"
     );
     // The filter holds still landmarks steadier than raw M3 on noisy frames.

