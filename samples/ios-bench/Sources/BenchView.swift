@@ -2,89 +2,153 @@ import Monotrack
 import SwiftUI
 import UIKit
 
+/// The benchmark screen: iteration count, run button, then per image a table for each path (stage,
+/// median, p90, mean in ms) and the per-frame totals with their ratio; the toolbar copies the whole
+/// report as text.
 struct BenchView: View {
-    @State private var report = ""
-    @State private var running = false
+    @StateObject private var model = BenchModel()
+    /// Frames per path.
+    @State private var iterations: UInt32 = 100
 
-    /// Tracked frames per image: enough for a stable p90 (≥ 10 samples above it) in a few seconds.
-    private static let iterations: UInt32 = 200
-    private static let imageExtensions = ["jpg", "jpeg", "png"]
+    /// 100 by default: a p90 from 10 samples above it, and a run of seconds even where a re-detect
+    /// frame takes tens of milliseconds.
+    private static let iterationChoices: [UInt32] = [10, 100, 1000]
 
     var body: some View {
-        VStack(alignment: .leading, spacing: 12) {
-            Button(running ? "Running…" : "Run benchmark") { run() }
-                .buttonStyle(.borderedProminent)
-                .disabled(running)
-            ScrollView {
-                Text(report)
-                    .font(.system(.footnote, design: .monospaced))
-                    .textSelection(.enabled)
-                    .frame(maxWidth: .infinity, alignment: .leading)
+        NavigationView {
+            List {
+                Section {
+                    Picker("Frames per path", selection: $iterations) {
+                        ForEach(Self.iterationChoices, id: \.self) { Text("\($0)").tag($0) }
+                    }
+                    .pickerStyle(.segmented)
+                    .disabled(model.running)
+                    Button {
+                        model.run(iterations: iterations)
+                    } label: {
+                        HStack {
+                            Text(model.running ? "Running…" : "Run benchmark")
+                            if model.running {
+                                Spacer()
+                                ProgressView()
+                            }
+                        }
+                    }
+                    .disabled(model.running)
+                } footer: {
+                    Text("Frames per path: each image is processed that many times tracked (video mode) and re-detected (image mode). Run the Release build.")
+                }
+
+                if !model.header.isEmpty {
+                    Section {
+                        Text(model.header).font(.footnote).textSelection(.enabled)
+                        if model.results.isEmpty {
+                            Text("No bundled images.").foregroundColor(.red)
+                        }
+                    } header: {
+                        Text("Device")
+                    }
+                }
+
+                ForEach(model.results) { result in
+                    ImageSections(result: result)
+                }
+
+                if !model.results.isEmpty {
+                    Section {
+                        Text(BenchSummary.thesisLine()).font(.footnote)
+                    } header: {
+                        Text("For comparison")
+                    }
+                }
+            }
+            .listStyle(.grouped)
+            .navigationTitle("monotrack bench")
+            .navigationBarTitleDisplayMode(.inline)
+            .toolbar {
+                ToolbarItem(placement: .navigationBarTrailing) {
+                    Button {
+                        UIPasteboard.general.string = model.text
+                    } label: {
+                        Label("Copy report", systemImage: "doc.on.doc")
+                    }
+                    .disabled(model.header.isEmpty || model.running)
+                }
             }
         }
-        .padding()
+        .navigationViewStyle(.stack)
     }
+}
 
-    private func run() {
-        running = true
-        report = ""
-        DispatchQueue.global(qos: .userInitiated).async {
-            let text = Self.benchmarkAll()
-            DispatchQueue.main.async {
-                report = text
-                running = false
+/// One image's results: a stage table per path and the per-frame totals, or why it failed.
+private struct ImageSections: View {
+    let result: ImageBench
+
+    var body: some View {
+        if let report = result.report {
+            ForEach(BenchSummary.paths) { path in
+                Section {
+                    StageRow(name: "stage", values: ["median", "p90", "mean"]).foregroundColor(.secondary)
+                    ForEach(BenchSummary.stages(report, path: path), id: \.name) { s in
+                        StageRow(name: String(s.name.dropFirst(path.prefix.count + 1)),
+                                 values: [s.medianUs, s.p90Us, s.meanUs].map { BenchSummary.ms($0) })
+                    }
+                } header: {
+                    Text("\(result.name) \(result.width)×\(result.height) · \(path.title), ms")
+                }
+            }
+            Section {
+                if let t = BenchSummary.totals(report) {
+                    TotalRow(label: "Tracking", value: String(format: "%.2f ms", t.trackingMs))
+                    TotalRow(label: "Re-detect", value: String(format: "%.2f ms", t.redetectMs))
+                    TotalRow(label: "Re-detect / tracking", value: t.ratio.map { String(format: "%.2f×", $0) } ?? "n/a")
+                }
+                if !BenchSummary.faceFound(report) {
+                    Text("No face found: the landmark and fit stages did not run, so the paths are not comparable.")
+                        .foregroundColor(.orange)
+                }
+            } header: {
+                Text("\(result.name) · per frame (median), \(report.iterations) frames per path")
+            } footer: {
+                Text(report.device)
+            }
+        } else {
+            Section {
+                Text(result.failure ?? "failed").foregroundColor(.red)
+            } header: {
+                Text(result.name)
             }
         }
     }
+}
 
-    private static func benchmarkAll() -> String {
-        let device = UIDevice.current
-        var out = "monotrack \(sdkVersion()) on \(machineIdentifier()) (\(device.systemName) \(device.systemVersion))\n\n"
-        let urls = imageExtensions
-            .flatMap { Bundle.main.urls(forResourcesWithExtension: $0, subdirectory: nil) ?? [] }
-            .sorted { $0.lastPathComponent < $1.lastPathComponent }
-        if urls.isEmpty { out += "no bundled images\n" }
-        for url in urls {
-            do {
-                let (bytes, desc) = try rgbaFrame(url: url)
-                let r = try runBenchmark(bytes: bytes, desc: desc, iterations: iterations)
-                out += "\(url.lastPathComponent) \(desc.width)x\(desc.height), \(r.iterations) iterations (\(r.device))\n"
-                out += r.table + "\n"
-            } catch {
-                out += "\(url.lastPathComponent): \(error)\n"
+/// A table row: the stage name, then three right-aligned number columns.
+private struct StageRow: View {
+    let name: String
+    let values: [String]
+
+    var body: some View {
+        HStack(spacing: 4) {
+            Text(name).lineLimit(1)
+            Spacer(minLength: 4)
+            ForEach(values.indices, id: \.self) { i in
+                Text(values[i]).frame(width: 60, alignment: .trailing)
             }
         }
-        return out
+        .font(.system(.footnote, design: .monospaced))
     }
+}
 
-    /// Decodes an image and draws it into a tightly packed RGBA buffer (premultiplied alpha is
-    /// harmless: photos are opaque).
-    private static func rgbaFrame(url: URL) throws -> (Data, FrameDesc) {
-        guard let image = UIImage(contentsOfFile: url.path)?.cgImage else {
-            throw FrameError.invalidLayout("cannot decode \(url.lastPathComponent)")
-        }
-        let w = image.width, h = image.height, rowBytes = 4 * w
-        var data = Data(count: rowBytes * h)
-        let drawn = data.withUnsafeMutableBytes { raw -> Bool in
-            guard let ctx = CGContext(data: raw.baseAddress, width: w, height: h, bitsPerComponent: 8,
-                                      bytesPerRow: rowBytes, space: CGColorSpaceCreateDeviceRGB(),
-                                      bitmapInfo: CGImageAlphaInfo.premultipliedLast.rawValue)
-            else { return false }
-            ctx.draw(image, in: CGRect(x: 0, y: 0, width: w, height: h))
-            return true
-        }
-        guard drawn else { throw FrameError.invalidLayout("cannot create an RGBA context") }
-        let desc = FrameDesc(width: UInt32(w), height: UInt32(h), format: .rgba8, rowStride: UInt32(rowBytes),
-                             uvRowStride: 0, uvPixelStride: 0, rotationDegrees: 0, mirrored: false)
-        return (data, desc)
-    }
+/// A label with its value on the right.
+private struct TotalRow: View {
+    let label: String
+    let value: String
 
-    /// The hardware model ("iPhone15,2"), which names the chip unlike `UIDevice.model`.
-    private static func machineIdentifier() -> String {
-        var info = utsname()
-        uname(&info)
-        return withUnsafeBytes(of: &info.machine) { raw in
-            String(decoding: raw.prefix { $0 != 0 }, as: UTF8.self)
+    var body: some View {
+        HStack {
+            Text(label)
+            Spacer()
+            Text(value).font(.system(.body, design: .monospaced))
         }
     }
 }
