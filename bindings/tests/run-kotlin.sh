@@ -41,6 +41,7 @@ echo "== compiling Kotlin"
 "$KOTLINC" -jvm-target 17 -nowarn -cp "$JNA:$JUNIT" \
   $(find "$WORK/gen" -name '*.kt') $(find "$ROOT/bindings/tests/kotlin" -name '*.kt') \
   $(find "$ROOT/android/monotrack/src/jvmMain" "$ROOT/android/monotrack/src/jvmTest" \( -name 'FrameMapping*.kt' -o -name 'Results*.kt' \)) \
+  $(find "$ROOT/samples/android-bench/src" -name 'BenchSummary*.kt') \
   -d "$WORK/classes" 2>&1 | grep -v '^warning' || true
 [ -d "$WORK/classes" ] || { echo "kotlinc failed"; echo "0 passed, 1 failed"; exit 1; }
 
