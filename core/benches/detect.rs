@@ -1,5 +1,5 @@
-//! Measures `FaceDetector::detect` on a 640×480 luma frame (default config: min face 40 px, so the
-//! network runs on 160×120), with one face: `samples/data/astronaut.jpg` scaled to 320×320 and
+//! Measures `FaceDetector::detect` on a 640×480 luma frame (default config: min face 32 px, so the
+//! network runs on 200×150), with one face: `samples/data/astronaut.jpg` scaled to 320×320 and
 //! pasted into a textured gray frame. Also `score_window` on that face (the tracker's check).
 
 use criterion::{Criterion, criterion_group, criterion_main};

@@ -4,10 +4,13 @@
 //!   point [`GOLDEN_CONFIG`] (min face 16 px, threshold 0.9), gives exactly one face whose box
 //!   matches [`ASTRONAUT_BOX`] at IoU ≥ [`GOLDEN_MIN_IOU`]. The expected box is the detector's own
 //!   output when the committed model was trained (identical to the Python/onnxruntime reference
-//!   decoder in `train.py`), checked by eye to be the tight jaw-to-brow box of the 68 landmarks (the
-//!   M3 convention); the tolerance allows small numeric drift (other tract versions, SIMD paths)
-//!   but not a different face or box convention. At the default config the model also fires on the
-//!   helmet (score 0.85, a known false positive recorded in `models/MODEL_CARD.md`).
+//!   decoder in `train.py` to 0.1 px), checked by eye: the brow-to-chin face box of the M3
+//!   convention, a little tight on this face (it ends ~5 px above the chin and inside the jaw line;
+//!   IoU 0.89 with the previous model's box; over the validation split the box calibration of
+//!   `eval_peers.py` is identity within 2 %). The tolerance allows small numeric drift (other tract
+//!   versions, SIMD paths) but not a different face or box convention. At the default config the
+//!   model also fires on the helmet visor (score 0.67, below the face's 0.93; a known false
+//!   positive recorded in `models/MODEL_CARD.md`).
 //! - faces68 validation split (`core/models/M3_IO.md`: line i when i % 10 == 0), min face 16 px,
 //!   threshold 0.5:
 //!   recall at IoU ≥ 0.5 against the tight landmark boxes stays above [`VAL_MIN_RECALL`]. Skips with
@@ -19,7 +22,7 @@ use serde::Deserialize;
 use std::path::Path;
 
 /// Expected astronaut face box `[x, y, w, h]` (see the module docs).
-const ASTRONAUT_BOX: [f32; 4] = [176.6, 88.3, 96.3, 91.8];
+const ASTRONAUT_BOX: [f32; 4] = [180.0, 88.1, 88.7, 89.2];
 /// Settings of the golden case (see the module docs).
 const GOLDEN_CONFIG: DetectorConfig = DetectorConfig {
     score_threshold: 0.9,
@@ -29,9 +32,9 @@ const GOLDEN_CONFIG: DetectorConfig = DetectorConfig {
 };
 /// IoU with [`ASTRONAUT_BOX`] the golden detection must reach.
 const GOLDEN_MIN_IOU: f32 = 0.9;
-/// Recall floor on the validation split at min face 16 px, threshold 0.5: measured 0.9453
-/// (121 of 128 faces, this test at commit time) minus a margin of 3 faces.
-const VAL_MIN_RECALL: f64 = 0.92;
+/// Recall floor on the validation split at min face 16 px, threshold 0.5: measured 0.9531
+/// (122 of 128 faces, this test at commit time) minus a margin of 3 faces (119 / 128 = 0.9297).
+const VAL_MIN_RECALL: f64 = 0.929;
 
 /// Luma per `core/models/M3_IO.md`: 0.299 R + 0.587 G + 0.114 B, rounded.
 fn read_luma(path: &Path) -> GrayImage {

@@ -21,9 +21,12 @@ shrinking, as the Rust detector does) so that a chosen face gets a log-uniform s
 rotated by up to +-30 degrees, flipped, cropped to CROP x CROP around a random placement, then
 blurred / relit (gamma, contrast, brightness, noise). Every non-face cell is a negative (focal loss),
 so all non-face regions of the images serve as negatives; faces too small or cut by the crop are
-ignored rather than counted as negatives.
+ignored rather than counted as negatives. Every cell within POS_RADIUS cells of a face centre is a
+positive. Hard negatives: at HN_AT of training the weight-EMA net is run on the training images and
+its false positives become the reference region of HN_P of the later samples. The EMA weights are
+exported, with float16 weight storage (../onnx_f16.py; tract folds the Cast at load).
 """
-import argparse, json, math, os, random, sys, time
+import argparse, copy, json, math, os, random, sys, time
 import numpy as np
 import cv2
 import torch
@@ -31,7 +34,9 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 import unlabeled  # noqa: E402
+import onnx_f16  # noqa: E402
 
 torch.set_num_threads(1)
 cv2.setNumThreads(1)
@@ -52,6 +57,16 @@ SIZE_RANGE = (7.0, 150.0)
 NET_MIN_FACE = 10.0
 MAX_ROT_DEG = 30.0
 MOSAIC_P = 0.25
+# Cells within this distance (in cells) of a face centre are positives (see make_targets).
+POS_RADIUS = 1.0
+# Hard-negative mining: at these fractions of training the current (EMA) net is run on the training
+# images; its false positives (score >= HN_MIN_SCORE, IoU < 0.3 with every face) are then the
+# reference region of a fraction HN_P of the samples, at about the size they were detected at.
+HN_AT = (0.4, 0.6, 0.8)
+HN_P = 0.3
+HN_MIN_SCORE = 0.3
+HN_MIN_FACES = (16.0, 24.0, 40.0)
+EMA_DECAY = 0.999
 # Coarser second pass (core::detect mirrors these): when the min-face input's long side exceeds
 # PYRAMID_TRIGGER its largest faces outgrow the trained sizes (SIZE_RANGE tops at 150 px), so the
 # frame is also run with its long side at SECOND_PASS_LONG_SIDE.
@@ -101,12 +116,12 @@ class Net(nn.Module):
     def __init__(self):
         super().__init__()
         self.c1 = cbr(1, 16, 2)  # /2
-        self.c2 = cbr(16, 24, 2)  # /4
-        self.c3 = nn.Sequential(cbr(24, 32, 2), cbr(32, 32, 1), dws(32, 32, 1))  # /8
-        self.c4 = nn.Sequential(dws(32, 48, 2), dws(48, 48, 1))  # /16
-        self.c5 = nn.Sequential(dws(48, 64, 2), dws(64, 64, 1))  # /32
-        self.c6 = nn.Sequential(dws(64, 64, 2), dws(64, 64, 1))  # /64
-        self.heads = nn.ModuleList([nn.Conv2d(c, 5, 3, 1, 1) for c in (32, 48, 64, 64)])
+        self.c2 = cbr(16, 32, 2)  # /4
+        self.c3 = nn.Sequential(cbr(32, 48, 2), cbr(48, 48, 1), dws(48, 48, 1))  # /8
+        self.c4 = nn.Sequential(dws(48, 64, 2), dws(64, 64, 1))  # /16
+        self.c5 = nn.Sequential(dws(64, 96, 2), dws(96, 96, 1))  # /32
+        self.c6 = nn.Sequential(dws(96, 96, 2), dws(96, 96, 1))  # /64
+        self.heads = nn.ModuleList([nn.Conv2d(c, 5, 3, 1, 1) for c in (48, 64, 96, 96)])
         for h in self.heads:
             nn.init.normal_(h.weight, std=0.01)
             nn.init.zeros_(h.bias)
@@ -143,7 +158,7 @@ def make_targets(boxes, ignores, H, W):
             x, y, w, h = b
             size = max(w, h)
             cx, cy = (x + w / 2) / s - 0.5, (y + h / 2) / s - 0.5
-            ix, iy = int(round(cx)), int(round(cy))
+            ix, iy = int(math.floor(cx + 0.5)), int(math.floor(cy + 0.5))
             inside = 0 <= ix < gw and 0 <= iy < gh
             if ign or not (lo <= size <= hi) or not inside:
                 # Do not teach "no face" where a face (ignored or belonging to another head) is.
@@ -155,9 +170,15 @@ def make_targets(boxes, ignores, H, W):
                         wgt[y0:y1, x0:x1] = 0.0
                 continue
             sig = max(0.6, 0.15 * size / s)
-            g = np.exp(-((xs - ix) ** 2 + (ys - iy) ** 2) / (2 * sig * sig))
+            d2 = (xs - cx) ** 2 + (ys - cy) ** 2
+            g = np.exp(-d2 / (2 * sig * sig))
+            # Positives: every cell whose anchor lies within POS_RADIUS cells of the true centre (at
+            # least the nearest one). A single positive cell (the rounded centre) made a face centred
+            # near a cell boundary ambiguous: the net split its score over 2-4 cells (~0.5 each).
+            pos = d2 < POS_RADIUS ** 2
+            pos[iy, ix] = True
+            g[pos] = 1.0
             heat = np.maximum(heat, g)
-            heat[iy, ix] = 1.0
             m = g >= 0.2
             reg[0][m] = cx - xs[m]
             reg[1][m] = cy - ys[m]
@@ -177,14 +198,42 @@ class Sampler:
         # Unannotated faces (unlabeled.py) as corner points: their boxes are masked from the loss.
         self.extra = [[np.array([[x, y], [x + w, y], [x, y + h], [x + w, y + h]], np.float32)
                        for x, y, w, h in extra.get(rel, [])] for rel, _ in items]
+        self.extra_boxes = [extra.get(rel, []) for rel, _ in items]
+        self.hard = []  # (image index, x, y, w, h, net size) of mined false positives
+
+    def mine(self, net):
+        """Runs `net` on every training image at the pyramids of HN_MIN_FACES and keeps its false
+        positives: score >= HN_MIN_SCORE, IoU < 0.3 with every annotated face, centre outside every
+        unannotated one."""
+        net.eval()
+        hard = []
+        with torch.no_grad():
+            for k, img in enumerate(self.imgs):
+                h0, w0 = img.shape
+                gts = [tight_box(p) for p in self.lms[k]]
+                for mf in HN_MIN_FACES:
+                    for sc in pyramid_scales(w0, h0, mf):
+                        o, rx, ry = run_net(net, img, sc)
+                        for d in detect_np(o, rx, ry, HN_MIN_SCORE, 0.4):
+                            if all(iou(d, g) < 0.3 for g in gts) and not ignored(d, self.extra_boxes[k]):
+                                hard.append((k, d[0], d[1], d[2], d[3], max(d[2] / rx, d[3] / ry)))
+        net.train()
+        self.hard = hard
+        return len(hard)
 
     def sample(self):
         rng = self.rng
-        k = int(rng.integers(len(self.imgs)))
+        if self.hard and rng.random() < HN_P:
+            # A mined false positive as the reference region, at about the size it fired at.
+            k, x, y, w, h, net_size = self.hard[int(rng.integers(len(self.hard)))]
+            ref = np.array([[x, y], [x + w, y], [x, y + h], [x + w, y + h]], np.float32)
+            target = float(np.clip(net_size * math.exp(rng.uniform(-0.25, 0.25)), *SIZE_RANGE))
+        else:
+            k = int(rng.integers(len(self.imgs)))
+            ref = self.lms[k][int(rng.integers(len(self.lms[k])))]
+            target = math.exp(rng.uniform(math.log(SIZE_RANGE[0]), math.log(SIZE_RANGE[1])))
         img, lms = self.imgs[k], self.lms[k]
-        ref = lms[int(rng.integers(len(lms)))]
         rb = tight_box(ref)
-        target = math.exp(rng.uniform(math.log(SIZE_RANGE[0]), math.log(SIZE_RANGE[1])))
         scale = target / max(rb[2], rb[3])
         # Shrink with INTER_AREA like the Rust detector; rotation then works at the final scale.
         h0, w0 = img.shape
@@ -407,7 +456,7 @@ def evaluate(net, items, min_face_px, thrs, nms_iou, extra=None):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--steps", type=int, default=8000)
+    ap.add_argument("--steps", type=int, default=18000)
     ap.add_argument("--batch", type=int, default=32)
     ap.add_argument("--out", default=os.path.join(ROOT, "core/models/detector"))
     args = ap.parse_args()
@@ -430,10 +479,12 @@ def main():
     say(f"unannotated faces masked (unlabeled.py): {sum(len(v) for v in extra.values())}")
     sampler = Sampler(train, SEED, extra)
     net = Net()
+    ema = copy.deepcopy(net)
     nparam = sum(p.numel() for p in net.parameters())
     say(f"params {nparam}; steps {args.steps} batch {args.batch} crop {CROP}")
     opt = torch.optim.AdamW(net.parameters(), lr=3e-3, weight_decay=1e-4)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=3e-3, total_steps=args.steps, pct_start=0.05)
+    hn_steps = {int(f * args.steps) for f in HN_AT}
     t0 = time.time()
     for step in range(1, args.steps + 1):
         x, levels = sampler.batch(args.batch)
@@ -444,11 +495,23 @@ def main():
         torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
         opt.step()
         sched.step()
+        with torch.no_grad():
+            dec = min(EMA_DECAY, (1 + step) / (10 + step))
+            for pe, p in zip(ema.state_dict().values(), net.state_dict().values()):
+                if pe.dtype.is_floating_point:
+                    pe.mul_(dec).add_(p, alpha=1 - dec)
+                else:
+                    pe.copy_(p)
         if step % 100 == 0 or step == 20:
             say(f"step {step} focal {lf.item():.4f} reg {lr_.item():.4f} t {time.time() - t0:.0f}s")
-        if step % 1000 == 0 and step < args.steps:
-            m, _ = evaluate(net, val, 16.0, [0.5], 0.4, extra)
-            say(f"  val (min_face 16 px) {m}")
+        if step in hn_steps:
+            n = sampler.mine(ema)
+            say(f"  hard negatives mined on training images: {n} (t {time.time() - t0:.0f}s)")
+        if step % 3000 == 0 and step < args.steps:
+            for mf, t in ((16.0, 0.5), (40.0, 0.6)):
+                m, _ = evaluate(ema, val, mf, [t], 0.4, extra)
+                say(f"  val (EMA, min_face {mf:.0f} px) {m}")
+    net = ema
     thrs = [0.2, 0.3, 0.4, 0.5, 0.6, 0.7]
     metrics = {"split": "faces68 train.jsonl lines i % 10 == 0", "match": "IoU >= 0.5 vs tight landmark box; detections on unlabeled.py faces ignored",
                "nms_iou": 0.4, "train_seconds": round(time.time() - t0)}
@@ -474,7 +537,9 @@ def main():
         json.dump(cfg, f, indent=1)
     with open(os.path.join(args.out, "metrics.json"), "w") as f:
         json.dump(metrics, f, indent=1)
-    say(f"wrote {path} ({os.path.getsize(path)} bytes)")
+    f32_bytes = os.path.getsize(path)
+    onnx_f16.to_f16(path)  # float16 weight storage (Cast folded at load): half the bytes
+    say(f"wrote {path} ({os.path.getsize(path)} bytes; {f32_bytes} as float32)")
 
 
 if __name__ == "__main__":
