@@ -292,7 +292,7 @@ impl BodyFitter {
         }
         if self.config.assume_contact {
             skel.forward(&p, &mut x);
-            if let Some(a) = contact_ankle(&x, obs) {
+            if let Some(a) = contact_ankle(&x, obs, cam, skel) {
                 // The contact foot's depth comes from the floor; its knee from both segments.
                 let left = a == Joint::LAnkle;
                 let (base, root, mid, end, l1, l2) = limb_spec(left, false, skel);
@@ -325,7 +325,7 @@ impl BodyFitter {
         let mut x = [Vector3::zeros(); N_JOINTS];
         skel.forward(init, &mut x);
         let contact = if self.config.assume_contact {
-            contact_ankle(&x, obs)
+            contact_ankle(&x, obs, cam, skel)
         } else {
             None
         };
@@ -462,18 +462,52 @@ fn limb_spec(left: bool, arm: bool, skel: &Skeleton) -> (usize, Joint, Joint, Jo
     }
 }
 
-/// The lower of the observed ankles (with its knee observed), the one assumed on the floor.
-fn contact_ankle(x: &[Vector3<f64>; N_JOINTS], obs: &Joints2d) -> Option<Joint> {
+/// The observed ankle (with its knee observed) assumed on the floor. With both observed: the one
+/// whose viewing ray meets the floor (at ankle height) closest to its hip, relative to the leg's
+/// length. A foot in the air meets the floor beyond its true place, farther than the leg reaches;
+/// the initial pose's lower ankle, used before, depends on the IK's depth guesses and picked the
+/// lifted foot more often (HumanEva Train Procrustes 112.2 → 106.1 mm, with the true dimensions
+/// 88.1 → 84.4 mm; Human3.6M synthetic 85.8 → 83.8 mm).
+fn contact_ankle(
+    x: &[Vector3<f64>; N_JOINTS],
+    obs: &Joints2d,
+    cam: &BodyCamera,
+    skel: &Skeleton,
+) -> Option<Joint> {
     let ok = |a: Joint, k: Joint| obs.has(a) && obs.has(k);
     match (
         ok(Joint::LAnkle, Joint::LKnee),
         ok(Joint::RAnkle, Joint::RKnee),
     ) {
-        (true, true) => Some(if x[10].z <= x[13].z {
-            Joint::LAnkle
-        } else {
-            Joint::RAnkle
-        }),
+        (true, true) => {
+            let o = cam.center();
+            let reach = |ankle: Joint, hip: Joint, leg: f64| -> f64 {
+                ik::ray_plane_z(&o, &cam.ray(obs.points[ankle.index()]), skel.ankle_height)
+                    .map_or(f64::INFINITY, |e| (e - x[hip.index()]).norm() / leg)
+            };
+            let left = reach(
+                Joint::LAnkle,
+                Joint::LHip,
+                skel.len(dim::L_THIGH) + skel.len(dim::L_SHIN),
+            );
+            let right = reach(
+                Joint::RAnkle,
+                Joint::RHip,
+                skel.len(dim::R_THIGH) + skel.len(dim::R_SHIN),
+            );
+            Some(if left.is_finite() || right.is_finite() {
+                if left <= right {
+                    Joint::LAnkle
+                } else {
+                    Joint::RAnkle
+                }
+            } else if x[10].z <= x[13].z {
+                // Neither ray reaches the floor (camera below ankle height): the lower ankle.
+                Joint::LAnkle
+            } else {
+                Joint::RAnkle
+            })
+        }
         (true, false) => Some(Joint::LAnkle),
         (false, true) => Some(Joint::RAnkle),
         (false, false) => None,
