@@ -40,6 +40,8 @@ WEIGHT_DECAY = 1e-4
 BATCH = 64
 LEVEL1_CHANNELS = (16, 32, 48, 64)
 LEVEL1_HIDDEN = 128
+# Zone trunks (the shipped models); --zone-channels overrides them for experiments.
+ZONE_CHANNELS = {"eye": (8, 16, 32), "face": (8, 16, 32, 64), "default": (8, 16, 32, 48)}
 
 
 class Data:
@@ -257,7 +259,7 @@ def train_level1(data, steps, fh):
 def train_zone(name, data, steps, fh, genki=None):
     zone = D.ZONES[name]
     gest = len(zone.get("gestures", []))
-    channels = {"eye": (8, 16, 32), "face": (8, 16, 32, 64)}.get(name, (8, 16, 32, 48))
+    channels = ZONE_CHANNELS.get(name, ZONE_CHANNELS["default"])
     model = Level2(zone["width"], zone["height"], len(zone["indices68"]), gest, bool(zone.get("gaze")),
                    channels=channels)
     log(fh, f"{name}: {n_params(model)} parameters, {steps} steps of {BATCH}")
@@ -340,7 +342,21 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps-scale", type=float, default=1.0)
     ap.add_argument("--only", default="level1,brows,eye,mouth,face")
+    # Architecture experiments (defaults = the shipped models): e.g. --level1-channels 8,16,32,48
+    # --zone-channels eye=8-16-24,face=8-16-24-48,default=8-16-24-32
+    ap.add_argument("--level1-channels", default=None)
+    ap.add_argument("--level1-hidden", type=int, default=None)
+    ap.add_argument("--zone-channels", default=None)
     a = ap.parse_args()
+    global LEVEL1_CHANNELS, LEVEL1_HIDDEN
+    if a.level1_channels:
+        LEVEL1_CHANNELS = tuple(int(c) for c in a.level1_channels.split(","))
+    if a.level1_hidden:
+        LEVEL1_HIDDEN = a.level1_hidden
+    if a.zone_channels:
+        for item in a.zone_channels.split(","):
+            k, v = item.split("=")
+            ZONE_CHANNELS[k] = tuple(int(c) for c in v.split("-"))
     random.seed(SEED)
     np.random.seed(SEED)
     torch.manual_seed(SEED)
@@ -349,7 +365,8 @@ def main():
     os.makedirs(OUT, exist_ok=True)
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
-    log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}")
+    log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
+            f" level1={LEVEL1_CHANNELS}/{LEVEL1_HIDDEN} zones={ZONE_CHANNELS}")
     data = Data("train")
     log(fh, f"train faces (with mirrors): {len(data.faces)} from {len(data.imgs)} images")
     steps = {k: int(v * a.steps_scale) for k, v in {"level1": 6000, "brows": 4000, "eye": 4000, "mouth": 5000, "face": 6000}.items()}
