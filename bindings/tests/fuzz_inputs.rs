@@ -180,23 +180,7 @@ fn fits_never_panic() {
 #[test]
 fn body_calls_never_panic() {
     let mut r = Rng(3);
-    let joints = [
-        BodyJoint::Pelvis,
-        BodyJoint::Thorax,
-        BodyJoint::LShoulder,
-        BodyJoint::LElbow,
-        BodyJoint::LWrist,
-        BodyJoint::RShoulder,
-        BodyJoint::RElbow,
-        BodyJoint::RWrist,
-        BodyJoint::LHip,
-        BodyJoint::LKnee,
-        BodyJoint::LAnkle,
-        BodyJoint::RHip,
-        BodyJoint::RKnee,
-        BodyJoint::RAnkle,
-        BodyJoint::Head,
-    ];
+    let joints = monotrack_core::body::Joint::ALL.map(BodyJoint::from);
     // A valid camera so that fits get past construction and meet random joints.
     let camera = BodyCameraPose {
         intrinsics: CameraIntrinsics {

@@ -481,20 +481,14 @@ fn contact_ankle(
     ) {
         (true, true) => {
             let o = cam.center();
-            let reach = |ankle: Joint, hip: Joint, leg: f64| -> f64 {
+            let reach = |left: bool| -> f64 {
+                let (_, hip, _, ankle, thigh, shin) = limb_spec(left, false, skel);
                 ik::ray_plane_z(&o, &cam.ray(obs.points[ankle.index()]), skel.ankle_height)
-                    .map_or(f64::INFINITY, |e| (e - x[hip.index()]).norm() / leg)
+                    .map_or(f64::INFINITY, |e| {
+                        (e - x[hip.index()]).norm() / (thigh + shin)
+                    })
             };
-            let left = reach(
-                Joint::LAnkle,
-                Joint::LHip,
-                skel.len(dim::L_THIGH) + skel.len(dim::L_SHIN),
-            );
-            let right = reach(
-                Joint::RAnkle,
-                Joint::RHip,
-                skel.len(dim::R_THIGH) + skel.len(dim::R_SHIN),
-            );
+            let (left, right) = (reach(true), reach(false));
             Some(if left.is_finite() || right.is_finite() {
                 if left <= right {
                     Joint::LAnkle

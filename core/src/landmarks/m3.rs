@@ -616,13 +616,14 @@ impl M3 {
                 image.height()
             )));
         }
+        if let Some(i) = self.non_finite_level1_point(out) {
+            return Err(Error::InvalidInput(format!(
+                "level-1 point {i} is not finite: {:?}",
+                out.points[i]
+            )));
+        }
         for &i in &self.cfg.level1.indices68 {
             let p = out.points[i];
-            if !(p[0].is_finite() && p[1].is_finite()) {
-                return Err(Error::InvalidInput(format!(
-                    "level-1 point {i} is not finite: {p:?}"
-                )));
-            }
             self.pts[i] = [f64::from(p[0]), f64::from(p[1])];
         }
         let yaw = out.yaw_probs;
@@ -666,15 +667,21 @@ impl M3 {
         out: &mut FaceLandmarks,
     ) -> Result<()> {
         self.level1(image, face, out)?;
-        if let Some(&i) = self.cfg.level1.indices68.iter().find(|&&i| {
-            let p = out.points[i];
-            !(p[0].is_finite() && p[1].is_finite())
-        }) {
+        // Here a non-finite point is the network's fault, not the caller's.
+        if let Some(i) = self.non_finite_level1_point(out) {
             return Err(Error::Internal(format!(
                 "level 1 gave a non-finite point {i}"
             )));
         }
         self.refine(image, out)
+    }
+
+    /// The first level-1 point of `out` that is not finite, if any.
+    fn non_finite_level1_point(&self, out: &FaceLandmarks) -> Option<usize> {
+        self.cfg.level1.indices68.iter().copied().find(|&i| {
+            let p = out.points[i];
+            !(p[0].is_finite() && p[1].is_finite())
+        })
     }
 }
 
