@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
-"""Trains the four M3 networks and exports them to core/models/m3/ (ONNX opset 17 + m3.json).
+"""Trains the five M3 networks (level 1 + four zone nets) and exports them to core/models/m3/ (ONNX opset 17 + m3.json).
 
-    python3 core/models/train/train_m3.py [--steps-scale 1.0] [--only level1,brows,eye,mouth]
+    python3 core/models/train/train_m3.py [--steps-scale 1.0] [--only level1,brows,eye,mouth,face]
 
-Seeds are fixed (numpy, torch, python); one CPU thread by default (MONOTRACK_TRAIN_THREADS).
+Seeds are fixed (numpy, torch, python; each net seeds itself); one CPU thread per process by default
+(MONOTRACK_TRAIN_THREADS); level 1 first, then the zone nets in up to --jobs processes at once.
 Writes next to the weights: train_log.txt (losses per step window) and the validation metrics
 (metrics.json, by eval_m3.py). Data: ../shared/data (faces68, its MediaPipe teacher, GENKI-4K);
 the split rule and the preprocessing are core/models/M3_IO.md's.
@@ -12,6 +13,7 @@ import argparse
 import json
 import os
 import random
+import subprocess
 import sys
 import time
 
@@ -38,10 +40,15 @@ GESTURE_WEIGHT = 0.5
 GAZE_WEIGHT = 1.0
 WEIGHT_DECAY = 1e-4
 BATCH = 64
-LEVEL1_CHANNELS = (16, 32, 48, 64)
+# Trunks (m3nets.trunk spec strings) of the shipped models; --level1-trunk / --zone-trunk override
+# them for experiments.
+LEVEL1_TRUNK = "16s-32s-48s-48c-64s"
 LEVEL1_HIDDEN = 128
-# Zone trunks (the shipped models); --zone-channels overrides them for experiments.
-ZONE_CHANNELS = {"eye": (8, 16, 32), "face": (8, 16, 32, 64), "default": (8, 16, 32, 48)}
+ZONE_TRUNK = {"eye": "8s-16s-16c-32s", "face": "16s-32s-48s-48c-96s", "mouth": "16s-32s-48s-48c-64s",
+              "default": "8s-16s-32s-32c-48s"}
+STEPS = {"level1": 15000, "brows": 10000, "eye": 10000, "mouth": 12500, "face": 15000}
+ZONE_SEED = {"brows": 2, "eye": 3, "mouth": 4, "face": 5}
+DEVICE = torch.device("cpu")
 
 
 class Data:
@@ -227,17 +234,18 @@ def log(fh, msg):
 
 
 def train_level1(data, steps, fh):
-    model = Level1(size=D.LEVEL1["input_size"], channels=LEVEL1_CHANNELS, hidden=LEVEL1_HIDDEN)
+    torch.manual_seed(SEED + 1)
+    model = Level1(size=D.LEVEL1["input_size"], spec=LEVEL1_TRUNK, hidden=LEVEL1_HIDDEN).to(DEVICE)
     log(fh, f"level1: {n_params(model)} parameters, {steps} steps of {BATCH}")
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=WEIGHT_DECAY)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=3e-3, total_steps=steps, pct_start=0.1)
     rng = np.random.default_rng(SEED + 1)
     weights = balanced_weights([f["yaw_class"] for f in data.faces], 5)
-    yaw_w = torch.ones(5)
+    yaw_w = torch.ones(5, device=DEVICE)
     t0, acc = time.time(), np.zeros(3)
     model.train()
     for step in range(steps):
-        X, Y, yaw, face = level1_batch(data, rng, weights)
+        X, Y, yaw, face = (t.to(DEVICE) for t in level1_batch(data, rng, weights))
         lm, yl, fl = model(X)
         pos = face > 0.5
         l_lm = point_loss(lm[pos], Y[pos]).mean() if pos.any() else lm.sum() * 0
@@ -253,33 +261,35 @@ def train_level1(data, steps, fh):
             a = acc / 200
             log(fh, f"level1 step {step + 1}: lm {a[0]:.4f} yaw {a[1]:.4f} face {a[2]:.4f} ({time.time() - t0:.0f} s)")
             acc[:] = 0
-    return model.eval()
+    return model.cpu().eval()
 
 
 def train_zone(name, data, steps, fh, genki=None):
     zone = D.ZONES[name]
     gest = len(zone.get("gestures", []))
-    channels = ZONE_CHANNELS.get(name, ZONE_CHANNELS["default"])
+    spec = ZONE_TRUNK.get(name, ZONE_TRUNK["default"])
+    # Each net seeds its own initialisation so it does not depend on which nets ran before it.
+    torch.manual_seed(SEED + ZONE_SEED[name])
     model = Level2(zone["width"], zone["height"], len(zone["indices68"]), gest, bool(zone.get("gaze")),
-                   channels=channels)
+                   spec=spec).to(DEVICE)
     log(fh, f"{name}: {n_params(model)} parameters, {steps} steps of {BATCH}")
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=WEIGHT_DECAY)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=3e-3, total_steps=steps, pct_start=0.1)
-    rng = np.random.default_rng(SEED + {"brows": 2, "eye": 3, "mouth": 4, "face": 5}[name])
+    rng = np.random.default_rng(SEED + ZONE_SEED[name])
     if gest:
         labels = [f[name] for f in data.faces]
         weights = balanced_weights(labels, gest)
         counts = np.bincount([x for x in labels if x >= 0], minlength=gest).astype(np.float32)
         # Sampling balances by the square root; the loss weight does the other square root.
         cw = torch.from_numpy((counts.sum() / np.maximum(counts, 1)) ** 0.5)
-        cw = cw / cw.mean()
+        cw = (cw / cw.mean()).to(DEVICE)
     else:
         weights = np.full(len(data.faces), 1.0 / len(data.faces))
         cw = None
     t0, acc = time.time(), np.zeros(3)
     model.train()
     for step in range(steps):
-        X, Y, YAW, G, GZ, GZM, SM, LM = zone_batch(name, data, rng, weights, genki)
+        X, Y, YAW, G, GZ, GZM, SM, LM = (t.to(DEVICE) for t in zone_batch(name, data, rng, weights, genki))
         out = model(X, YAW)
         lm, extra = out[0], out[-1]
         l_lm = (point_loss(lm, Y) * LM).sum() / LM.sum().clamp(min=1)
@@ -309,7 +319,7 @@ def train_zone(name, data, steps, fh, genki=None):
             a = acc / 200
             log(fh, f"{name} step {step + 1}: lm {a[0]:.4f} {'gest' if gest else 'gaze'} {a[1]:.4f} ({time.time() - t0:.0f} s)")
             acc[:] = 0
-    return model.eval()
+    return model.cpu().eval()
 
 
 def export(model, path, names_in, shapes_in, names_out):
@@ -342,21 +352,27 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps-scale", type=float, default=1.0)
     ap.add_argument("--only", default="level1,brows,eye,mouth,face")
-    # Architecture experiments (defaults = the shipped models): e.g. --level1-channels 8,16,32,48
-    # --zone-channels eye=8-16-24,face=8-16-24-48,default=8-16-24-32
-    ap.add_argument("--level1-channels", default=None)
+    # Architecture experiments (defaults = the shipped models), m3nets.trunk specs: e.g.
+    # --level1-trunk 16s-32s-48s-64s --zone-trunk eye=8s-16s-32s,default=8s-16s-32s-48s
+    ap.add_argument("--level1-trunk", default=None)
     ap.add_argument("--level1-hidden", type=int, default=None)
-    ap.add_argument("--zone-channels", default=None)
+    ap.add_argument("--zone-trunk", default=None)
+    # Results differ from the CPU run's in the last bits (GPU kernels); the shipped weights are CPU's.
+    ap.add_argument("--device", default="cpu")
+    # Zone nets train in this many processes at once after level 1 (each net seeds itself, so the
+    # result does not depend on it).
+    ap.add_argument("--jobs", type=int, default=min(4, os.cpu_count() or 1))
     a = ap.parse_args()
-    global LEVEL1_CHANNELS, LEVEL1_HIDDEN
-    if a.level1_channels:
-        LEVEL1_CHANNELS = tuple(int(c) for c in a.level1_channels.split(","))
+    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE
+    DEVICE = torch.device(a.device)
+    if a.level1_trunk:
+        LEVEL1_TRUNK = a.level1_trunk
     if a.level1_hidden:
         LEVEL1_HIDDEN = a.level1_hidden
-    if a.zone_channels:
-        for item in a.zone_channels.split(","):
+    if a.zone_trunk:
+        for item in a.zone_trunk.split(","):
             k, v = item.split("=")
-            ZONE_CHANNELS[k] = tuple(int(c) for c in v.split("-"))
+            ZONE_TRUNK[k] = v
     random.seed(SEED)
     np.random.seed(SEED)
     torch.manual_seed(SEED)
@@ -366,16 +382,18 @@ def main():
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
-            f" level1={LEVEL1_CHANNELS}/{LEVEL1_HIDDEN} zones={ZONE_CHANNELS}")
+            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} device={DEVICE}")
     data = Data("train")
     log(fh, f"train faces (with mirrors): {len(data.faces)} from {len(data.imgs)} images")
-    steps = {k: int(v * a.steps_scale) for k, v in {"level1": 6000, "brows": 4000, "eye": 4000, "mouth": 5000, "face": 6000}.items()}
+    steps = {k: int(v * a.steps_scale) for k, v in STEPS.items()}
     if "level1" in only:
         m = train_level1(data, steps["level1"], fh)
         export(m, os.path.join(OUT, "level1.onnx"), ["image"], [(1, 1, 64, 64)], ["landmarks", "yaw_logits", "face_logit"])
-    for name in ("brows", "eye", "mouth", "face"):
-        if name not in only:
-            continue
+    zones = [n for n in ("face", "mouth", "brows", "eye") if n in only]  # longest first
+    if a.jobs > 1 and len(zones) > 1:
+        run_zones_in_processes(zones, a, fh)
+        zones = []
+    for name in zones:
         z = D.ZONES[name]
         genki = genki_with_refs(os.path.join(OUT, "level1.onnx"), "train") if name == "mouth" else None
         if genki is not None:
@@ -385,6 +403,22 @@ def main():
         export(m, os.path.join(OUT, f"{name}.onnx"), ["patch", "yaw"], [(1, 1, z["height"], z["width"]), (1, 5)], outs)
     write_config()
     log(fh, f"done {only}")
+
+
+def run_zones_in_processes(zones, a, fh):
+    base = [sys.executable, os.path.abspath(__file__), "--jobs", "1", "--steps-scale", str(a.steps_scale),
+            "--device", a.device, "--zone-trunk", ",".join(f"{k}={v}" for k, v in ZONE_TRUNK.items())]
+    pending, running = list(zones), []
+    while pending or running:
+        while pending and len(running) < a.jobs:
+            name = pending.pop(0)
+            log(fh, f"{name}: training in a process of its own (train_log_{name}.txt)")
+            running.append((name, subprocess.Popen(base + ["--only", name], stdout=subprocess.DEVNULL)))
+        time.sleep(2)
+        for item in [r for r in running if r[1].poll() is not None]:
+            running.remove(item)
+            if item[1].returncode != 0:
+                raise SystemExit(f"{item[0]}: training failed ({item[1].returncode})")
 
 
 def write_config():
