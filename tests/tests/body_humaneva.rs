@@ -9,7 +9,10 @@
 //!    errors against the reference.
 //! 3. Fitting with the known (reference) camera: body dimensions estimated on each sequence's first
 //!    frames, pose-only fits for every frame; 2D reprojection error, 3D error after Procrustes per
-//!    limb, body-part lengths vs truth.
+//!    limb, body-part lengths vs truth. The dimension search starts from (and its proportion prior
+//!    pulls towards) the mean body of the *other* two subjects: HumanEva-I has only S1-S3, and the
+//!    shipped `Convention::HumanEva` table is their mean, so evaluating with it would be in-sample.
+//!    The test checks that table against the mocap.
 //! 4. The same with the floor-calibrated camera, for the absolute (non-Procrustes) 3D error.
 //!
 //! The printed tables are what README.md's body section reports. Run:
@@ -19,6 +22,7 @@ mod body_common;
 
 use body_common::*;
 use monotrack_core::body::calib::calibrate_floor;
+use monotrack_core::body::skeleton::{N_DIMS, dim};
 use monotrack_core::body::{
     BodyCamera, BodyFitter, Convention, DimensionEstimator, Dimensions, Joints2d, N_JOINTS,
     Skeleton,
@@ -89,10 +93,63 @@ fn humaneva_train_with_ground_truth_2d() {
     };
     let he: HumanEva = load(&dir, "humaneva.json");
     let refs = reference_intrinsics(&he);
+    check_calibration(&he, &refs);
 
+    // --- Fitting with the reference camera, dimensions estimated with a leave-one-subject-out
+    // proportion prior.
+    let conv = Convention::HumanEva;
+    let per_subject = subject_lengths(&he);
+    println!("\nHumanEva-I mean body per subject and leave-one-subject-out priors (mm):");
+    println!("| subject | {} |", dim::NAMES.join(" | "));
+    let row = |name: &str, l: &[f64; N_DIMS]| {
+        let cells: Vec<String> = l.iter().map(|v| format!("{v:.0}")).collect();
+        println!("| {name} | {} |", cells.join(" | "));
+    };
+    for (s, l) in &per_subject {
+        row(s, l);
+        row(
+            &format!("prior for {s}"),
+            &mean_body(&per_subject, |o| o != s).lengths,
+        );
+    }
+    // The shipped table is the mean of all three subjects, rounded to the millimetre.
+    let all = mean_body(&per_subject, |_| true);
+    row("all (shipped)", &Dimensions::mean(conv).lengths);
+    for i in 0..N_DIMS {
+        assert!(
+            (all.lengths[i] - Dimensions::mean(conv).lengths[i]).abs() <= 0.51,
+            "{}: HumanEva mean {:.1} vs shipped {}",
+            dim::NAMES[i],
+            all.lengths[i],
+            Dimensions::mean(conv).lengths[i]
+        );
+    }
+    let r = evaluate(
+        &he,
+        &refs,
+        &per_subject,
+        &DimensionEstimator::default(),
+        Prior::LeaveOneOut,
+        DIMENSION_FRAMES,
+        true,
+    );
+    println!(
+        "\nHumanEva-I Train, GT 2D, reference camera: {} frames in {} sequences",
+        r.frames,
+        he.sequences.len()
+    );
+    r.print();
+    // The thesis' CLFBA reaches 5.96 px and 110.2 mm.
+    assert!(r.reproj < 8.0, "reprojection {:.2} px", r.reproj);
+    // Regression bound around what was measured (102.0 mm, README); the 80 mm target is not
+    // met yet.
+    assert!(r.pa < 110.0, "PA error {:.1} mm", r.pa);
+}
+
+fn check_calibration(he: &HumanEva, refs: &BTreeMap<(String, usize), (BodyCamera, f64)>) {
     println!("\nReference intrinsics (linear fit to mocap 3D / GT 2D):");
     println!("| subject | camera | fx | fy | cx | cy | RMS px |");
-    for ((s, c), (cam, rms)) in &refs {
+    for ((s, c), (cam, rms)) in refs {
         let k = cam.intrinsics;
         println!(
             "| {s} | C{} | {:.1} | {:.1} | {:.1} | {:.1} | {rms:.2} |",
@@ -120,7 +177,7 @@ fn humaneva_train_with_ground_truth_2d() {
         (rng_state % 20001) as f64 / 10000.0 - 1.0
     };
     let mut calib_errors = vec![];
-    for ((s, c), (cam, _)) in &refs {
+    for ((s, c), (cam, _)) in refs {
         // Centre the rectangle on the subject's mean floor position.
         let mut centre = Vector3::zeros();
         let mut count = 0.0;
@@ -200,53 +257,257 @@ fn humaneva_train_with_ground_truth_2d() {
             assert!(fe < 5.0 && re < 6.0 && ce < 150.0, "{fe} {re} {ce}");
         }
     }
+}
 
-    // --- Fitting with the reference camera.
+/// The dimension-search experiments behind README's table (not run in CI: each row is a full pass
+/// over HumanEva Train). Run:
+/// `cargo test --release -p monotrack-tests --test body_humaneva -- --ignored --nocapture`.
+#[test]
+#[ignore = "experiment table, about a minute per row in release"]
+fn humaneva_dimension_experiments() {
+    let Some(dir) = converted("body_humaneva") else {
+        return;
+    };
+    let he: HumanEva = load(&dir, "humaneva.json");
+    let refs = reference_intrinsics(&he);
+    let per_subject = subject_lengths(&he);
+    // The table used before: Human3.6M's mean lengths with HumanEva's neck and hip width.
+    let mut h36m = Dimensions::mean(Convention::Human36M);
+    h36m.lengths[dim::NECK] = 318.0;
+    h36m.lengths[dim::HIP_WIDTH] = 93.0;
+    let default = DimensionEstimator::default();
+    let weight = |w: f64| DimensionEstimator {
+        proportion_prior_px2: w,
+        ..default
+    };
+    let scale_only = DimensionEstimator {
+        separate_dimensions: false,
+        ..default
+    };
+    let rows: Vec<(String, DimensionEstimator, Prior, usize)> = vec![
+        (
+            "Human3.6M proportions".into(),
+            default,
+            Prior::Fixed(h36m),
+            DIMENSION_FRAMES,
+        ),
+        (
+            "leave-one-out".into(),
+            default,
+            Prior::LeaveOneOut,
+            DIMENSION_FRAMES,
+        ),
+        (
+            "in-sample (shipped table)".into(),
+            default,
+            Prior::Shipped,
+            DIMENSION_FRAMES,
+        ),
+        (
+            "leave-one-out, scale only".into(),
+            scale_only,
+            Prior::LeaveOneOut,
+            DIMENSION_FRAMES,
+        ),
+        (
+            "leave-one-out, prior 0".into(),
+            weight(0.0),
+            Prior::LeaveOneOut,
+            DIMENSION_FRAMES,
+        ),
+        (
+            "leave-one-out, prior 50".into(),
+            weight(50.0),
+            Prior::LeaveOneOut,
+            DIMENSION_FRAMES,
+        ),
+        (
+            "leave-one-out, prior 100".into(),
+            weight(100.0),
+            Prior::LeaveOneOut,
+            DIMENSION_FRAMES,
+        ),
+        (
+            "leave-one-out, prior 400".into(),
+            weight(400.0),
+            Prior::LeaveOneOut,
+            DIMENSION_FRAMES,
+        ),
+        (
+            "leave-one-out, prior 1000".into(),
+            weight(1000.0),
+            Prior::LeaveOneOut,
+            DIMENSION_FRAMES,
+        ),
+        (
+            "leave-one-out, 3 frames".into(),
+            default,
+            Prior::LeaveOneOut,
+            3,
+        ),
+        (
+            "leave-one-out, 10 frames".into(),
+            default,
+            Prior::LeaveOneOut,
+            10,
+        ),
+    ];
+    let only = std::env::var("BODY_ROWS").ok();
+    println!(
+        "\n| dimensions | PA-MPJPE mm | MPJPE mm (mean / median) | reprojection px | mean abs length error mm | shins mm | shoulder width mm | thighs mm | dimension search median ms |"
+    );
+    for (i, (name, est, prior, frames)) in rows.iter().enumerate() {
+        // BODY_ROWS=0,3 runs only those rows.
+        if only
+            .as_ref()
+            .is_some_and(|o| !o.split(',').any(|k| k.trim().parse() == Ok(i)))
+        {
+            continue;
+        }
+        let r = evaluate(&he, &refs, &per_subject, est, *prior, *frames, false);
+        println!(
+            "| {name} | {:.1} | {:.0} / {:.0} | {:.2} | {:.1} | {:+.0} / {:+.0} | {:+.0} | {:+.0} / {:+.0} | {:.0} |",
+            r.pa,
+            r.abs,
+            r.abs_median,
+            r.reproj,
+            r.mean_abs_len_err(),
+            r.part_err("left shin"),
+            r.part_err("right shin"),
+            r.part_err("shoulder width"),
+            r.part_err("left thigh"),
+            r.part_err("right thigh"),
+            r.dim_us / 1e3
+        );
+    }
+}
+
+/// Per-subject mean bone lengths of the mocap (each chunk counted once, not once per camera).
+fn subject_lengths(he: &HumanEva) -> BTreeMap<String, [f64; N_DIMS]> {
+    let mut out = BTreeMap::new();
+    for subject in he.cameras.keys() {
+        let frames = he
+            .sequences
+            .iter()
+            .filter(|s| &s.subject == subject && s.camera == 0)
+            .flat_map(|s| s.joints3d_mm.iter());
+        out.insert(subject.clone(), mean_lengths(frames));
+    }
+    out
+}
+
+/// What one evaluation over HumanEva Train measured.
+struct Report {
+    frames: usize,
+    /// Mean 2D reprojection RMS, px.
+    reproj: f64,
+    /// Mean per-joint error after Procrustes (PA-MPJPE), mm.
+    pa: f64,
+    /// Mean per-joint world-frame error, no alignment (MPJPE), mm.
+    abs: f64,
+    /// Its median over frames (a few frames whose depth goes far astray dominate the mean).
+    abs_median: f64,
+    /// PA-MPJPE with the mocap's own dimensions (when asked for).
+    pa_true: Option<f64>,
+    limb: [f64; 6],
+    /// Estimated − mocap length per body part, one entry per sequence × camera run.
+    len_err: Vec<(&'static str, Vec<f64>)>,
+    pose_us: f64,
+    dim_us: f64,
+}
+
+impl Report {
+    fn mean_abs_len_err(&self) -> f64 {
+        let all: Vec<f64> = self
+            .len_err
+            .iter()
+            .flat_map(|(_, e)| e.iter())
+            .map(|v| v.abs())
+            .collect();
+        all.iter().sum::<f64>() / all.len() as f64
+    }
+
+    fn part_err(&self, name: &str) -> f64 {
+        let e = &self.len_err.iter().find(|(n, _)| *n == name).unwrap().1;
+        e.iter().sum::<f64>() / e.len() as f64
+    }
+
+    fn print(&self) {
+        println!("2D reprojection RMS: mean {:.2} px", self.reproj);
+        println!(
+            "3D error after Procrustes: mean {:.1} mm (absolute, no alignment: mean {:.1} mm, median over frames {:.1} mm)",
+            self.pa, self.abs, self.abs_median
+        );
+        if let Some(t) = self.pa_true {
+            println!(
+                "3D error after Procrustes with the mocap's own body dimensions: mean {t:.1} mm"
+            );
+        }
+        println!("| limb | 3D error after Procrustes, mm |");
+        for (g, (name, _)) in LIMB_GROUPS.iter().enumerate() {
+            println!("| {name} | {:.1} |", self.limb[g]);
+        }
+        println!("| body part | mean error mm | mean abs error mm |");
+        for (name, e) in &self.len_err {
+            println!(
+                "| {name} | {:+.1} | {:.1} |",
+                e.iter().sum::<f64>() / e.len() as f64,
+                e.iter().map(|v| v.abs()).sum::<f64>() / e.len() as f64
+            );
+        }
+        println!("| all parts | | {:.1} |", self.mean_abs_len_err());
+        println!(
+            "timings in this build: pose median {:.0} us, dimensions median {:.0} us",
+            self.pose_us, self.dim_us
+        );
+    }
+}
+
+/// Fits every frame of HumanEva Train with the reference cameras, dimensions estimated per
+/// sequence × camera run on its first `frames` frames, starting from `prior`'s dimensions for the
+/// run's subject.
+fn evaluate(
+    he: &HumanEva,
+    refs: &BTreeMap<(String, usize), (BodyCamera, f64)>,
+    per_subject: &BTreeMap<String, [f64; N_DIMS]>,
+    estimator: &DimensionEstimator,
+    prior: Prior,
+    frames: usize,
+    with_true_dims: bool,
+) -> Report {
     let conv = Convention::HumanEva;
     let fitter = BodyFitter::default();
-    let estimator = DimensionEstimator::default();
     let mut reproj = vec![];
     let mut limb_err = [0.0f64; 6];
     let mut limb_n = [0usize; 6];
     let mut pa_all = vec![];
     let mut abs_all = vec![];
-    let mut len_err: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
+    let mut len_err: Vec<(&'static str, Vec<f64>)> =
+        BONES.iter().map(|(name, ..)| (*name, vec![])).collect();
     let mut pa_truedims = vec![];
     let mut pose_us = vec![];
     let mut dim_us = vec![];
     for seq in &he.sequences {
         let (cam, _) = refs[&(seq.subject.clone(), seq.camera)];
         let obs: Vec<Joints2d> = seq.joints2d.iter().map(|p| Joints2d::full(*p)).collect();
-        let k = DIMENSION_FRAMES.min(obs.len());
+        let k = frames.min(obs.len());
+        let start = prior.start(&seq.subject, per_subject, conv);
         let t0 = Instant::now();
         let est = estimator
-            .estimate(&fitter, &obs[..k], &cam, &Dimensions::mean(conv), conv)
+            .estimate(&fitter, &obs[..k], &cam, &start, conv)
             .unwrap();
         dim_us.push(t0.elapsed().as_secs_f64() * 1e6);
         let skel = Skeleton::new(est.dimensions, conv).unwrap();
-        let mut true_dims = est.dimensions;
-        for (_, a, b, di) in BONES {
-            true_dims.lengths[di] = seq
-                .joints3d_mm
-                .iter()
-                .map(|f| (v3(&f[a]) - v3(&f[b])).norm())
-                .sum::<f64>()
-                / seq.joints3d_mm.len() as f64;
-        }
-        let skel_true = Skeleton::new(true_dims, conv).unwrap();
         // Body-part lengths vs the mocap's (mean over the sequence).
-        for (name, a, b, di) in BONES {
-            let truth: f64 = seq
-                .joints3d_mm
-                .iter()
-                .map(|f| (v3(&f[a]) - v3(&f[b])).norm())
-                .sum::<f64>()
-                / seq.joints3d_mm.len() as f64;
-            len_err
-                .entry(name)
-                .or_default()
-                .push(skel.dims.lengths[di] - truth);
+        let truth_dims = Dimensions {
+            lengths: mean_lengths(seq.joints3d_mm.iter()),
+        };
+        for (b, (_, _, _, di)) in BONES.iter().enumerate() {
+            len_err[b]
+                .1
+                .push(skel.dims.lengths[*di] - truth_dims.lengths[*di]);
         }
+        let skel_true = Skeleton::new(truth_dims, conv).unwrap();
         for (o, x3) in obs.iter().zip(&seq.joints3d_mm) {
             let t0 = Instant::now();
             let fit = fitter.fit(o, &cam, &skel).unwrap();
@@ -261,15 +522,17 @@ fn humaneva_train_with_ground_truth_2d() {
                 ab += (fit.joints[j] - truth[j]).norm();
             }
             pa_all.push(pa / N_JOINTS as f64);
-            let ft = fitter.fit(o, &cam, &skel_true).unwrap();
-            let at = procrustes(&ft.joints, &truth);
-            pa_truedims.push(
-                (0..N_JOINTS)
-                    .map(|j| (at[j] - truth[j]).norm())
-                    .sum::<f64>()
-                    / N_JOINTS as f64,
-            );
             abs_all.push(ab / N_JOINTS as f64);
+            if with_true_dims {
+                let ft = fitter.fit(o, &cam, &skel_true).unwrap();
+                let at = procrustes(&ft.joints, &truth);
+                pa_truedims.push(
+                    (0..N_JOINTS)
+                        .map(|j| (at[j] - truth[j]).norm())
+                        .sum::<f64>()
+                        / N_JOINTS as f64,
+                );
+            }
             for (g, (_, joints)) in LIMB_GROUPS.iter().enumerate() {
                 for &j in *joints {
                     limb_err[g] += (aligned[j] - truth[j]).norm();
@@ -283,41 +546,16 @@ fn humaneva_train_with_ground_truth_2d() {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
-    println!(
-        "\nHumanEva-I Train, GT 2D, reference camera: {} frames in {} sequences",
-        reproj.len(),
-        he.sequences.len()
-    );
-    println!("2D reprojection RMS: mean {:.2} px", mean(&reproj));
-    println!(
-        "3D error after Procrustes: mean {:.1} mm (absolute, no alignment: {:.1} mm)",
-        mean(&pa_all),
-        mean(&abs_all)
-    );
-    println!(
-        "3D error after Procrustes with the mocap's own body dimensions: mean {:.1} mm",
-        mean(&pa_truedims)
-    );
-    println!("| limb | 3D error after Procrustes, mm |");
-    for (g, (name, _)) in LIMB_GROUPS.iter().enumerate() {
-        println!("| {name} | {:.1} |", limb_err[g] / limb_n[g] as f64);
+    Report {
+        frames: reproj.len(),
+        reproj: mean(&reproj),
+        pa: mean(&pa_all),
+        abs: mean(&abs_all),
+        abs_median: median(&mut abs_all),
+        pa_true: with_true_dims.then(|| mean(&pa_truedims)),
+        limb: std::array::from_fn(|g| limb_err[g] / limb_n[g] as f64),
+        len_err,
+        pose_us: median(&mut pose_us),
+        dim_us: median(&mut dim_us),
     }
-    println!("| body part | mean error mm | mean abs error mm |");
-    for (name, e) in &len_err {
-        println!(
-            "| {name} | {:+.1} | {:.1} |",
-            mean(e),
-            e.iter().map(|v| v.abs()).sum::<f64>() / e.len() as f64
-        );
-    }
-    println!(
-        "timings in this (test-profile) build: pose median {:.0} us, dimensions ({DIMENSION_FRAMES} frames) median {:.0} us",
-        median(&mut pose_us),
-        median(&mut dim_us)
-    );
-    // The thesis' CLFBA reaches 5.96 px and 110.2 mm.
-    assert!(mean(&reproj) < 8.0, "reprojection {:.2} px", mean(&reproj));
-    // Regression bounds around what was measured (111.5 mm, 3.8 px); the 80 mm target is not
-    // met yet (README).
-    assert!(mean(&pa_all) < 125.0, "PA error {:.1} mm", mean(&pa_all));
 }

@@ -542,7 +542,11 @@ pub struct DimensionEstimator {
     /// Each separate length may move by this fraction around its scaled starting value.
     pub part_range: f64,
     /// Weight (px² per joint) of the squared log-ratio of each length to its scaled starting value:
-    /// lengths longer than needed always fit, so without a prior they drift upwards.
+    /// lengths longer than needed always fit, so without a prior they drift upwards. The starting
+    /// value's proportions should be the convention's ([`Dimensions::mean`]). Measured with
+    /// leave-one-subject-out proportions (README), PA error for 0 / 50 / 100 / 200 / 400 / 1000:
+    /// HumanEva 113.2 / 103.1 / 102.8 / 102.0 / 102.2 / 102.2 mm, Human3.6M synthetic
+    /// 103.6 / 91.4 / 88.3 / 89.7 / 90.2 / 90.1 mm; flat from 100 up, so 200 stays.
     pub proportion_prior_px2: f64,
     /// Refine the separate lengths (pose + dimensions) or stop after the scale (pose + scale).
     pub separate_dimensions: bool,

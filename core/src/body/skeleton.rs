@@ -94,25 +94,12 @@ pub struct Dimensions {
 }
 
 impl Dimensions {
-    /// The mean adult of Human3.6M (subjects S1, S5, S6, S7, S8; means of the per-subject bone
-    /// lengths of the 32-joint skeleton mapped to the 15 joints), with the neck and hip width of
-    /// `convention`, whose joint definitions differ from Human3.6M's.
+    /// The mean adult of `convention`'s data set (see [`Convention::mean_lengths_mm`]): the
+    /// starting dimensions and the proportions the dimension search is pulled towards.
     pub fn mean(convention: Convention) -> Self {
-        let c = convention.constants();
-        let mut lengths = [0.0; N_DIMS];
-        lengths[dim::BACK] = 487.0;
-        lengths[dim::NECK] = c.neck_mm;
-        lengths[dim::SHOULDER_WIDTH] = 276.0;
-        lengths[dim::HIP_WIDTH] = c.hip_width_mm;
-        lengths[dim::L_UPPER_ARM] = 282.0;
-        lengths[dim::R_UPPER_ARM] = 282.0;
-        lengths[dim::L_FOREARM] = 250.0;
-        lengths[dim::R_FOREARM] = 250.0;
-        lengths[dim::L_THIGH] = 452.0;
-        lengths[dim::R_THIGH] = 452.0;
-        lengths[dim::L_SHIN] = 447.0;
-        lengths[dim::R_SHIN] = 447.0;
-        Self { lengths }
+        Self {
+            lengths: convention.mean_lengths_mm(),
+        }
     }
 
     /// Every length multiplied by `s`.
@@ -163,16 +150,46 @@ pub struct ConventionConstants {
     pub shoulder_drop_mm: f64,
     /// Shoulders in front of the thorax, mm.
     pub shoulder_forward_mm: f64,
-    /// Default thorax → head distance, mm.
-    pub neck_mm: f64,
-    /// Default hip width, mm.
-    pub hip_width_mm: f64,
     /// Height of the ankle joint above the floor when the foot is flat on it, mm (for the mean
     /// body; scaled with the shin).
     pub ankle_height_mm: f64,
 }
 
 impl Convention {
+    /// The mean body of the convention's data set, in [`dim`] order (mm): per-subject mean bone
+    /// lengths of its training subjects, averaged over the subjects, left and right averaged, rounded
+    /// to the millimetre.
+    ///
+    /// The two data sets place their joints differently enough that one table cannot serve both:
+    /// HumanEva's shoulder points sit 1.19 upper arms apart (Human3.6M 0.98), its hip points 93 mm
+    /// apart (271), its "head" 319 mm above the thorax (178), and its legs are 1.43 times its arms
+    /// (Human3.6M 1.69). With Human3.6M's proportions as the prior for HumanEva, the estimated
+    /// shins came out 51–63 mm too long and the shoulders 63 mm too narrow (README).
+    ///
+    /// HumanEva-I: Train subjects S1–S3 (every 10th mocap frame of every chunk; `body_humaneva`
+    /// recomputes and checks this table, and evaluates with leave-one-subject-out tables instead,
+    /// since HumanEva-I has no other subjects). Human3.6M: S1, S5–S8 (`body_h36m` likewise).
+    pub fn mean_lengths_mm(self) -> [f64; N_DIMS] {
+        let (back, neck, shoulders, hips, upper_arm, forearm, thigh, shin) = match self {
+            Self::HumanEva => (484.0, 319.0, 349.0, 93.0, 294.0, 280.0, 421.0, 400.0),
+            Self::Human36M => (487.0, 178.0, 276.0, 271.0, 282.0, 250.0, 452.0, 447.0),
+        };
+        let mut l = [0.0; N_DIMS];
+        l[dim::BACK] = back;
+        l[dim::NECK] = neck;
+        l[dim::SHOULDER_WIDTH] = shoulders;
+        l[dim::HIP_WIDTH] = hips;
+        l[dim::L_UPPER_ARM] = upper_arm;
+        l[dim::R_UPPER_ARM] = upper_arm;
+        l[dim::L_FOREARM] = forearm;
+        l[dim::R_FOREARM] = forearm;
+        l[dim::L_THIGH] = thigh;
+        l[dim::R_THIGH] = thigh;
+        l[dim::L_SHIN] = shin;
+        l[dim::R_SHIN] = shin;
+        l
+    }
+
     /// The constants. HumanEva-I's were measured on its Train split's mocap joints (means in the
     /// pelvis frame over S1-S3; their spread across subjects is under 5 mm, i.e. they are fixed by
     /// the joint definitions); Human3.6M's likewise over S1, S5-S8. Ankle heights: the median
@@ -184,8 +201,6 @@ impl Convention {
                 hip_forward_mm: 50.0,
                 shoulder_drop_mm: 20.0,
                 shoulder_forward_mm: -35.0,
-                neck_mm: 318.0,
-                hip_width_mm: 93.0,
                 ankle_height_mm: 88.0,
             },
             Self::Human36M => ConventionConstants {
@@ -193,8 +208,6 @@ impl Convention {
                 hip_forward_mm: 0.0,
                 shoulder_drop_mm: 54.0,
                 shoulder_forward_mm: -8.0,
-                neck_mm: 178.0,
-                hip_width_mm: 271.0,
                 ankle_height_mm: 80.0,
             },
         }

@@ -2,9 +2,11 @@
 //! (numpy + h5py) into JSON under the cargo target dir, reading it, and 3D error helpers.
 #![allow(dead_code)]
 
-use monotrack_core::body::N_JOINTS;
+use monotrack_core::body::skeleton::{N_DIMS, dim};
+use monotrack_core::body::{Dimensions, N_JOINTS};
 use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -143,3 +145,73 @@ pub const BONES: [(&str, usize, usize, usize); 12] = [
     ("left shin", 9, 10, 10),
     ("right shin", 12, 13, 11),
 ];
+
+/// Mean bone lengths (mm, [`dim`] order) of one subject's frames: a frame-weighted mean of each
+/// bone's length over all of them (HumanEva's marker-based joints stretch by up to ±28 mm).
+pub fn mean_lengths<'a>(
+    frames: impl IntoIterator<Item = &'a [[f64; 3]; N_JOINTS]>,
+) -> [f64; N_DIMS] {
+    let mut sum = [0.0; N_DIMS];
+    let mut n = 0.0;
+    for f in frames {
+        for (_, a, b, di) in BONES {
+            sum[di] += (v3(&f[a]) - v3(&f[b])).norm();
+        }
+        n += 1.0;
+    }
+    sum.map(|s| s / n)
+}
+
+/// The mean body of the subjects `keep` accepts: per-subject lengths averaged over the subjects
+/// (each subject counts once), left and right averaged; the way
+/// `Convention::mean_lengths_mm` was made, before its rounding.
+pub fn mean_body(
+    per_subject: &BTreeMap<String, [f64; N_DIMS]>,
+    keep: impl Fn(&str) -> bool,
+) -> Dimensions {
+    let chosen: Vec<_> = per_subject.iter().filter(|(s, _)| keep(s)).collect();
+    assert!(!chosen.is_empty(), "no subjects for the mean body");
+    let n = chosen.len() as f64;
+    let mut lengths: [f64; N_DIMS] =
+        std::array::from_fn(|i| chosen.iter().map(|(_, l)| l[i]).sum::<f64>() / n);
+    for (l, r) in [
+        (dim::L_UPPER_ARM, dim::R_UPPER_ARM),
+        (dim::L_FOREARM, dim::R_FOREARM),
+        (dim::L_THIGH, dim::R_THIGH),
+        (dim::L_SHIN, dim::R_SHIN),
+    ] {
+        let m = 0.5 * (lengths[l] + lengths[r]);
+        lengths[l] = m;
+        lengths[r] = m;
+    }
+    Dimensions { lengths }
+}
+
+/// Where the dimension search's starting proportions (its prior) come from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Prior {
+    /// The shipped table, `Dimensions::mean(convention)`: made from every subject evaluated here,
+    /// so an in-sample (optimistic) figure.
+    Shipped,
+    /// The mean body of the other subjects of the data set (leave one subject out): the honest
+    /// figure for a subject the table has not seen.
+    LeaveOneOut,
+    /// Fixed lengths (e.g. another data set's proportions).
+    Fixed(Dimensions),
+}
+
+impl Prior {
+    /// The starting dimensions for `subject`.
+    pub fn start(
+        &self,
+        subject: &str,
+        per_subject: &BTreeMap<String, [f64; N_DIMS]>,
+        convention: monotrack_core::body::Convention,
+    ) -> Dimensions {
+        match self {
+            Prior::Shipped => Dimensions::mean(convention),
+            Prior::LeaveOneOut => mean_body(per_subject, |s| s != subject),
+            Prior::Fixed(d) => *d,
+        }
+    }
+}
