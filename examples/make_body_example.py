@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Writes examples/body_fit_example.jsonl: six frames of a synthetic walker (a stick figure with
-HumanEva-I joint definitions and the mean Human3.6M limb lengths scaled by 1.05, legs and arms
+HumanEva-I joint definitions and the HumanEva-I mean body (`Convention::mean_lengths_mm`) scaled by 1.05, legs and arms
 swinging sinusoidally, the lower ankle 88 mm above the floor) seen by a 640x480 camera (f = 760 px)
 4.5 m away and 1.5 m high, with 0.5 px uniform noise on the 2D joints (seed fixed). The camera is
 given to `monotrack body-fit` only through the image corners of a 2 m x 3 m floor rectangle, so the
@@ -12,8 +12,8 @@ import json, math, os, random
 HERE = os.path.dirname(os.path.abspath(__file__))
 rng = random.Random(11)
 S = 1.05
-BACK, NECK, SHW, HIPW = 487 * S, 318 * S, 276 * S, 93 * S
-UARM, FARM, THIGH, SHIN, ANKLE = 282 * S, 250 * S, 452 * S, 447 * S, 88 * S
+BACK, NECK, SHW, HIPW = 484 * S, 319 * S, 349 * S, 93 * S
+UARM, FARM, THIGH, SHIN, ANKLE = 294 * S, 280 * S, 421 * S, 400 * S, 88 * S
 W, H, F = 640, 480, 760.0
 CAM_C = [1000.0, -3000.0, 1500.0]
 TILT = math.radians(12)

@@ -72,8 +72,9 @@ fn body_fit_example_recovers_the_walker() {
         }
     }
     // World-frame error without any alignment: camera, scale and pose all estimated.
-    // Measured: 57.8 mm.
-    assert!(total < 100.0, "mean joint error {total:.1} mm");
+    // Measured: 20.8 mm (the walker has the HumanEva mean proportions the dimension search is
+    // pulled towards, scaled by 1.05).
+    assert!(total < 50.0, "mean joint error {total:.1} mm");
 }
 
 #[test]
