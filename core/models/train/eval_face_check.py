@@ -1,0 +1,62 @@
+#!/usr/bin/env python3
+"""Level 1's face / not-face output (the tracker's and the CLI's face check) on the faces68
+validation split: positives = landmark boxes with tracker-like jitter (centre ±5 %, side ±10 %),
+negatives = the training recipe's kinds (shifted off the face, a part of the face, anywhere in the
+image), seeded. Prints, per model, the share of positives and negatives at or above 0.5 (the
+tracker's `min_face_confidence`) and the ROC AUC.
+
+    python3 core/models/train/eval_face_check.py [LEVEL1.onnx ...]   # default: the shipped one
+"""
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import m3data as D  # noqa: E402
+import m3_reference as R  # noqa: E402
+
+SEED = 5
+ROUNDS = 4
+
+
+def main():
+    paths = sys.argv[1:] or [os.path.join(D.REPO, "core", "models", "m3", "level1.onnx")]
+    runners = [R.Level1Runner(p) for p in paths]
+    img_paths, faces = D.load_faces68("val")
+    imgs = [D.load_gray(p) for p in img_paths]
+    rng = np.random.default_rng(SEED)
+    pos, neg = [[] for _ in runners], [[] for _ in runners]
+    for _ in range(ROUNDS):
+        for f in faces:
+            img = imgs[f["image"]]
+            c, s = D.square_of_box(D.box_of(f["pts"]))
+            for positive in (True, False):
+                cc, ss = c.copy(), s
+                if positive:
+                    ss *= np.exp(rng.uniform(-0.1, 0.1))
+                    cc = cc + rng.uniform(-0.05, 0.05, 2) * s
+                else:
+                    k = rng.random()
+                    if k < 0.5:
+                        th = rng.uniform(0, 2 * np.pi)
+                        cc = cc + rng.uniform(0.6, 1.2) * s * np.array([np.cos(th), np.sin(th)])
+                    elif k < 0.75:
+                        ss *= rng.uniform(0.3, 0.45)
+                        cc = cc + rng.uniform(-0.3, 0.3, 2) * s / 0.35
+                    else:
+                        h, w = img.shape
+                        ss = rng.uniform(0.3, 1.0) * s
+                        cc = np.array([rng.uniform(0, w), rng.uniform(0, h)])
+                box = np.array([cc[0] - ss / 2, cc[1] - ss / 2, ss, ss])
+                for k, r in enumerate(runners):
+                    (pos if positive else neg)[k].append(float(r.run(img, box)[2]))
+    for path, p, q in zip(paths, pos, neg):
+        p, q = np.array(p), np.array(q)
+        auc = (p[:, None] > q[None, :]).mean() + 0.5 * (p[:, None] == q[None, :]).mean()
+        print(f"{path}: positives >= 0.5 {np.mean(p >= 0.5):.3f}, negatives >= 0.5 {np.mean(q >= 0.5):.3f},"
+              f" AUC {auc:.4f} ({len(p)} / {len(q)})")
+
+
+if __name__ == "__main__":
+    main()
