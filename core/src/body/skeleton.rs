@@ -69,6 +69,13 @@ pub mod dim {
     pub const L_SHIN: usize = 10;
     /// Right knee → ankle.
     pub const R_SHIN: usize = 11;
+    /// The left and right lengths of each limb segment (upper arm, forearm, thigh, shin).
+    pub const LEFT_RIGHT: [(usize, usize); 4] = [
+        (L_UPPER_ARM, R_UPPER_ARM),
+        (L_FOREARM, R_FOREARM),
+        (L_THIGH, R_THIGH),
+        (L_SHIN, R_SHIN),
+    ];
     /// The names used in JSON output, in index order.
     pub const NAMES: [&str; super::N_DIMS] = [
         "back",
@@ -174,20 +181,11 @@ impl Convention {
             Self::HumanEva => (484.0, 319.0, 349.0, 93.0, 294.0, 280.0, 421.0, 400.0),
             Self::Human36M => (487.0, 178.0, 276.0, 271.0, 282.0, 250.0, 452.0, 447.0),
         };
-        let mut l = [0.0; N_DIMS];
-        l[dim::BACK] = back;
-        l[dim::NECK] = neck;
-        l[dim::SHOULDER_WIDTH] = shoulders;
-        l[dim::HIP_WIDTH] = hips;
-        l[dim::L_UPPER_ARM] = upper_arm;
-        l[dim::R_UPPER_ARM] = upper_arm;
-        l[dim::L_FOREARM] = forearm;
-        l[dim::R_FOREARM] = forearm;
-        l[dim::L_THIGH] = thigh;
-        l[dim::R_THIGH] = thigh;
-        l[dim::L_SHIN] = shin;
-        l[dim::R_SHIN] = shin;
-        l
+        // [`dim`] order: back, neck, shoulders, hips, then each limb segment left and right.
+        [
+            back, neck, shoulders, hips, upper_arm, upper_arm, forearm, forearm, thigh, thigh,
+            shin, shin,
+        ]
     }
 
     /// The constants. HumanEva-I's were measured on its Train split's mocap joints (means in the

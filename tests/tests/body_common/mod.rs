@@ -174,17 +174,32 @@ pub fn mean_body(
     let n = chosen.len() as f64;
     let mut lengths: [f64; N_DIMS] =
         std::array::from_fn(|i| chosen.iter().map(|(_, l)| l[i]).sum::<f64>() / n);
-    for (l, r) in [
-        (dim::L_UPPER_ARM, dim::R_UPPER_ARM),
-        (dim::L_FOREARM, dim::R_FOREARM),
-        (dim::L_THIGH, dim::R_THIGH),
-        (dim::L_SHIN, dim::R_SHIN),
-    ] {
+    for (l, r) in dim::LEFT_RIGHT {
         let m = 0.5 * (lengths[l] + lengths[r]);
         lengths[l] = m;
         lengths[r] = m;
     }
     Dimensions { lengths }
+}
+
+/// Asserts that the shipped table `Dimensions::mean(convention)` is the mean body of all the
+/// subjects of `per_subject`, each length within `tol_mm` (the table is rounded to the millimetre).
+pub fn assert_shipped_table(
+    per_subject: &BTreeMap<String, [f64; N_DIMS]>,
+    convention: monotrack_core::body::Convention,
+    tol_mm: f64,
+) {
+    let all = mean_body(per_subject, |_| true);
+    let shipped = Dimensions::mean(convention);
+    for i in 0..N_DIMS {
+        assert!(
+            (all.lengths[i] - shipped.lengths[i]).abs() <= tol_mm,
+            "{}: {convention:?} data mean {:.1} vs shipped {}",
+            dim::NAMES[i],
+            all.lengths[i],
+            shipped.lengths[i]
+        );
+    }
 }
 
 /// Where the dimension search's starting proportions (its prior) come from.
