@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Level 1's face / not-face output (the tracker's and the CLI's face check) on the faces68
 validation split: positives = landmark boxes with tracker-like jitter (centre ±5 %, side ±10 %),
-negatives = the training recipe's kinds (shifted off the face, a part of the face, anywhere in the
-image), seeded. Prints, per model, the share of positives and negatives at or above 0.5 (the
+negatives drawn as in training (`m3data.level1_negative`: shifted off the face, far too large, a part
+of the face, anywhere in the image), seeded. Prints, per model, the share of positives and negatives at or above 0.5 (the
 tracker's `min_face_confidence`) and the ROC AUC.
 
     python3 core/models/train/eval_face_check.py [LEVEL1.onnx ...]   # default: the shipped one
@@ -37,17 +37,7 @@ def main():
                     ss *= np.exp(rng.uniform(-0.1, 0.1))
                     cc = cc + rng.uniform(-0.05, 0.05, 2) * s
                 else:
-                    k = rng.random()
-                    if k < 0.5:
-                        th = rng.uniform(0, 2 * np.pi)
-                        cc = cc + rng.uniform(0.6, 1.2) * s * np.array([np.cos(th), np.sin(th)])
-                    elif k < 0.75:
-                        ss *= rng.uniform(0.3, 0.45)
-                        cc = cc + rng.uniform(-0.3, 0.3, 2) * s / 0.35
-                    else:
-                        h, w = img.shape
-                        ss = rng.uniform(0.3, 1.0) * s
-                        cc = np.array([rng.uniform(0, w), rng.uniform(0, h)])
+                    cc, ss = D.level1_negative(cc, ss, img.shape, rng)
                 box = np.array([cc[0] - ss / 2, cc[1] - ss / 2, ss, ss])
                 for k, r in enumerate(runners):
                     (pos if positive else neg)[k].append(float(r.run(img, box)[2]))

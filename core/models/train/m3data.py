@@ -234,6 +234,26 @@ def pnp_yaw(pts, W, H):
     return float(np.degrees(-np.arcsin(np.clip(R[2, 0], -1, 1))))
 
 
+def level1_negative(c, s, shape, rng):
+    """A not-a-face level-1 square (centre, side) drawn near the face square (c, s) of an image of
+    `shape`: shifted off the face, far too large, a part of the face, or anywhere in the image.
+    Level 1's face/not-face training and eval_face_check.py draw their negatives here."""
+    kind = rng.random()
+    if kind < 0.5:  # shifted off the face
+        th = rng.uniform(0, 2 * np.pi)
+        c = c + rng.uniform(0.5, 1.2) * s * np.array([np.cos(th), np.sin(th)])
+    elif kind < 0.7:  # far too large
+        s *= rng.uniform(2.3, 3.5)
+    elif kind < 0.85:  # a part of the face
+        s *= rng.uniform(0.25, 0.45)
+        c = c + rng.uniform(-0.3, 0.3, 2) * s / 0.35
+    else:  # anywhere in the image, away from this face
+        h, w = shape
+        s = rng.uniform(0.3, 1.0) * s
+        c = np.array([rng.uniform(0, w), rng.uniform(0, h)])
+    return c, s
+
+
 def load_faces68(split):
     """Faces of the faces68 split ('train' | 'val'): dicts with image index, landmarks, labels."""
     teacher = {}

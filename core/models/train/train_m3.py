@@ -129,19 +129,7 @@ def level1_batch(data, rng, weights):
         angle = np.radians(rng.uniform(-25, 25)) if rng.random() < 0.4 else 0.0
         positive = rng.random() > 0.25
         if not positive:
-            kind = rng.random()
-            if kind < 0.5:  # shifted off the face
-                th = rng.uniform(0, 2 * np.pi)
-                c = c + rng.uniform(0.5, 1.2) * s * np.array([np.cos(th), np.sin(th)])
-            elif kind < 0.7:  # far too large
-                s *= rng.uniform(2.3, 3.5)
-            elif kind < 0.85:  # a part of the face
-                s *= rng.uniform(0.25, 0.45)
-                c = c + rng.uniform(-0.3, 0.3, 2) * s / 0.35
-            else:  # anywhere in the image, away from this face
-                h, w = img.shape
-                s = rng.uniform(0.3, 1.0) * s
-                c = np.array([rng.uniform(0, w), rng.uniform(0, h)])
+            c, s = D.level1_negative(c, s, img.shape, rng)
         A = D.level1_map(c, s, S, cs, angle)
         patch = photometric(D.sample(img, A, S, S), rng)
         X[k, 0] = patch / 255.0
