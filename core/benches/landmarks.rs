@@ -5,6 +5,8 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use monotrack_core::image::{GrayImage, Rect};
+use monotrack_core::landmarks::filter::Bilateral;
+use monotrack_core::landmarks::warp::{Affine, sample};
 use monotrack_core::landmarks::{FaceLandmarks, M3};
 use std::hint::black_box;
 
@@ -36,6 +38,22 @@ fn bench(c: &mut Criterion) {
             m3.face_confidence(black_box(&img), black_box(&face))
                 .unwrap()
         })
+    });
+    // The preprocessing kernels alone, at the level-1 crop (64×64 from a 273 px square, as
+    // `m3_per_face`) and the brows patch size (64×32, rotated, bilateral d = 5).
+    let crop = Affine::square_crop([320.0, 245.0], 1.3 * 210.0, 64);
+    let mut buf = Vec::new();
+    c.bench_function("warp_sample_64x64", |b| {
+        b.iter(|| sample(black_box(&img), black_box(&crop), 64, 64, &mut buf).unwrap())
+    });
+    let brows = Affine::similarity([250.0, 200.0], [390.0, 215.0], [8.0, 24.0], [56.0, 24.0])
+        .expect("distinct points");
+    let mut patch = Vec::new();
+    sample(&img, &brows, 64, 32, &mut patch).unwrap();
+    let mut bilateral = Bilateral::new(5, 20.0, 3.0);
+    let mut filtered = vec![0; 64 * 32];
+    c.bench_function("bilateral_64x32_d5", |b| {
+        b.iter(|| bilateral.apply(black_box(&patch), 64, 32, &mut filtered))
     });
 }
 

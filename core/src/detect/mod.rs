@@ -319,9 +319,9 @@ impl FaceDetector {
                 let buf = view.as_slice_mut::<f32>().map_err(internal)?;
                 self.resampler.run(image, buf, cw, ch, cw);
             }
-            plan.state
-                .run(tvec![plan.input.clone().into_tvalue()])
-                .map_err(internal)?
+            let outputs = plan.state.run(tvec![plan.input.clone().into_tvalue()]);
+            crate::cpu::clear_upper_vector_state();
+            outputs.map_err(internal)?
         };
         let logit_thr = logit(self.config.score_threshold);
         for (k, &stride) in STRIDES.iter().enumerate() {
@@ -382,10 +382,9 @@ impl FaceDetector {
             let buf = view.as_slice_mut::<f32>().map_err(internal)?;
             self.resampler.run(image, buf, n, n, n);
         }
-        let outputs = plan
-            .state
-            .run(tvec![plan.input.clone().into_tvalue()])
-            .map_err(internal)?;
+        let outputs = plan.state.run(tvec![plan.input.clone().into_tvalue()]);
+        crate::cpu::clear_upper_vector_state();
+        let outputs = outputs.map_err(internal)?;
         // Stride-16 head: the patch centre (32, 32) lies between cells 1 and 2 on each axis.
         let t = outputs
             .get(1)

@@ -104,10 +104,12 @@ impl Net {
             .iter()
             .map(|t| TValue::from_const(Arc::clone(t)))
             .collect();
-        self.outputs = self
+        let outputs = self
             .state
             .run(inputs)
-            .map_err(|e| Error::Internal(format!("network run: {e:#}")))?;
+            .map_err(|e| Error::Internal(format!("network run: {e:#}")));
+        crate::cpu::clear_upper_vector_state();
+        self.outputs = outputs?;
         Ok(())
     }
 
