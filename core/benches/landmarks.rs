@@ -39,8 +39,8 @@ fn bench(c: &mut Criterion) {
                 .unwrap()
         })
     });
-    // The preprocessing kernels alone, at the level-1 crop (64×64 from a 273 px square, as
-    // `m3_per_face`) and the brows patch size (64×32, rotated, bilateral d = 5).
+    // The preprocessing kernels alone: the level-1 crop (64×64 from a 273 px square, as
+    // `m3_per_face`; unrotated) and the brows patch (64×32, rotated; bilateral d = 5).
     let crop = Affine::square_crop([320.0, 245.0], 1.3 * 210.0, 64);
     let mut buf = Vec::new();
     c.bench_function("warp_sample_64x64", |b| {
@@ -49,7 +49,9 @@ fn bench(c: &mut Criterion) {
     let brows = Affine::similarity([250.0, 200.0], [390.0, 215.0], [8.0, 24.0], [56.0, 24.0])
         .expect("distinct points");
     let mut patch = Vec::new();
-    sample(&img, &brows, 64, 32, &mut patch).unwrap();
+    c.bench_function("warp_sample_rotated_64x32", |b| {
+        b.iter(|| sample(black_box(&img), black_box(&brows), 64, 32, &mut patch).unwrap())
+    });
     let mut bilateral = Bilateral::new(5, 20.0, 3.0);
     let mut filtered = vec![0; 64 * 32];
     c.bench_function("bilateral_64x32_d5", |b| {

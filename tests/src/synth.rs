@@ -31,13 +31,8 @@ pub struct FaceSample {
     pub name: String,
 }
 
-/// `round(0.299 R + 0.587 G + 0.114 B)` of an RGB buffer — the CONTRACT luma.
-pub fn rgb_to_luma(rgb: &[u8], out: &mut [u8]) {
-    for (o, p) in out.iter_mut().zip(rgb.chunks_exact(3)) {
-        *o = (0.299 * f32::from(p[0]) + 0.587 * f32::from(p[1]) + 0.114 * f32::from(p[2])).round()
-            as u8;
-    }
-}
+/// The CONTRACT luma of an RGB buffer (the core's; re-exported for the test programs).
+pub use monotrack_core::image::rgb_to_contract_luma as rgb_to_luma;
 
 /// Loads up to `max` validation faces of `faces68/train.jsonl` (line i is validation when
 /// i % 10 == 0; the first annotated face of each image) whose 68-point box spans at least

@@ -17,7 +17,7 @@
 //!   a printed reason when `../shared` is absent.
 
 use monotrack_core::detect::{DetectorConfig, FaceDetector};
-use monotrack_core::image::{GrayImage, Rect};
+use monotrack_core::image::{GrayImage, Rect, rgb_to_contract_luma};
 use serde::Deserialize;
 use std::path::Path;
 
@@ -39,14 +39,9 @@ const VAL_MIN_RECALL: f64 = 0.929;
 /// Luma per `core/models/M3_IO.md`: 0.299 R + 0.587 G + 0.114 B, rounded.
 fn read_luma(path: &Path) -> GrayImage {
     let img = image::open(path).unwrap().into_rgb8();
-    let data = img
-        .pixels()
-        .map(|p| {
-            let [r, g, b] = p.0;
-            (0.299 * r as f32 + 0.587 * g as f32 + 0.114 * b as f32).round() as u8
-        })
-        .collect();
-    GrayImage::from_vec(img.width() as usize, img.height() as usize, data).unwrap()
+    let mut out = GrayImage::new(img.width() as usize, img.height() as usize);
+    rgb_to_contract_luma(img.as_raw(), out.data_mut());
+    out
 }
 
 #[test]

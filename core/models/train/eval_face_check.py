@@ -2,8 +2,10 @@
 """Level 1's face / not-face output (the tracker's and the CLI's face check) on the faces68
 validation split: positives = landmark boxes with tracker-like jitter (centre ±5 %, side ±10 %),
 negatives drawn as in training (`m3data.level1_negative`: shifted off the face, far too large, a part
-of the face, anywhere in the image), seeded. Prints, per model, the share of positives and negatives at or above 0.5 (the
-tracker's `min_face_confidence`) and the ROC AUC.
+of the face, anywhere in the image), seeded; and the shipped detector's false positives on the
+validation images (`m3data.detector_false_positives`: what the face check must reject in the CLI and
+the tracker). Prints, per model, the share of positives and of each kind of negative at or above 0.5
+(the tracker's `min_face_confidence`) and the ROC AUC against the drawn negatives.
 
     python3 core/models/train/eval_face_check.py [LEVEL1.onnx ...]   # default: the shipped one
 """
@@ -41,11 +43,14 @@ def main():
                 box = np.array([cc[0] - ss / 2, cc[1] - ss / 2, ss, ss])
                 for k, r in enumerate(runners):
                     (pos if positive else neg)[k].append(float(r.run(img, box)[2]))
-    for path, p, q in zip(paths, pos, neg):
-        p, q = np.array(p), np.array(q)
+    fps = D.detector_false_positives(img_paths, faces)
+    det = [[float(r.run(imgs[k], box)[2]) for k, box in fps] for r in runners]
+    for path, p, q, d in zip(paths, pos, neg, det):
+        p, q, d = np.array(p), np.array(q), np.array(d)
         auc = (p[:, None] > q[None, :]).mean() + 0.5 * (p[:, None] == q[None, :]).mean()
         print(f"{path}: positives >= 0.5 {np.mean(p >= 0.5):.3f}, negatives >= 0.5 {np.mean(q >= 0.5):.3f},"
-              f" AUC {auc:.4f} ({len(p)} / {len(q)})")
+              f" AUC {auc:.4f} ({len(p)} / {len(q)}); detector false positives >= 0.5 {np.mean(d >= 0.5):.3f}"
+              f" ({len(d)})")
 
 
 if __name__ == "__main__":

@@ -294,3 +294,47 @@ def load_genki(split):
                 continue
             out.append((load_gray(os.path.join(d, f)), label, f))
     return out
+
+
+# Level-1 hard negatives: the shipped detector's false positives (detector/train.py's decoding, run
+# with onnxruntime on detector.onnx at these minimum face sizes and this score, lower than the SDK's
+# 0.6 default so that near misses count too). A false positive overlaps no annotated face (IoU < 0.3)
+# and has its centre outside every unannotated face (detector/unlabeled.py).
+DETECTOR_FP_MIN_SCORE = 0.3
+DETECTOR_FP_MIN_FACES = (16.0, 24.0, 32.0, 48.0)
+
+
+def detector_false_positives(img_paths, faces):
+    """[(image index, box x, y, w, h)] of the shipped detector's false positives on the images
+    `img_paths` whose annotated faces are `faces` (load_faces68's output)."""
+    import sys
+    import onnxruntime as ort
+    sys.path.insert(0, os.path.join(HERE, "detector"))
+    import train as det  # the detector's own decoding and pyramid (imports torch)
+    import unlabeled
+    unannotated = unlabeled.load()
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = 1
+    so.log_severity_level = 3
+    sess = ort.InferenceSession(os.path.join(REPO, "core", "models", "detector", "detector.onnx"), so,
+                                providers=["CPUExecutionProvider"])
+    gts = [[] for _ in img_paths]
+    rels = [None] * len(img_paths)
+    for f in faces:
+        gts[f["image"]].append(det.tight_box(f["pts"]))
+        rels[f["image"]] = f["path"]
+    out = []
+    for k, path in enumerate(img_paths):
+        img = load_gray(path)
+        h0, w0 = img.shape
+        dets = []
+        for mf in DETECTOR_FP_MIN_FACES:
+            for sc in det.pyramid_scales(w0, h0, mf):
+                nw, nh = max(1, round(w0 * sc)), max(1, round(h0 * sc))
+                small = cv2.resize(img, (nw, nh), interpolation=cv2.INTER_AREA) if sc < 1 else img
+                outs = sess.run(None, {"image": small[None, None].astype(np.float32) / 255.0})
+                dets += det.detect_np([o[0] for o in outs], w0 / nw, h0 / nh, DETECTOR_FP_MIN_SCORE, 0.4)
+        for d in det.nms_list(dets, 0.4):
+            if all(det.iou(d, g) < 0.3 for g in gts[k]) and not det.ignored(d, unannotated.get(rels[k], [])):
+                out.append((k, np.array(d[:4], np.float64)))
+    return out

@@ -36,6 +36,10 @@ SEED = 20261122
 LM_SCALE = 10.0
 YAW_WEIGHT = 0.5
 FACE_WEIGHT = 0.5
+# Share of level 1's negatives that are one of the shipped detector's false positives on the
+# training images (m3data.detector_false_positives): without them level 1 rejected crops drawn around
+# faces but passed face-like things the detector fires on (the astronaut's helmet visor, at 0.97).
+HARD_NEGATIVE_P = 0.3
 GESTURE_WEIGHT = 0.5
 GAZE_WEIGHT = 1.0
 WEIGHT_DECAY = 1e-4
@@ -73,6 +77,12 @@ class Data:
                 m["gaze"] = (l * [-1, 1, 1], r * [-1, 1, 1])
             self.faces.append(m)
         self.mirrored = [np.ascontiguousarray(im[:, ::-1]) for im in self.imgs]
+        self.paths, self.labelled = paths, faces
+        self.hard = []  # (image index, box) of detector false positives, by mine_hard_negatives
+
+    def mine_hard_negatives(self):
+        self.hard = D.detector_false_positives(self.paths, self.labelled)
+        return len(self.hard)
 
     def image(self, f):
         return self.mirrored[f["image"]] if f["mirror"] else self.imgs[f["image"]]
@@ -128,7 +138,16 @@ def level1_batch(data, rng, weights):
         c = c + rng.uniform(-0.1, 0.1, 2) * s
         angle = np.radians(rng.uniform(-25, 25)) if rng.random() < 0.4 else 0.0
         positive = rng.random() > 0.25
-        if not positive:
+        if not positive and data.hard and rng.random() < HARD_NEGATIVE_P:
+            # A detector false positive, at the detector's box (± as a tracker's), either way round.
+            j, (x, y, w, h) = data.hard[int(rng.integers(len(data.hard)))]
+            img = data.imgs[j]
+            if rng.random() < 0.5:
+                img, x = data.mirrored[j], img.shape[1] - x - w
+            c, s = D.square_of_box((x, y, w, h))
+            s *= np.exp(rng.uniform(-0.1, 0.1))
+            c = c + rng.uniform(-0.05, 0.05, 2) * s
+        elif not positive:
             c, s = D.level1_negative(c, s, img.shape, rng)
         A = D.level1_map(c, s, S, cs, angle)
         patch = photometric(D.sample(img, A, S, S), rng)
@@ -345,6 +364,8 @@ def main():
     ap.add_argument("--level1-trunk", default=None)
     ap.add_argument("--level1-hidden", type=int, default=None)
     ap.add_argument("--zone-trunk", default=None)
+    # e.g. --zone-size face=48x48 (the patch size in m3.json follows)
+    ap.add_argument("--zone-size", default=None)
     # Results differ from the CPU run's in the last bits (GPU kernels); the shipped weights are CPU's.
     ap.add_argument("--device", default="cpu")
     # Zone nets train in this many processes at once after level 1 (each net seeds itself, so the
@@ -361,6 +382,10 @@ def main():
         for item in a.zone_trunk.split(","):
             k, v = item.split("=")
             ZONE_TRUNK[k] = v
+    if a.zone_size:
+        for item in a.zone_size.split(","):
+            k, v = item.split("=")
+            D.ZONES[k]["width"], D.ZONES[k]["height"] = (int(n) for n in v.split("x"))
     random.seed(SEED)
     np.random.seed(SEED)
     torch.manual_seed(SEED)
@@ -375,6 +400,7 @@ def main():
     log(fh, f"train faces (with mirrors): {len(data.faces)} from {len(data.imgs)} images")
     steps = {k: int(v * a.steps_scale) for k, v in STEPS.items()}
     if "level1" in only:
+        log(fh, f"level1 hard negatives: {data.mine_hard_negatives()} detector false positives on the training images")
         m = train_level1(data, steps["level1"], fh)
         export(m, os.path.join(OUT, "level1.onnx"), ["image"], [(1, 1, 64, 64)], ["landmarks", "yaw_logits", "face_logit"])
     zones = [n for n in ("face", "mouth", "brows", "eye") if n in only]  # longest first
@@ -396,6 +422,8 @@ def main():
 def run_zones_in_processes(zones, a, fh):
     base = [sys.executable, os.path.abspath(__file__), "--jobs", "1", "--steps-scale", str(a.steps_scale),
             "--device", a.device, "--zone-trunk", ",".join(f"{k}={v}" for k, v in ZONE_TRUNK.items())]
+    if a.zone_size:
+        base += ["--zone-size", a.zone_size]
     pending, running = list(zones), []
     while pending or running:
         while pending and len(running) < a.jobs:

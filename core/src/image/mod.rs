@@ -8,6 +8,22 @@ pub mod frame;
 
 pub use frame::{Frame, FrameDesc, PixelFormat};
 
+/// The luma of `models/M3_IO.md` that the models were trained with: `round(0.299 R + 0.587 G +
+/// 0.114 B)` in f32. Image files take this exact form (the CLI, the tests); the camera path of
+/// [`Frame`] uses a fixed-point form within ±1 of it, for speed.
+#[inline]
+pub fn contract_luma(r: u8, g: u8, b: u8) -> u8 {
+    (0.299 * f32::from(r) + 0.587 * f32::from(g) + 0.114 * f32::from(b)).round() as u8
+}
+
+/// [`contract_luma`] of every pixel of a packed RGB buffer into `out` (as many pixels as both
+/// hold).
+pub fn rgb_to_contract_luma(rgb: &[u8], out: &mut [u8]) {
+    for (o, p) in out.iter_mut().zip(rgb.chunks_exact(3)) {
+        *o = contract_luma(p[0], p[1], p[2]);
+    }
+}
+
 /// An owned, tightly packed (stride = width) 8-bit grayscale image. Buffers are reused across
 /// frames: [`GrayImage::resize`] only reallocates when the image grows beyond its capacity.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -130,5 +146,21 @@ impl Rect {
             && self.h.is_finite()
             && self.w > 0.0
             && self.h > 0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn contract_luma_rounds_the_bt601_weights() {
+        // 0.299·255 = 76.245 → 76; 0.299·10 + 0.587·200 + 0.114·30 = 123.81 → 124.
+        assert_eq!(contract_luma(255, 0, 0), 76);
+        assert_eq!(contract_luma(10, 200, 30), 124);
+        assert_eq!(contract_luma(255, 255, 255), 255);
+        let mut out = [0; 2];
+        rgb_to_contract_luma(&[255, 0, 0, 10, 200, 30], &mut out);
+        assert_eq!(out, [76, 124]);
     }
 }

@@ -306,12 +306,15 @@ impl Zone {
             outputs.push("gaze");
             sizes.push(3);
         }
+        // Both eyes go through one run: half the per-run overhead of a small net.
+        let batch = if kind == ZoneKind::Eye { 2 } else { 1 };
         let mut net = Net::load(
             name,
             bytes,
-            &[("patch", &[1, 1, h, w]), ("yaw", &[1, 5])],
+            &[("patch", &[batch, 1, h, w]), ("yaw", &[batch, 5])],
             &outputs,
         )?;
+        let sizes: Vec<usize> = sizes.iter().map(|n| n * batch).collect();
         check_outputs(name, &mut net, &sizes)?;
         Ok(Self {
             kind,
@@ -348,16 +351,8 @@ impl Zone {
         Ok(if mirror { map.mirrored_x(w) } else { map })
     }
 
-    /// Samples, filters and runs the zone for the patch map `map`; writes its points through
-    /// `map` into `pts[indices]`. The other outputs stay in the net.
-    fn run(
-        &mut self,
-        image: &GrayImage,
-        map: &Affine,
-        yaw: &[f32; 5],
-        mirrored: bool,
-        pts: &mut [[f64; 2]; N_POINTS],
-    ) -> Result<()> {
+    /// Samples and filters the patch of `map` into batch slot `slot` of the network input.
+    fn prepare(&mut self, image: &GrayImage, map: &Affine, slot: usize) -> Result<()> {
         let (w, h) = (self.width, self.height);
         sample(image, map, w, h, &mut self.patch)?;
         if let Some(b) = &mut self.bilateral {
@@ -369,41 +364,86 @@ impl Zone {
             equalize_hist(&mut self.patch);
         }
         let src = &self.patch;
-        self.net.fill_input(0, |x| to_unit(src, x))?;
-        self.net.fill_input(1, |x| x.copy_from_slice(yaw))?;
-        self.net.run()?;
+        self.net.fill_input(0, |x| {
+            to_unit(src, &mut x[slot * w * h..(slot + 1) * w * h])
+        })
+    }
+
+    /// Runs the network on the prepared slots with `yaw` in every slot.
+    fn run(&mut self, yaw: &[f32; 5]) -> Result<()> {
+        self.net.fill_input(1, |x| {
+            x.chunks_exact_mut(5).for_each(|c| c.copy_from_slice(yaw))
+        })?;
+        self.net.run()
+    }
+
+    /// Writes slot `slot`'s points of the last run through `map` into `pts[indices]` (the
+    /// mirrored eye's indices when `mirrored`).
+    fn write_points(
+        &self,
+        map: &Affine,
+        slot: usize,
+        mirrored: bool,
+        pts: &mut [[f64; 2]; N_POINTS],
+    ) -> Result<()> {
         let idx = match (&self.mirror, mirrored) {
             (Some((_, mi)), true) => mi,
             _ => &self.indices68,
         };
-        let lm = self.net.output(0)?;
-        let (wf, hf) = (w as f64, h as f64);
+        let n = 2 * idx.len();
+        let lm = &self.net.output(0)?[slot * n..(slot + 1) * n];
+        let (wf, hf) = (self.width as f64, self.height as f64);
         for (k, &i) in idx.iter().enumerate() {
             pts[i] = map.apply([f64::from(lm[2 * k]) * wf, f64::from(lm[2 * k + 1]) * hf]);
         }
         Ok(())
     }
 
-    /// One eye: runs the zone and returns the unit gaze in the camera frame.
-    fn run_eye(
+    /// A single-patch zone: samples, filters and runs it for the patch map `map` and writes its
+    /// points. The other outputs stay in the net.
+    fn run_one(
+        &mut self,
+        image: &GrayImage,
+        map: &Affine,
+        yaw: &[f32; 5],
+        pts: &mut [[f64; 2]; N_POINTS],
+    ) -> Result<()> {
+        self.prepare(image, map, 0)?;
+        self.run(yaw)?;
+        self.write_points(map, 0, false, pts)
+    }
+
+    /// Both eyes in one run (slot 0 the right eye, slot 1 the left eye mirrored); returns their
+    /// unit gaze vectors in the camera frame, right then left.
+    fn run_eyes(
         &mut self,
         image: &GrayImage,
         refs: &[[f64; 2]; N_POINTS],
         yaw: &[f32; 5],
-        mirrored: bool,
         pts: &mut [[f64; 2]; N_POINTS],
-    ) -> Result<[f64; 3]> {
-        let r = match (&self.mirror, mirrored) {
-            (Some((r, _)), true) => *r,
-            _ => self.ref68,
+    ) -> Result<[[f64; 3]; 2]> {
+        let mirror_ref = match &self.mirror {
+            Some((r, _)) => *r,
+            None => return Err(Error::Internal("eye zone without its mirror".into())),
         };
-        let map = self.map(refs[r[0]], refs[r[1]], mirrored)?;
-        self.run(image, &map, yaw, mirrored, pts)?;
-        let g = self.net.output(1)?;
-        // Patch frame → camera frame: the patch axes as image unit vectors. For the mirrored eye
-        // the u axis points the other way, which is M3_IO.md's "gaze x negated".
-        let xy = map.rotate_unit([f64::from(g[0]), f64::from(g[1])]);
-        Ok(normalized([xy[0], xy[1], f64::from(g[2])]))
+        let maps = [
+            self.map(refs[self.ref68[0]], refs[self.ref68[1]], false)?,
+            self.map(refs[mirror_ref[0]], refs[mirror_ref[1]], true)?,
+        ];
+        for (slot, map) in maps.iter().enumerate() {
+            self.prepare(image, map, slot)?;
+        }
+        self.run(yaw)?;
+        let mut gaze = [[0.0; 3]; 2];
+        for (slot, map) in maps.iter().enumerate() {
+            self.write_points(map, slot, slot == 1, pts)?;
+            let g = &self.net.output(1)?[3 * slot..3 * slot + 3];
+            // Patch frame → camera frame: the patch axes as image unit vectors. For the mirrored
+            // eye the u axis points the other way, which is M3_IO.md's "gaze x negated".
+            let xy = map.rotate_unit([f64::from(g[0]), f64::from(g[1])]);
+            gaze[slot] = normalized([xy[0], xy[1], f64::from(g[2])]);
+        }
+        Ok(gaze)
     }
 }
 
@@ -632,8 +672,7 @@ impl M3 {
         let (refs, pts) = (&self.ref_pts, &mut self.pts);
         for zone in &mut self.zones {
             if zone.kind == ZoneKind::Eye {
-                let right = zone.run_eye(image, refs, &yaw, false, pts)?;
-                let left = zone.run_eye(image, refs, &yaw, true, pts)?;
+                let [right, left] = zone.run_eyes(image, refs, &yaw, pts)?;
                 let both = normalized([left[0] + right[0], left[1] + right[1], left[2] + right[2]]);
                 out.gaze_right = right.map(|v| v as f32);
                 out.gaze_left = left.map(|v| v as f32);
@@ -641,7 +680,7 @@ impl M3 {
                 continue;
             }
             let map = zone.map(refs[zone.ref68[0]], refs[zone.ref68[1]], false)?;
-            zone.run(image, &map, &yaw, false, pts)?;
+            zone.run_one(image, &map, &yaw, pts)?;
             match zone.kind {
                 ZoneKind::Brows => softmax(zone.net.output(1)?, &mut out.brows),
                 ZoneKind::Mouth => softmax(zone.net.output(1)?, &mut out.mouth),

@@ -2,21 +2,14 @@
 //! 0.114 B)` per pixel, exactly the conversion of `core/models/M3_IO.md` that the models were
 //! trained with (the core's camera path uses a fixed-point form within ±1 of it, for speed).
 
-use monotrack_core::image::GrayImage;
+use monotrack_core::image::{GrayImage, rgb_to_contract_luma};
 use std::path::Path;
-
-/// The M3_IO luma of one RGB pixel.
-pub fn luma(r: u8, g: u8, b: u8) -> u8 {
-    (0.299 * f32::from(r) + 0.587 * f32::from(g) + 0.114 * f32::from(b)).round() as u8
-}
 
 /// Converts a decoded image into `out` (resized; its allocation reused).
 pub fn to_luma(img: &image::DynamicImage, out: &mut GrayImage) {
     let rgb = img.to_rgb8();
     out.resize(rgb.width() as usize, rgb.height() as usize);
-    for (o, p) in out.data_mut().iter_mut().zip(rgb.as_raw().chunks_exact(3)) {
-        *o = luma(p[0], p[1], p[2]);
-    }
+    rgb_to_contract_luma(rgb.as_raw(), out.data_mut());
 }
 
 /// Decodes the image file at `path` (PNG or JPEG) into `out`.
@@ -43,14 +36,6 @@ pub fn decode_luma(bytes: &[u8], out: &mut GrayImage) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn luma_rounds_the_bt601_weights() {
-        // 0.299·255 = 76.245 → 76; 0.299·10 + 0.587·200 + 0.114·30 = 123.81 → 124.
-        assert_eq!(luma(255, 0, 0), 76);
-        assert_eq!(luma(10, 200, 30), 124);
-        assert_eq!(luma(255, 255, 255), 255);
-    }
 
     #[test]
     fn bad_bytes_are_an_error_not_a_panic() {
