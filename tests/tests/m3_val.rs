@@ -21,9 +21,9 @@ const SEED: u64 = 2026;
 const CENTER_JITTER: f32 = 0.05;
 /// Box scale jitter, fraction (uniform ±).
 const SCALE_JITTER: f32 = 0.10;
-/// Bound on the overall mean NME: 5.28 % measured with the v3 weights (128 faces, this seed) plus
-/// margin for retraining noise.
-const MAX_MEAN_NME: f64 = 0.065;
+/// Bound on the overall mean NME: 4.75 % measured with the shipped weights and the eye-refined
+/// references (128 faces, this seed; 5.28 % with the first weights) plus margin for retraining noise.
+const MAX_MEAN_NME: f64 = 0.055;
 
 const ZONES: [(&str, std::ops::Range<usize>); 5] = [
     ("jaw", 0..17),

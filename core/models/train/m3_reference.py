@@ -66,15 +66,17 @@ class M3:
         pts32, yaw, face = self.l1.run(gray, box)
         out68 = np.zeros((68, 2))
         out68[self.cfg["level1"]["indices68"]] = pts32
-        l1 = out68.copy()  # zone reference points always come from level 1 (M3_IO.md)
+        refs68 = out68.copy()  # level 1's points; the eye corners are replaced after the eye zone
         res = {"yaw_probs": yaw, "face_prob": face}
-        for name, (z, sess) in self.zones.items():
+        # M3_IO.md: the eye zone runs first, and its eye corners replace level 1's as references.
+        for name in sorted(self.zones, key=lambda n: n != "eye"):
+            z, sess = self.zones[name]
             r = z["ref68"]
             if name == "eye":
                 gazes = {}
                 for side, refs, idx, mirror in (("right", z["ref68"], z["indices68"], False),
                                                 ("left", z["mirror_ref68"], z["mirror_indices68"], True)):
-                    pts, g, A = self._zone(z, sess, gray, l1[refs[0]], l1[refs[1]], yaw, mirror)
+                    pts, g, A = self._zone(z, sess, gray, refs68[refs[0]], refs68[refs[1]], yaw, mirror)
                     out68[idx] = pts
                     phi = np.arctan2(A[1, 0], A[0, 0]) if not mirror else np.arctan2(-A[1, 0], -A[0, 0])
                     gx, gy = (-g[0], g[1]) if mirror else (g[0], g[1])
@@ -84,8 +86,10 @@ class M3:
                 comb = gazes["left"] + gazes["right"]
                 res["gaze"] = {"left": gazes["left"], "right": gazes["right"],
                                "combined": comb / max(np.linalg.norm(comb), 1e-9)}
+                corners = list(z["ref68"]) + list(z["mirror_ref68"])
+                refs68[corners] = out68[corners]
             else:
-                pts, g, _ = self._zone(z, sess, gray, l1[r[0]], l1[r[1]], yaw, False)
+                pts, g, _ = self._zone(z, sess, gray, refs68[r[0]], refs68[r[1]], yaw, False)
                 out68[z["indices68"]] = pts
                 if z.get("gestures"):
                     res[name] = dict(zip(z["gestures"], softmax(g).tolist()))

@@ -544,11 +544,13 @@ impl M3 {
             &["landmarks", "yaw_logits", "face_logit"],
         )?;
         check_outputs("level1", &mut level1, &[2 * N_LEVEL1, 5, 1])?;
-        let zones = cfg
+        let mut zones = cfg
             .zones
             .iter()
             .map(|(name, z)| Zone::new(name, z, file(&z.file)?))
             .collect::<Result<Vec<_>>>()?;
+        // The eye zone first: its corners are the other zones' references (M3_IO.md).
+        zones.sort_by_key(|z| z.kind != ZoneKind::Eye);
         Ok(Self {
             crop: Vec::with_capacity(s * s),
             cfg,
@@ -667,20 +669,28 @@ impl M3 {
             self.pts[i] = [f64::from(p[0]), f64::from(p[1])];
         }
         let yaw = out.yaw_probs;
-        // Zone reference points always come from level 1 (M3_IO.md).
+        // Zone references are level 1's points, except the eye zone's own references (the eye
+        // corners), which its output replaces: it runs first (M3_IO.md).
         self.ref_pts = self.pts;
-        let (refs, pts) = (&self.ref_pts, &mut self.pts);
         for zone in &mut self.zones {
             if zone.kind == ZoneKind::Eye {
-                let [right, left] = zone.run_eyes(image, refs, &yaw, pts)?;
+                let [right, left] = zone.run_eyes(image, &self.ref_pts, &yaw, &mut self.pts)?;
                 let both = normalized([left[0] + right[0], left[1] + right[1], left[2] + right[2]]);
                 out.gaze_right = right.map(|v| v as f32);
                 out.gaze_left = left.map(|v| v as f32);
                 out.gaze_combined = both.map(|v| v as f32);
+                for &i in zone
+                    .ref68
+                    .iter()
+                    .chain(zone.mirror.iter().flat_map(|(r, _)| r))
+                {
+                    self.ref_pts[i] = self.pts[i];
+                }
                 continue;
             }
+            let refs = &self.ref_pts;
             let map = zone.map(refs[zone.ref68[0]], refs[zone.ref68[1]], false)?;
-            zone.run_one(image, &map, &yaw, pts)?;
+            zone.run_one(image, &map, &yaw, &mut self.pts)?;
             match zone.kind {
                 ZoneKind::Brows => softmax(zone.net.output(1)?, &mut out.brows),
                 ZoneKind::Mouth => softmax(zone.net.output(1)?, &mut out.mouth),
