@@ -19,7 +19,6 @@ use monotrack_core::body::{
 };
 use monotrack_core::camera::Intrinsics;
 use nalgebra::Vector3;
-use std::collections::BTreeMap;
 
 /// Frames per sequence used for the dimension estimation (0.25 fps subsampling: 20 s of action).
 const DIMENSION_FRAMES: usize = 5;
@@ -32,21 +31,6 @@ fn true_dimensions(frames: &[[[f64; 3]; N_JOINTS]]) -> Dimensions {
     }
 }
 
-/// Per-subject mean bone lengths over all of the subject's (subsampled) actions.
-fn subject_lengths(h: &H36m) -> BTreeMap<String, [f64; N_DIMS]> {
-    h.cameras
-        .keys()
-        .map(|s| {
-            let frames = h
-                .sequences
-                .iter()
-                .filter(|q| &q.subject == s)
-                .flat_map(|q| q.joints3d_mm.iter());
-            (s.clone(), mean_lengths(frames))
-        })
-        .collect()
-}
-
 #[test]
 fn human36m_synthetic_projections() {
     let Some(dir) = converted("body_h36m") else {
@@ -54,7 +38,7 @@ fn human36m_synthetic_projections() {
     };
     let h: H36m = load(&dir, "h36m.json");
     let conv = Convention::Human36M;
-    let per_subject = subject_lengths(&h);
+    let per_subject = h.subject_lengths();
     // The shipped table is the mean of the five subjects, rounded to the millimetre.
     assert_shipped_table(&per_subject, conv, 1.0);
     let prior = match std::env::var("BODY_PRIOR").as_deref() {

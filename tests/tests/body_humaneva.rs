@@ -98,7 +98,7 @@ fn humaneva_train_with_ground_truth_2d() {
     // --- Fitting with the reference camera, dimensions estimated with a leave-one-subject-out
     // proportion prior.
     let conv = Convention::HumanEva;
-    let per_subject = subject_lengths(&he);
+    let per_subject = he.subject_lengths();
     println!("\nHumanEva-I mean body per subject and leave-one-subject-out priors (mm):");
     println!("| subject | {} |", dim::NAMES.join(" | "));
     let row = |name: &str, l: &[f64; N_DIMS]| {
@@ -261,7 +261,7 @@ fn humaneva_dimension_experiments() {
     };
     let he: HumanEva = load(&dir, "humaneva.json");
     let refs = reference_intrinsics(&he);
-    let per_subject = subject_lengths(&he);
+    let per_subject = he.subject_lengths();
     // The table used before: Human3.6M's mean lengths with HumanEva's neck and hip width.
     let mut h36m = Dimensions::mean(Convention::Human36M);
     h36m.lengths[dim::NECK] = 318.0;
@@ -371,20 +371,6 @@ fn humaneva_dimension_experiments() {
             r.dim_us / 1e3
         );
     }
-}
-
-/// Per-subject mean bone lengths of the mocap (each chunk counted once, not once per camera).
-fn subject_lengths(he: &HumanEva) -> BTreeMap<String, [f64; N_DIMS]> {
-    let mut out = BTreeMap::new();
-    for subject in he.cameras.keys() {
-        let frames = he
-            .sequences
-            .iter()
-            .filter(|s| &s.subject == subject && s.camera == 0)
-            .flat_map(|s| s.joints3d_mm.iter());
-        out.insert(subject.clone(), mean_lengths(frames));
-    }
-    out
 }
 
 /// What one evaluation over HumanEva Train measured.

@@ -35,6 +35,19 @@ pub struct HumanEva {
     pub sequences: Vec<HeSequence>,
 }
 
+impl HumanEva {
+    /// Mean body-part lengths per subject ([`mean_lengths`] of the subject's mocap frames). Each
+    /// chunk appears once per camera with the same 3D joints, so camera 0's copy alone counts.
+    pub fn subject_lengths(&self) -> BTreeMap<String, [f64; N_DIMS]> {
+        per_subject(self.cameras.keys(), |s| {
+            self.sequences
+                .iter()
+                .filter(move |q| q.subject == s && q.camera == 0)
+                .flat_map(|q| q.joints3d_mm.iter())
+        })
+    }
+}
+
 /// Human3.6M camera (Martinez et al.'s cameras.h5): X_cam = R (X − T).
 #[derive(Deserialize)]
 pub struct H36mCamera {
@@ -145,6 +158,32 @@ pub const BONES: [(&str, usize, usize, usize); 12] = [
     ("left shin", 9, 10, 10),
     ("right shin", 12, 13, 11),
 ];
+
+impl H36m {
+    /// Mean body-part lengths per subject ([`mean_lengths`] of all the subject's mocap frames).
+    pub fn subject_lengths(&self) -> BTreeMap<String, [f64; N_DIMS]> {
+        per_subject(self.cameras.keys(), |s| {
+            self.sequences
+                .iter()
+                .filter(move |q| q.subject == s)
+                .flat_map(|q| q.joints3d_mm.iter())
+        })
+    }
+}
+
+/// [`mean_lengths`] per subject of the frames `frames(subject)` yields.
+fn per_subject<'a, I>(
+    subjects: impl IntoIterator<Item = &'a String>,
+    frames: impl Fn(&'a str) -> I,
+) -> BTreeMap<String, [f64; N_DIMS]>
+where
+    I: Iterator<Item = &'a [[f64; 3]; N_JOINTS]>,
+{
+    subjects
+        .into_iter()
+        .map(|s| (s.clone(), mean_lengths(frames(s))))
+        .collect()
+}
 
 /// Mean bone lengths (mm, [`dim`] order) of one subject's frames: a frame-weighted mean of each
 /// bone's length over all of them (HumanEva's marker-based joints stretch by up to ±28 mm).
