@@ -12,9 +12,10 @@
 //! markdown tables; timings are single-threaded means over all frames on this machine.
 
 use monotrack_core::image::GrayImage;
+use monotrack_core::image::rgb_to_contract_luma;
 use monotrack_core::track::{Mode, Tracker, TrackerConfig};
 use monotrack_tests::shared_data;
-use monotrack_tests::synth::{SeqConfig, load_validation_faces, rgb_to_luma};
+use monotrack_tests::synth::{SeqConfig, load_validation_faces};
 use monotrack_tests::trackeval::{ClipFrame, run_clip, synthetic_clip, table_header, table_row};
 use std::io::Read;
 use std::process::{Command, Stdio};
@@ -116,7 +117,7 @@ fn video_clip(video: &str, reference: &str) -> Result<Vec<ClipFrame>, String> {
         .zip(truth)
         .map(|(rgb, t)| {
             let mut image = GrayImage::new(w, h);
-            rgb_to_luma(rgb, image.data_mut());
+            rgb_to_contract_luma(rgb, image.data_mut());
             ClipFrame {
                 image,
                 truth: t,

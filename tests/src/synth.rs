@@ -31,9 +31,6 @@ pub struct FaceSample {
     pub name: String,
 }
 
-/// The CONTRACT luma of an RGB buffer (the core's; re-exported for the test programs).
-pub use monotrack_core::image::rgb_to_contract_luma as rgb_to_luma;
-
 /// Loads up to `max` validation faces of `faces68/train.jsonl` (line i is validation when
 /// i % 10 == 0; the first annotated face of each image) whose 68-point box spans at least
 /// `min_size` pixels.
@@ -84,7 +81,7 @@ pub fn load_validation_faces(
             .to_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
         let mut luma = GrayImage::new(w, h);
-        rgb_to_luma(img.as_raw(), luma.data_mut());
+        monotrack_core::image::rgb_to_contract_luma(img.as_raw(), luma.data_mut());
         out.push(FaceSample {
             image: luma,
             landmarks: lm,
