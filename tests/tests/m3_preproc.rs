@@ -41,17 +41,19 @@ fn pgm(name: &str) -> GrayImage {
     GrayImage::from_vec(w, h, bytes[pos + 1..].to_vec()).unwrap()
 }
 
-/// (max |diff|, fraction of pixels that differ).
-fn compare(got: &[u8], want: &[u8]) -> (u8, f64) {
-    assert_eq!(got.len(), want.len());
+/// Prints and asserts that `got` is within one level of `want` everywhere and differs on at most
+/// the fraction `max_off` of the pixels.
+fn assert_within_one(label: &str, got: &[u8], want: &[u8], max_off: f64) {
+    assert_eq!(got.len(), want.len(), "{label}");
     let max = got
         .iter()
         .zip(want)
         .map(|(a, b)| a.abs_diff(*b))
         .max()
         .unwrap();
-    let off = got.iter().zip(want).filter(|(a, b)| a != b).count();
-    (max, off as f64 / got.len() as f64)
+    let off = got.iter().zip(want).filter(|(a, b)| a != b).count() as f64 / got.len() as f64;
+    println!("{label}: max {max}, {:.3} % off", 100.0 * off);
+    assert!(max <= 1 && off <= max_off, "{label}: {max} / {off}");
 }
 
 #[derive(Deserialize)]
@@ -82,27 +84,17 @@ fn warps_match_the_contract_within_rounding_and_opencv_within_one_level() {
             m: [m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2]],
         };
         sample(&src, &map, c.width, c.height, &mut out).unwrap();
-        let (max, off) = compare(&out, pgm(&format!("warp_{}_exact.pgm", c.name)).data());
-        println!(
-            "warp {}: vs the f64 contract max {max}, {:.3} % off",
-            c.name,
-            100.0 * off
+        assert_within_one(
+            &format!("warp {} vs the f64 contract", c.name),
+            &out,
+            pgm(&format!("warp_{}_exact.pgm", c.name)).data(),
+            WARP_MAX_OFF_CONTRACT,
         );
-        assert!(
-            max <= 1 && off <= WARP_MAX_OFF_CONTRACT,
-            "{}: {max} / {off} off the exact contract",
-            c.name
-        );
-        let (max, off) = compare(&out, pgm(&format!("warp_{}.pgm", c.name)).data());
-        println!(
-            "warp {}: vs OpenCV max {max}, {:.3} % off",
-            c.name,
-            100.0 * off
-        );
-        assert!(
-            max <= 1 && off <= WARP_MAX_OFF_FRACTION,
-            "{}: {max} / {off}",
-            c.name
+        assert_within_one(
+            &format!("warp {} vs OpenCV", c.name),
+            &out,
+            pgm(&format!("warp_{}.pgm", c.name)).data(),
+            WARP_MAX_OFF_FRACTION,
         );
     }
 }
@@ -116,14 +108,11 @@ fn bilateral_and_equalize_match_opencv() {
         let want = pgm(&format!("bilateral_{tag}.pgm"));
         let mut got = vec![0; w * h];
         bf.apply(patch.data(), w, h, &mut got);
-        let (max, off) = compare(&got, want.data());
-        println!(
-            "bilateral {tag}: vs OpenCV max {max}, {:.3} % off",
-            100.0 * off
-        );
-        assert!(
-            max <= 1 && off <= BILATERAL_MAX_OFF_FRACTION,
-            "{tag}: {max} / {off}"
+        assert_within_one(
+            &format!("bilateral {tag} vs OpenCV"),
+            &got,
+            want.data(),
+            BILATERAL_MAX_OFF_FRACTION,
         );
 
         let mut eq = want.data().to_vec();
