@@ -330,12 +330,10 @@ impl BodyTracker {
                 camera: BodyCamera::try_from(&camera)?,
                 convention,
                 dimension_frames: config.dimension_frames as usize,
-                fitter: BodyFitter {
-                    config: BodyFitConfig {
-                        assume_contact: config.assume_contact,
-                        ..BodyFitConfig::default()
-                    },
-                },
+                fitter: BodyFitter::new(BodyFitConfig {
+                    assume_contact: config.assume_contact,
+                    ..BodyFitConfig::default()
+                }),
                 skeleton: mean_skeleton(convention)?,
                 estimated: false,
                 collected: Vec::with_capacity(config.dimension_frames as usize),

@@ -7,8 +7,8 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use monotrack_core::body::skeleton::{N_POSE, P_LARM, P_LLEG, P_RARM, P_RLEG, log_so3};
 use monotrack_core::body::{
-    BodyCamera, BodyFitter, Convention, DimensionEstimator, Dimensions, Joints2d, N_JOINTS,
-    Skeleton,
+    BodyCamera, BodyFitConfig, BodyFitter, Convention, DimensionEstimator, Dimensions, Joints2d,
+    N_JOINTS, PosePrior, Skeleton,
 };
 use monotrack_core::camera::Intrinsics;
 use nalgebra::{Matrix3, Vector3};
@@ -62,6 +62,17 @@ fn bench(c: &mut Criterion) {
     let fitter = BodyFitter::default();
     c.bench_function("body_pose_only", |b| {
         b.iter(|| fitter.fit(black_box(&obs), &cam, &truth).unwrap())
+    });
+    // The same with the isotropic prior used before the learnt one (weight 3 px per radian).
+    let neutral = BodyFitter {
+        config: BodyFitConfig {
+            prior_weight_px: 3.0,
+            ..Default::default()
+        },
+        prior: PosePrior::neutral(),
+    };
+    c.bench_function("body_pose_only_neutral_prior", |b| {
+        b.iter(|| neutral.fit(black_box(&obs), &cam, &truth).unwrap())
     });
     // The two halves of a pose fit: EPnP + IK initialisation, then the LM refinement.
     c.bench_function("body_pose_initialise", |b| {

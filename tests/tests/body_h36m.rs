@@ -12,10 +12,12 @@
 mod body_common;
 
 use body_common::*;
+use monotrack_core::body::PosePrior;
+use monotrack_core::body::fit::DEFAULT_PRIOR_WEIGHT_PX;
 use monotrack_core::body::skeleton::N_DIMS;
 use monotrack_core::body::{
-    BodyCamera, BodyFitter, Convention, DimensionEstimator, Dimensions, JOINT_NAMES, Joints2d,
-    N_JOINTS, Skeleton,
+    BodyCamera, BodyFitConfig, BodyFitter, Convention, DimensionEstimator, Dimensions, JOINT_NAMES,
+    Joints2d, N_JOINTS, Skeleton,
 };
 use monotrack_core::camera::Intrinsics;
 use nalgebra::Vector3;
@@ -45,7 +47,25 @@ fn human36m_synthetic_projections() {
         Ok("shipped") => Prior::Shipped,
         _ => Prior::LeaveOneOut,
     };
-    let fitter = BodyFitter::default();
+    // The pose prior, leave one subject out as well (the shipped one is learnt from all five).
+    let weight = std::env::var("POSE_PRIOR_WEIGHT")
+        .map(|w| w.parse().unwrap())
+        .unwrap_or(DEFAULT_PRIOR_WEIGHT_PX);
+    let (poses, _) = h.poses_by_subject();
+    let fitters: std::collections::BTreeMap<String, BodyFitter> = h
+        .cameras
+        .keys()
+        .map(|s| {
+            let fitter = BodyFitter {
+                config: BodyFitConfig {
+                    prior_weight_px: weight,
+                    ..Default::default()
+                },
+                prior: pose_prior(&poses, |o| o != s).0,
+            };
+            (s.clone(), fitter)
+        })
+        .collect();
     let estimator = match std::env::var("BODY_PRIOR_WEIGHT") {
         Ok(w) => DimensionEstimator {
             proportion_prior_px2: w.parse().unwrap(),
@@ -69,6 +89,7 @@ fn human36m_synthetic_projections() {
     // Every fifth action keeps the test under a minute; the camera rotates through the four.
     for (si, seq) in h.sequences.iter().enumerate().step_by(5) {
         let cams = &h.cameras[&seq.subject];
+        let fitter = &fitters[&seq.subject];
         let dims_true = true_dimensions(&seq.joints3d_mm);
         let skel_true = Skeleton::new(dims_true, conv).unwrap();
         // One camera per sequence, rotating through the four.
@@ -88,7 +109,7 @@ fn human36m_synthetic_projections() {
         let k = DIMENSION_FRAMES.min(obs.len());
         let est = estimator
             .estimate(
-                &fitter,
+                fitter,
                 &obs[..k],
                 &cam,
                 &prior.start(&seq.subject, &per_subject, conv),
@@ -160,4 +181,39 @@ fn human36m_synthetic_projections() {
     );
     assert!(pa_true / nf < 90.0, "PA {:.1} mm", pa_true / nf);
     assert!(mean_abs_scale < 0.06);
+}
+
+/// The shipped pose prior (`core/models/body/pose_prior.json`) is the one these data give: every
+/// subsampled Human3.6M frame of S1, S5–S8 and its mirror image, fitted with the sequence's own
+/// dimensions. `WRITE_POSE_PRIOR=1` rewrites the file (the one command that makes it):
+/// `WRITE_POSE_PRIOR=1 cargo test --release -p monotrack-tests --test body_h36m -- shipped_pose_prior`.
+#[test]
+fn shipped_pose_prior_is_the_data_s() {
+    let Some(dir) = converted("body_h36m") else {
+        return;
+    };
+    let h: H36m = load(&dir, "h36m.json");
+    let (poses, rms) = h.poses_by_subject();
+    let (prior, count) = pose_prior(&poses, |_| true);
+    println!("pose prior from {count} poses (with mirror images); model-to-mocap RMS {rms:.1} mm");
+    // The model reproduces the mocap joints to about a centimetre (marker noise, joint definitions).
+    assert!(rms < 15.0, "model-to-mocap RMS {rms:.1} mm");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../core/models/body/pose_prior.json");
+    if std::env::var("WRITE_POSE_PRIOR").is_ok() {
+        let source = format!(
+            "Human3.6M (research-only licence) S1, S5, S6, S7, S8: every subsampled 10-fps frame \
+             of tests/scripts/body_data.py and its mirror image, fitted with \
+             monotrack_core::body::prior::fit_to_joints (RMS {rms:.1} mm); min_std {POSE_PRIOR_MIN_STD} rad"
+        );
+        std::fs::write(&path, prior.to_json(&source, count) + "\n").unwrap();
+        println!("wrote {}", path.display());
+    }
+    let shipped = PosePrior::shipped();
+    let d = (prior.covariance() - shipped.covariance()).abs().max()
+        + (prior.mean() - shipped.mean()).abs().max();
+    assert!(
+        d < 1e-5,
+        "the shipped pose prior differs from the data's by {d:e}: rerun with WRITE_POSE_PRIOR=1"
+    );
 }

@@ -28,10 +28,12 @@ pub mod epnp;
 pub mod fit;
 pub mod ik;
 pub mod optim;
+pub mod prior;
 pub mod skeleton;
 
 pub use calib::{BodyCamera, FloorCalibration, calibrate_floor};
 pub use fit::{BodyFit, BodyFitConfig, BodyFitter, DimensionEstimate, DimensionEstimator};
+pub use prior::PosePrior;
 pub use skeleton::{Convention, Dimensions, Skeleton};
 
 /// Number of joints in the output (the HumanEva-I 15-joint set).

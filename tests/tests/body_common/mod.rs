@@ -2,8 +2,9 @@
 //! (numpy + h5py) into JSON under the cargo target dir, reading it, and 3D error helpers.
 #![allow(dead_code)]
 
-use monotrack_core::body::skeleton::{N_DIMS, dim};
-use monotrack_core::body::{Dimensions, N_JOINTS};
+use monotrack_core::body::prior::fit_to_joints;
+use monotrack_core::body::skeleton::{N_DIMS, N_POSE, dim};
+use monotrack_core::body::{Convention, Dimensions, N_JOINTS, PosePrior, Skeleton};
 use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -269,3 +270,69 @@ impl Prior {
         }
     }
 }
+
+/// Left/right joint pairs of the 15-joint order (for mirroring).
+const MIRROR_PAIRS: [(usize, usize); 6] = [(2, 5), (3, 6), (4, 7), (8, 11), (9, 12), (10, 13)];
+
+impl H36m {
+    /// Per subject, the pose of every frame and of its mirror image (x negated, left and right
+    /// swapped: the prior should not prefer one side), fitted to the mocap joints with the
+    /// sequence's own dimensions (`prior::fit_to_joints`). Also returns the RMS model-to-mocap
+    /// joint distance over all of them, mm.
+    pub fn poses_by_subject(&self) -> (BTreeMap<String, Vec<[f64; N_POSE]>>, f64) {
+        let mut out: BTreeMap<String, Vec<[f64; N_POSE]>> = BTreeMap::new();
+        let mut ms = 0.0;
+        let mut n = 0.0;
+        for seq in &self.sequences {
+            let dims = Dimensions {
+                lengths: mean_lengths(seq.joints3d_mm.iter()),
+            };
+            for mirror in [false, true] {
+                let mut dims = dims;
+                if mirror {
+                    for (l, r) in dim::LEFT_RIGHT {
+                        dims.lengths.swap(l, r);
+                    }
+                }
+                let skel = Skeleton::new(dims, Convention::Human36M).unwrap();
+                for f in &seq.joints3d_mm {
+                    let mut x: [Vector3<f64>; N_JOINTS] = std::array::from_fn(|j| v3(&f[j]));
+                    if mirror {
+                        for p in &mut x {
+                            p.x = -p.x;
+                        }
+                        for (a, b) in MIRROR_PAIRS {
+                            x.swap(a, b);
+                        }
+                    }
+                    let (p, rms) = fit_to_joints(&skel, &x).unwrap();
+                    ms += rms * rms;
+                    n += 1.0;
+                    out.entry(seq.subject.clone()).or_default().push(p);
+                }
+            }
+        }
+        (out, (ms / f64::max(n, 1.0)).sqrt())
+    }
+}
+
+/// The pose prior of the subjects `keep` accepts, from [`H36m::poses_by_subject`]'s poses
+/// ([`POSE_PRIOR_MIN_STD`]); also the number of poses.
+pub fn pose_prior(
+    poses: &BTreeMap<String, Vec<[f64; N_POSE]>>,
+    keep: impl Fn(&str) -> bool,
+) -> (PosePrior, usize) {
+    let all: Vec<[f64; N_POSE]> = poses
+        .iter()
+        .filter(|(s, _)| keep(s))
+        .flat_map(|(_, p)| p.iter().copied())
+        .collect();
+    (
+        PosePrior::from_poses(&all, POSE_PRIOR_MIN_STD).unwrap(),
+        all.len(),
+    )
+}
+
+/// Independent spread added to every parameter of the pose prior, radians (see
+/// `PosePrior::from_poses`).
+pub const POSE_PRIOR_MIN_STD: f64 = 0.05;
