@@ -5,6 +5,7 @@
 use crate::MonotrackError;
 use crate::types::{CameraIntrinsics, Point2, Vec3, named};
 use monotrack_core::body::calib::calibrate_floor_extrinsics;
+use monotrack_core::body::fit::DEFAULT_PRIOR_WEIGHT_PX;
 use monotrack_core::body::skeleton::dim;
 use monotrack_core::body::{
     BodyCamera, BodyFitConfig, BodyFitter, Convention, DimensionEstimator, Dimensions, Joint,
@@ -247,15 +248,20 @@ pub struct BodyTrackerConfig {
     pub convention: BodyConvention,
     /// Assume the lower foot touches the floor (standing, walking; false for jumps or sitting).
     pub assume_contact: bool,
+    /// Strength of the learnt pose prior, px per standard deviation (≥ 0): about the error of the
+    /// 2D joints. 5 suits keypoint detectors and annotations; exact synthetic joints want ≤ 1.
+    pub prior_weight_px: f64,
 }
 
-/// `BodyTrackerConfig` defaults: 5 dimension frames, HumanEva joints, floor contact.
+/// `BodyTrackerConfig` defaults: 5 dimension frames, HumanEva joints, floor contact, prior weight
+/// 5 px.
 #[uniffi::export]
 pub fn default_body_tracker_config() -> BodyTrackerConfig {
     BodyTrackerConfig {
         dimension_frames: 5,
         convention: BodyConvention::HumanEva,
         assume_contact: true,
+        prior_weight_px: DEFAULT_PRIOR_WEIGHT_PX,
     }
 }
 
@@ -324,6 +330,14 @@ impl BodyTracker {
                 msg: "dimension_frames must be at least 1".into(),
             });
         }
+        if !(config.prior_weight_px.is_finite() && config.prior_weight_px >= 0.0) {
+            return Err(MonotrackError::InvalidConfig {
+                msg: format!(
+                    "prior_weight_px must be finite and >= 0, got {}",
+                    config.prior_weight_px
+                ),
+            });
+        }
         let convention = Convention::from(config.convention);
         Ok(Arc::new(Self {
             state: Mutex::new(BodyState {
@@ -332,6 +346,7 @@ impl BodyTracker {
                 dimension_frames: config.dimension_frames as usize,
                 fitter: BodyFitter::new(BodyFitConfig {
                     assume_contact: config.assume_contact,
+                    prior_weight_px: config.prior_weight_px,
                     ..BodyFitConfig::default()
                 }),
                 skeleton: mean_skeleton(convention)?,
@@ -464,6 +479,18 @@ mod tests {
             ),
             Err(MonotrackError::InvalidConfig { .. })
         ));
+        for w in [f64::NAN, -1.0, f64::INFINITY] {
+            assert!(matches!(
+                BodyTracker::new(
+                    camera(),
+                    BodyTrackerConfig {
+                        prior_weight_px: w,
+                        ..cfg
+                    }
+                ),
+                Err(MonotrackError::InvalidConfig { .. })
+            ));
+        }
         let mut bad = camera();
         bad.rotation[0] = 2.0;
         assert!(matches!(
@@ -562,6 +589,8 @@ mod tests {
             rec,
             BodyTrackerConfig {
                 dimension_frames: 3,
+                // Exact projections: a weak prior (the default expects keypoint-detector noise).
+                prior_weight_px: 0.5,
                 ..default_body_tracker_config()
             },
         )

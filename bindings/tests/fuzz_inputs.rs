@@ -229,6 +229,7 @@ fn body_calls_never_panic() {
                 BodyConvention::Human36m
             },
             assume_contact: r.below(2) == 0,
+            prior_weight_px: r.float(10.0),
         };
         no_panic("BodyTracker::new", case, || {
             let _ = BodyTracker::new(cam, cfg);

@@ -5,9 +5,11 @@
 //! each sequence's first frames, starting from (and pulled towards) the proportions of the other
 //! four subjects (leave one subject out: the shipped table is the mean of all five).
 //!
+//! The pose prior is learnt leave one subject out as well (the shipped one has all five subjects).
+//!
 //! Run: `cargo test -p monotrack-tests --test body_h36m -- --nocapture`; `BODY_PRIOR=shipped` starts
 //! from the shipped (in-sample) table instead, `BODY_PRIOR_WEIGHT=W` sets the dimension search's
-//! proportion-prior weight (README's experiments).
+//! proportion-prior weight, `POSE_PRIOR_WEIGHT=W` the pose prior's (README's experiments).
 
 mod body_common;
 
@@ -175,11 +177,14 @@ fn human36m_synthetic_projections() {
     );
     // Regression bounds around what was measured (README): the absolute error is dominated by depth
     // (the floor fixes it only through the assumed foot contact, wrong when sitting or mid-step).
+    // Measured with the leave-one-subject-out pose prior: 135 mm absolute, 62.9 / 67.2 mm after
+    // Procrustes (true / estimated dimensions).
     assert!(
-        mt < 300.0,
+        mt < 200.0,
         "mean joint error {mt:.1} mm with true dimensions"
     );
-    assert!(pa_true / nf < 90.0, "PA {:.1} mm", pa_true / nf);
+    assert!(pa_true / nf < 70.0, "PA {:.1} mm", pa_true / nf);
+    assert!(pa_est / nf < 75.0, "PA {:.1} mm", pa_est / nf);
     assert!(mean_abs_scale < 0.06);
 }
 

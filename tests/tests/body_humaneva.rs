@@ -135,9 +135,10 @@ fn humaneva_train_with_ground_truth_2d() {
     r.print();
     // The thesis' CLFBA reaches 5.96 px and 110.2 mm.
     assert!(r.reproj < 8.0, "reprojection {:.2} px", r.reproj);
-    // Regression bound around what was measured (102.0 mm, README); the 80 mm target is not
-    // met yet.
-    assert!(r.pa < 110.0, "PA error {:.1} mm", r.pa);
+    // Regression bound around what was measured (79.8 mm with the shipped pose prior, README; the
+    // issue's target is 80 mm, the isotropic prior before reached 102.0).
+    assert!(r.pa < 82.0, "PA error {:.1} mm", r.pa);
+    assert!(r.pa_true.unwrap() < 75.0, "PA error with mocap dimensions");
 }
 
 fn check_calibration(he: &HumanEva, refs: &BTreeMap<(String, usize), (BodyCamera, f64)>) {

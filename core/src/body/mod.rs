@@ -11,7 +11,8 @@
 //!    viewing ray at its segment's length from its parent, the two depth solutions chosen by the
 //!    swing–twist joint limits and the floor; the lower foot's depth set by floor contact;
 //! 4. a Levenberg–Marquardt refinement of all joint angles on the objective (reprojection error in
-//!    px² plus joint-limit, floor and contact penalties expressed in pixels).
+//!    px² plus joint-limit, floor and contact penalties expressed in pixels, and the learnt pose
+//!    prior of [`prior`]).
 //!
 //! Body dimensions are estimated once per sequence on its first frames
 //! ([`fit::DimensionEstimator`]): DIRECT-L over the global scale, then COBYLA over the twelve

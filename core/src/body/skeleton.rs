@@ -477,8 +477,9 @@ impl Skeleton {
 }
 
 /// The neutral pose of the joints below the root (standing, arms hanging slightly forward, elbows
-/// a little bent): where the pose prior pulls parameters the 2D joints leave undetermined (twists,
-/// depth-ambiguous limbs). Root entries are unused.
+/// a little bent): the mean of the isotropic [`super::PosePrior::neutral`] (the prior before the
+/// learnt one) and where `prior::fit_to_joints` holds what mocap joints cannot show (the twist of a
+/// straight limb). Root entries are unused.
 pub const NEUTRAL: [f64; N_POSE] = {
     let mut n = [0.0; N_POSE];
     n[P_LARM + 1] = -1.3;
@@ -490,13 +491,6 @@ pub const NEUTRAL: [f64; N_POSE] = {
 
 /// First pose parameter the prior applies to (everything after the root).
 pub const P_PRIOR_START: usize = P_SPINE;
-
-/// Squared distance of the non-root parameters from [`NEUTRAL`], rad².
-pub fn prior_distance(p: &[f64; N_POSE]) -> f64 {
-    (P_PRIOR_START..N_POSE)
-        .map(|i| (p[i] - NEUTRAL[i]).powi(2))
-        .sum()
-}
 
 /// How far `t` lies outside `range`.
 #[inline]

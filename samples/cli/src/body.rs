@@ -14,8 +14,8 @@ use crate::{LineSink, read_lines};
 use monotrack_core::body::calib::{calibrate_floor, calibrate_floor_extrinsics};
 use monotrack_core::body::skeleton::dim;
 use monotrack_core::body::{
-    BodyCamera, BodyFitter, Convention, DimensionEstimator, Dimensions, JOINT_NAMES, Joint,
-    Joints2d, N_JOINTS, Skeleton,
+    BodyCamera, BodyFitConfig, BodyFitter, Convention, DimensionEstimator, Dimensions, JOINT_NAMES,
+    Joint, Joints2d, N_JOINTS, Skeleton,
 };
 use monotrack_core::camera::Intrinsics;
 use nalgebra::{Matrix3, Vector3};
@@ -185,7 +185,13 @@ pub fn run(
     out: Option<&Path>,
     dimension_frames: usize,
     convention: ConventionArg,
+    prior_weight_px: f64,
 ) -> Result<bool, String> {
+    if !(prior_weight_px.is_finite() && prior_weight_px >= 0.0) {
+        return Err(format!(
+            "--prior-weight must be finite and >= 0, got {prior_weight_px}"
+        ));
+    }
     let convention: Convention = convention.into();
     let lines = read_lines(input)?;
     let parsed: Vec<(usize, Result<Frame, String>)> =
@@ -203,7 +209,10 @@ pub fn run(
             None => groups.push((key, vec![i])),
         }
     }
-    let fitter = BodyFitter::default();
+    let fitter = BodyFitter::new(BodyFitConfig {
+        prior_weight_px,
+        ..BodyFitConfig::default()
+    });
     let estimator = DimensionEstimator::default();
     // Per valid line: its skeleton (or an error from the estimation) and the estimation time.
     let mut skeletons: HashMap<usize, Result<(Skeleton, u64), String>> = HashMap::new();

@@ -99,6 +99,10 @@ enum Command {
         /// Joint-definition convention of the input joints.
         #[arg(long, value_enum, default_value = "humaneva")]
         convention: body::ConventionArg,
+        /// Strength of the learnt pose prior, px per standard deviation: about the error of the
+        /// 2D joints (5 suits detectors and annotations; exact synthetic joints want <= 1).
+        #[arg(long, default_value_t = monotrack_core::body::fit::DEFAULT_PRIOR_WEIGHT_PX)]
+        prior_weight: f64,
     },
 }
 
@@ -202,7 +206,14 @@ fn main() -> ExitCode {
             out,
             dimension_frames,
             convention,
-        } => body::run(&input, out.as_deref(), dimension_frames, convention),
+            prior_weight,
+        } => body::run(
+            &input,
+            out.as_deref(),
+            dimension_frames,
+            convention,
+            prior_weight,
+        ),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,
