@@ -1477,6 +1477,11 @@ public struct BodyTrackerConfig: Equatable, Hashable {
      * Assume the lower foot touches the floor (standing, walking; false for jumps or sitting).
      */
     public var assumeContact: Bool
+    /**
+     * Strength of the learnt pose prior, px per standard deviation (≥ 0): about the error of the
+     * 2D joints. 5 suits keypoint detectors and annotations; exact synthetic joints want ≤ 1.
+     */
+    public var priorWeightPx: Double
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1490,10 +1495,15 @@ public struct BodyTrackerConfig: Equatable, Hashable {
          */convention: BodyConvention, 
         /**
          * Assume the lower foot touches the floor (standing, walking; false for jumps or sitting).
-         */assumeContact: Bool) {
+         */assumeContact: Bool, 
+        /**
+         * Strength of the learnt pose prior, px per standard deviation (≥ 0): about the error of the
+         * 2D joints. 5 suits keypoint detectors and annotations; exact synthetic joints want ≤ 1.
+         */priorWeightPx: Double) {
         self.dimensionFrames = dimensionFrames
         self.convention = convention
         self.assumeContact = assumeContact
+        self.priorWeightPx = priorWeightPx
     }
 
     
@@ -1514,7 +1524,8 @@ public struct FfiConverterTypeBodyTrackerConfig: FfiConverterRustBuffer {
             try BodyTrackerConfig(
                 dimensionFrames: FfiConverterUInt32.read(from: &buf), 
                 convention: FfiConverterTypeBodyConvention.read(from: &buf), 
-                assumeContact: FfiConverterBool.read(from: &buf)
+                assumeContact: FfiConverterBool.read(from: &buf), 
+                priorWeightPx: FfiConverterDouble.read(from: &buf)
         )
     }
 
@@ -1522,6 +1533,7 @@ public struct FfiConverterTypeBodyTrackerConfig: FfiConverterRustBuffer {
         FfiConverterUInt32.write(value.dimensionFrames, into: &buf)
         FfiConverterTypeBodyConvention.write(value.convention, into: &buf)
         FfiConverterBool.write(value.assumeContact, into: &buf)
+        FfiConverterDouble.write(value.priorWeightPx, into: &buf)
     }
 }
 
@@ -4313,7 +4325,8 @@ public func calibrateFloorCamera(cornersPx: [Point2], widthMm: Double, depthMm: 
 })
 }
 /**
- * `BodyTrackerConfig` defaults: 5 dimension frames, HumanEva joints, floor contact.
+ * `BodyTrackerConfig` defaults: 5 dimension frames, HumanEva joints, floor contact, prior weight
+ * 5 px.
  */
 public func defaultBodyTrackerConfig() -> BodyTrackerConfig  {
     return try!  FfiConverterTypeBodyTrackerConfig_lift(try! rustCall() {
@@ -4382,7 +4395,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_monotrack_ffi_checksum_func_calibrate_floor_camera() != 61981) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_monotrack_ffi_checksum_func_default_body_tracker_config() != 23637) {
+    if (uniffi_monotrack_ffi_checksum_func_default_body_tracker_config() != 47254) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_func_default_tracker_config() != 13976) {
