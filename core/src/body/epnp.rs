@@ -237,21 +237,38 @@ fn pose_from_controls(
         zsum += cam[i].z;
     }
     let sgn = if zsum < 0.0 { -1.0 } else { 1.0 };
-    let (mut pb, mut cb, mut w) = (Vector3::zeros(), Vector3::zeros(), 0.0);
-    for i in 0..n {
-        if weights[i] > 0.0 {
-            cam[i] *= sgn;
-            pb += planar[i] * weights[i];
-            cb += cam[i] * weights[i];
-            w += weights[i];
+    for c in &mut cam[..n] {
+        *c *= sgn;
+    }
+    let (r, t, _) = rigid_transform(planar, &cam[..n], weights)?;
+    (t.z > 0.0).then_some(Pose {
+        rotation: r,
+        translation: t,
+    })
+}
+
+/// The rotation R and translation t minimising Σ wᵢ‖R·srcᵢ + t − dstᵢ‖² (Kabsch, proper rotation
+/// only; points with wᵢ ≤ 0 are ignored), with the singular values of the cross-covariance (for
+/// callers that reject degenerate point sets). `None` when the SVD fails or R is not finite.
+pub(crate) fn rigid_transform(
+    src: &[Vector3<f64>],
+    dst: &[Vector3<f64>],
+    weights: &[f64],
+) -> Option<(Matrix3<f64>, Vector3<f64>, Vector3<f64>)> {
+    let (mut sb, mut db, mut w) = (Vector3::zeros(), Vector3::zeros(), 0.0);
+    for ((s, d), &wi) in src.iter().zip(dst).zip(weights) {
+        if wi > 0.0 {
+            sb += s * wi;
+            db += d * wi;
+            w += wi;
         }
     }
-    pb /= w;
-    cb /= w;
+    sb /= w;
+    db /= w;
     let mut h = Matrix3::zeros();
-    for i in 0..n {
-        if weights[i] > 0.0 {
-            h += (planar[i] - pb) * (cam[i] - cb).transpose() * weights[i];
+    for ((s, d), &wi) in src.iter().zip(dst).zip(weights) {
+        if wi > 0.0 {
+            h += (s - sb) * (d - db).transpose() * wi;
         }
     }
     let svd = h.svd(true, true);
@@ -259,11 +276,10 @@ fn pose_from_controls(
     let v = vt.transpose();
     let d = (v * u.transpose()).determinant().signum();
     let r = v * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
-    let t = cb - r * pb;
-    (t.z > 0.0 && r.iter().all(|x| x.is_finite())).then_some(Pose {
-        rotation: r,
-        translation: t,
-    })
+    let t = db - r * sb;
+    r.iter()
+        .all(|x| x.is_finite())
+        .then_some((r, t, svd.singular_values))
 }
 
 /// Weighted RMS reprojection error, px.

@@ -178,11 +178,7 @@ impl Residuals<N_POSE> for PoseProblem<'_> {
     }
 
     fn step(&self, i: usize) -> f64 {
-        if (P_ROOT_POS..P_ROOT_POS + 3).contains(&i) {
-            1e-3
-        } else {
-            1e-6
-        }
+        pose_fd_step(i)
     }
 }
 

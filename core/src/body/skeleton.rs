@@ -489,6 +489,16 @@ pub const NEUTRAL: [f64; N_POSE] = {
     n
 };
 
+/// Forward-difference step of pose parameter `i` for the finite-difference Jacobians of the body
+/// problems: 1e-3 mm for the root position, 1e-6 rad for every angle.
+pub(crate) fn pose_fd_step(i: usize) -> f64 {
+    if (P_ROOT_POS..P_ROOT_POS + 3).contains(&i) {
+        1e-3
+    } else {
+        1e-6
+    }
+}
+
 /// First pose parameter the prior applies to (everything after the root).
 pub const P_PRIOR_START: usize = P_SPINE;
 
