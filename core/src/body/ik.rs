@@ -94,7 +94,7 @@ pub fn two_sphere_near_ray(
 }
 
 /// The swing rotation vector taking unit `rest` onto unit `u` (perpendicular to `rest`).
-fn swing_between(rest: &Vector3<f64>, u: &Vector3<f64>) -> Vector3<f64> {
+pub(crate) fn swing_between(rest: &Vector3<f64>, u: &Vector3<f64>) -> Vector3<f64> {
     let axis = rest.cross(u);
     let s = axis.norm();
     let c = rest.dot(u).clamp(-1.0, 1.0);

@@ -27,6 +27,7 @@
 pub mod calib;
 pub mod epnp;
 pub mod fit;
+pub mod hanim;
 pub mod ik;
 pub mod optim;
 pub mod prior;
@@ -34,6 +35,7 @@ pub mod skeleton;
 
 pub use calib::{BodyCamera, FloorCalibration, calibrate_floor};
 pub use fit::{BodyFit, BodyFitConfig, BodyFitter, DimensionEstimate, DimensionEstimator};
+pub use hanim::{FullSkeleton, HJoint};
 pub use prior::PosePrior;
 pub use skeleton::{Convention, Dimensions, Skeleton};
 

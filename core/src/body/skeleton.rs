@@ -295,14 +295,14 @@ pub struct Skeleton {
 
 /// Rotation by angle `t` about x.
 #[inline]
-fn rot_x(t: f64) -> Matrix3<f64> {
+pub(crate) fn rot_x(t: f64) -> Matrix3<f64> {
     let (s, c) = t.sin_cos();
     Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c)
 }
 
 /// Rotation by angle `t` about y.
 #[inline]
-fn rot_y(t: f64) -> Matrix3<f64> {
+pub(crate) fn rot_y(t: f64) -> Matrix3<f64> {
     let (s, c) = t.sin_cos();
     Matrix3::new(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c)
 }
