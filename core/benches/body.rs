@@ -7,8 +7,8 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use monotrack_core::body::skeleton::{N_POSE, P_LARM, P_LLEG, P_RARM, P_RLEG, log_so3};
 use monotrack_core::body::{
-    BodyCamera, BodyFitConfig, BodyFitter, Convention, DimensionEstimator, Dimensions, Joints2d,
-    N_JOINTS, PosePrior, Skeleton,
+    BodyCamera, BodyFitConfig, BodyFitter, Convention, DimensionEstimator, Dimensions,
+    FullSkeleton, Joints2d, N_JOINTS, PosePrior, Skeleton, hanim,
 };
 use monotrack_core::camera::Intrinsics;
 use nalgebra::{Matrix3, Vector3};
@@ -62,6 +62,20 @@ fn bench(c: &mut Criterion) {
     let fitter = BodyFitter::default();
     c.bench_function("body_pose_only", |b| {
         b.iter(|| fitter.fit(black_box(&obs), &cam, &truth).unwrap())
+    });
+    // The same refined in the full 54-DoF model.
+    let full = BodyFitter::new(BodyFitConfig {
+        full_model: true,
+        ..Default::default()
+    });
+    c.bench_function("body_pose_only_full_model", |b| {
+        b.iter(|| full.fit(black_box(&obs), &cam, &truth).unwrap())
+    });
+    let fs = FullSkeleton::new(truth);
+    let full_init = hanim::embed(&fitter.initialise(&obs, &cam, &truth).unwrap());
+    let mut posed = hanim::Posed::default();
+    c.bench_function("body_full_forward_kinematics", |b| {
+        b.iter(|| fs.forward(black_box(&full_init), &mut posed))
     });
     // The same with the isotropic prior used before the learnt one (weight 3 px per radian).
     let neutral = BodyFitter {

@@ -12,6 +12,7 @@ use std::cell::RefCell;
 
 use super::calib::BodyCamera;
 use super::epnp;
+use super::hanim::{self, EndSite, FullSkeleton, N_FULL_LIMITS, N_FULL_POSE, Posed};
 use super::ik;
 use super::optim::cobyla::{Cobyla, CobylaTermination};
 use super::optim::direct::{DirectL, DirectTermination};
@@ -52,6 +53,12 @@ pub struct BodyFitConfig {
     /// Pixels of residual per standard deviation of the pose prior ([`PosePrior`]): it decides
     /// what the 2D joints leave open (depth-ambiguous limbs, twists), and little else.
     pub prior_weight_px: f64,
+    /// Refine, after the reduced model's fit, in the full 21-joint, 54-DoF model ([`hanim`]):
+    /// clavicles, pelvis girdle and a three-joint spine and two-joint neck free within their
+    /// limits. [`BodyFit::full_pose`] then holds that pose and the joints come from it.
+    pub full_model: bool,
+    /// Multiplies [`hanim::EXTRA_PRIOR_STD`] in the full model's refinement (1 = as shipped).
+    pub extra_prior_scale: f64,
 }
 
 impl Default for BodyFitConfig {
@@ -66,6 +73,8 @@ impl Default for BodyFitConfig {
             },
             assume_contact: true,
             prior_weight_px: DEFAULT_PRIOR_WEIGHT_PX,
+            full_model: false,
+            extra_prior_scale: 1.0,
         }
     }
 }
@@ -78,8 +87,11 @@ pub const DEFAULT_PRIOR_WEIGHT_PX: f64 = 5.0;
 pub struct BodyFit {
     /// Joint positions, world frame, mm.
     pub joints: [Vector3<f64>; N_JOINTS],
-    /// The pose vector (see [`super::skeleton`]).
+    /// The pose vector (see [`super::skeleton`]); with [`BodyFitConfig::full_model`], the first 27
+    /// parameters of [`BodyFit::full_pose`].
     pub pose: [f64; N_POSE],
+    /// The full model's pose ([`hanim`]) when fitted in it.
+    pub full_pose: Option<[f64; N_FULL_POSE]>,
     /// RMS reprojection error over the observed joints, px.
     pub reprojection_rms_px: f64,
     /// The objective per observed joint (reprojection plus penalties), px².
@@ -127,49 +139,15 @@ impl Residuals<N_POSE> for PoseProblem<'_> {
         let p = Self::unpack(x);
         let mut j = [Vector3::zeros(); N_JOINTS];
         self.skel.forward(&p, &mut j);
-        let fx = self.cam.intrinsics.fx;
-        let mut k = 0;
-        let mut depth = [0.0; N_JOINTS];
-        for i in 0..N_JOINTS {
-            let c = self.cam.to_camera(&j[i]);
-            // Behind the camera: a large finite residual keeps LM away without NaNs.
-            depth[i] = c.z.max(1.0);
-            let w = self.obs.weights[i];
-            if w > 0.0 && c.z > 1.0 {
-                let q = self.cam.project_camera(&c);
-                let sw = w.sqrt();
-                r[k] = sw * (q[0] - self.obs.points[i][0]);
-                r[k + 1] = sw * (q[1] - self.obs.points[i][1]);
-            } else if w > 0.0 {
-                r[k] = 1e4;
-                r[k + 1] = 1e4;
-            } else {
-                r[k] = 0.0;
-                r[k + 1] = 0.0;
-            }
-            k += 2;
-        }
+        let depth = reprojection_residuals(self.cam, self.obs, &j, r);
+        let mut k = 2 * N_JOINTS;
         let mut lim = [0.0; N_LIMITS];
         self.skel.limit_violations(&p, &mut lim);
         for v in lim {
             r[k] = LIMIT_WEIGHT_PX * v;
             k += 1;
         }
-        let ankle_min = self.skel.ankle_height - ANKLE_SINK_MM;
-        for i in 0..N_JOINTS {
-            let min = if i == Joint::LAnkle.index() || i == Joint::RAnkle.index() {
-                ankle_min
-            } else {
-                MIN_JOINT_HEIGHT_MM
-            };
-            r[k] = FLOOR_WEIGHT * (min - j[i].z).max(0.0) * fx / depth[i];
-            k += 1;
-        }
-        r[k] = match self.contact {
-            Some(a) => FLOOR_WEIGHT * (j[a].z - self.skel.ankle_height) * fx / depth[a],
-            None => 0.0,
-        };
-        k += 1;
+        k += floor_residuals(self.skel, self.cam, self.contact, &j, &depth, &mut r[k..]);
         self.prior.residuals(&p, &mut r[k..k + N_PRIOR]);
         for v in &mut r[k..k + N_PRIOR] {
             *v *= self.prior_weight;
@@ -179,6 +157,135 @@ impl Residuals<N_POSE> for PoseProblem<'_> {
 
     fn step(&self, i: usize) -> f64 {
         pose_fd_step(i)
+    }
+}
+
+/// Writes the weighted reprojection residuals of the 15 joints into `r[..30]` and returns the
+/// joints' depths (clamped to 1 mm).
+fn reprojection_residuals(
+    cam: &BodyCamera,
+    obs: &Joints2d,
+    j: &[Vector3<f64>; N_JOINTS],
+    r: &mut [f64],
+) -> [f64; N_JOINTS] {
+    let mut depth = [0.0; N_JOINTS];
+    for i in 0..N_JOINTS {
+        let c = cam.to_camera(&j[i]);
+        // Behind the camera: a large finite residual keeps LM away without NaNs.
+        depth[i] = c.z.max(1.0);
+        let w = obs.weights[i];
+        let (a, b) = if w > 0.0 && c.z > 1.0 {
+            let q = cam.project_camera(&c);
+            let sw = w.sqrt();
+            (
+                sw * (q[0] - obs.points[i][0]),
+                sw * (q[1] - obs.points[i][1]),
+            )
+        } else if w > 0.0 {
+            (1e4, 1e4)
+        } else {
+            (0.0, 0.0)
+        };
+        r[2 * i] = a;
+        r[2 * i + 1] = b;
+    }
+    depth
+}
+
+/// Writes the floor-penetration residuals of the 15 joints and the contact foot's height residual
+/// into `r` (in pixels at the joint's depth); returns how many (16).
+fn floor_residuals(
+    skel: &Skeleton,
+    cam: &BodyCamera,
+    contact: Option<usize>,
+    j: &[Vector3<f64>; N_JOINTS],
+    depth: &[f64; N_JOINTS],
+    r: &mut [f64],
+) -> usize {
+    let fx = cam.intrinsics.fx;
+    let ankle_min = skel.ankle_height - ANKLE_SINK_MM;
+    for i in 0..N_JOINTS {
+        let min = if i == Joint::LAnkle.index() || i == Joint::RAnkle.index() {
+            ankle_min
+        } else {
+            MIN_JOINT_HEIGHT_MM
+        };
+        r[i] = FLOOR_WEIGHT * (min - j[i].z).max(0.0) * fx / depth[i];
+    }
+    r[N_JOINTS] = match contact {
+        Some(a) => FLOOR_WEIGHT * (j[a].z - skel.ankle_height) * fx / depth[a],
+        None => 0.0,
+    };
+    N_JOINTS + 1
+}
+
+/// The refinement in the full 54-DoF model ([`hanim`]): the reduced objective with the full
+/// model's joint limits, the toes kept above the floor, and the extra parameters' zero-mean prior
+/// ([`hanim::EXTRA_PRIOR_STD`]) next to the learnt one on the first 27.
+struct FullPoseProblem<'a> {
+    fs: &'a FullSkeleton,
+    prior: &'a PosePrior,
+    prior_weight: f64,
+    extra_std_scale: f64,
+    cam: &'a BodyCamera,
+    obs: &'a Joints2d,
+    contact: Option<usize>,
+}
+
+impl FullPoseProblem<'_> {
+    fn unpack(x: &SVector<f64, N_FULL_POSE>) -> [f64; N_FULL_POSE] {
+        let mut p = [0.0; N_FULL_POSE];
+        p.copy_from_slice(x.as_slice());
+        p
+    }
+}
+
+impl Residuals<N_FULL_POSE> for FullPoseProblem<'_> {
+    fn residuals(&self, x: &SVector<f64, N_FULL_POSE>, r: &mut [f64; MAX_RESIDUALS]) -> usize {
+        let p = Self::unpack(x);
+        let mut posed = Posed::default();
+        self.fs.forward(&p, &mut posed);
+        let j = posed.output_joints();
+        let depth = reprojection_residuals(self.cam, self.obs, &j, r);
+        let mut k = 2 * N_JOINTS;
+        let mut lim = [0.0; N_FULL_LIMITS];
+        self.fs.limit_violations(&p, &mut lim);
+        for v in lim {
+            r[k] = LIMIT_WEIGHT_PX * v;
+            k += 1;
+        }
+        k += floor_residuals(
+            &self.fs.base,
+            self.cam,
+            self.contact,
+            &j,
+            &depth,
+            &mut r[k..],
+        );
+        let fx = self.cam.intrinsics.fx;
+        for toe in [EndSite::LToe, EndSite::RToe] {
+            let t = posed.ends[toe as usize];
+            let z = self.cam.to_camera(&t).z.max(1.0);
+            // The toes may sink as far as the ankles may (foot and ankle points are marker
+            // estimates, and the ankle's height allowance already covers a rolling foot).
+            r[k] = FLOOR_WEIGHT * (-ANKLE_SINK_MM - t.z).max(0.0) * fx / z;
+            k += 1;
+        }
+        let reduced = hanim::reduced(&p);
+        self.prior.residuals(&reduced, &mut r[k..k + N_PRIOR]);
+        for v in &mut r[k..k + N_PRIOR] {
+            *v *= self.prior_weight;
+        }
+        k += N_PRIOR;
+        for (i, s) in hanim::EXTRA_PRIOR_STD.iter().enumerate() {
+            r[k] = self.prior_weight * p[N_POSE + i] / (s * self.extra_std_scale);
+            k += 1;
+        }
+        k
+    }
+
+    fn step(&self, i: usize) -> f64 {
+        if i < N_POSE { pose_fd_step(i) } else { 1e-6 }
     }
 }
 
@@ -388,21 +495,77 @@ impl BodyFitter {
             };
             pose = PoseProblem::unpack(&v);
         }
+        if self.config.full_model {
+            return self.refine_full(obs, cam, skel, &pose, contact, report);
+        }
         skel.forward(&pose, &mut x);
         let mut r = [0.0; MAX_RESIDUALS];
         let m = problem.residuals(&v, &mut r);
-        let n_obs = obs.weights.iter().filter(|w| **w > 0.0).count().max(1) as f64;
-        let reproj: f64 = r[..2 * N_JOINTS].iter().map(|e| e * e).sum();
-        let total: f64 = r[..m].iter().map(|e| e * e).sum();
+        let (reprojection_rms_px, cost_px2) = fit_stats(obs, &r[..m]);
         BodyFit {
             joints: x,
             pose,
-            reprojection_rms_px: (reproj / n_obs).sqrt(),
-            cost_px2: total / n_obs,
+            full_pose: None,
+            reprojection_rms_px,
+            cost_px2,
             contact,
             report,
         }
     }
+
+    /// The full model's refinement from the reduced fit `pose`.
+    fn refine_full(
+        &self,
+        obs: &Joints2d,
+        cam: &BodyCamera,
+        skel: &Skeleton,
+        pose: &[f64; N_POSE],
+        contact: Option<Joint>,
+        report: SolverReport,
+    ) -> BodyFit {
+        let fs = FullSkeleton::new(*skel);
+        let problem = FullPoseProblem {
+            fs: &fs,
+            prior: &self.prior,
+            prior_weight: self.config.prior_weight_px,
+            extra_std_scale: self.config.extra_prior_scale,
+            cam,
+            obs,
+            contact: contact.map(Joint::index),
+        };
+        let mut v = SVector::<f64, N_FULL_POSE>::from_column_slice(&hanim::embed(pose));
+        let r2 = self
+            .config
+            .lm
+            .minimize(&NumericLeastSquares(&problem), &mut v);
+        let full = FullPoseProblem::unpack(&v);
+        let mut posed = Posed::default();
+        fs.forward(&full, &mut posed);
+        let mut r = [0.0; MAX_RESIDUALS];
+        let m = problem.residuals(&v, &mut r);
+        let (reprojection_rms_px, cost_px2) = fit_stats(obs, &r[..m]);
+        BodyFit {
+            joints: posed.output_joints(),
+            pose: hanim::reduced(&full),
+            full_pose: Some(full),
+            reprojection_rms_px,
+            cost_px2,
+            contact,
+            report: SolverReport {
+                iterations: report.iterations + r2.iterations,
+                ..r2
+            },
+        }
+    }
+}
+
+/// RMS reprojection error (px) and objective per observed joint (px²) from a residual vector
+/// whose first 30 entries are the reprojection residuals.
+fn fit_stats(obs: &Joints2d, r: &[f64]) -> (f64, f64) {
+    let n_obs = obs.weights.iter().filter(|w| **w > 0.0).count().max(1) as f64;
+    let reproj: f64 = r[..2 * N_JOINTS].iter().map(|e| e * e).sum();
+    let total: f64 = r.iter().map(|e| e * e).sum();
+    ((reproj / n_obs).sqrt(), total / n_obs)
 }
 
 /// The (up to four) depth-branch configurations of a limb, as its four parameters, with the rest
@@ -644,6 +807,21 @@ impl DimensionEstimator {
                 self.scale_range, self.part_range
             )));
         }
+        // The search fits in the reduced model: the full model's extra freedom would cost time at
+        // every evaluation and cannot change what the lengths explain.
+        let reduced_fitter;
+        let fitter = if fitter.config.full_model {
+            reduced_fitter = BodyFitter {
+                config: BodyFitConfig {
+                    full_model: false,
+                    ..fitter.config
+                },
+                prior: fitter.prior.clone(),
+            };
+            &reduced_fitter
+        } else {
+            fitter
+        };
         // Warm starts, one per frame, shared by all evaluations.
         let warm: RefCell<Vec<Option<[f64; N_POSE]>>> = RefCell::new(vec![None; frames.len()]);
         let evaluations = RefCell::new(0usize);

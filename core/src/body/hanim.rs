@@ -226,6 +226,26 @@ pub mod full_limits {
     pub const ANKLE: SwingTwistLimit = deg(55.0, 25.0, 25.0, 25.0, 0.0, 0.0);
 }
 
+/// Standard deviations (radians) of the zero-mean prior on the 27 extra parameters, in `X_*`
+/// order, used when fitting in the full model. The learnt prior covers the first 27 parameters
+/// only: no training set here has the points that would show the extras (a clavicle, a vertebra,
+/// a hand or toe), so they get a fixed Gaussian. Those that move an output joint (sacroiliac, vl1,
+/// vt6, skull-base swings, clavicles) are tight (6–9°): the 15 joints can trade them for the
+/// reduced model's own parameters, and the reduced parameters are the ones the data taught. Those
+/// that move no output joint (twists about a segment's own axis, wrists, ankles) are loose: only
+/// their limits and the floor (toes) decide them.
+pub const EXTRA_PRIOR_STD: [f64; N_FULL_POSE - N_POSE] = [
+    0.1, 0.1, 0.1, // sacroiliac
+    0.1, 0.1, 0.1, // vl1
+    0.1, 0.1, 0.1, // vt6
+    0.5, // vc7 twist
+    0.15, 0.15, 0.5, // skull base (nod, tilt, turn)
+    0.1, 0.1, 0.1, 0.1, // clavicles
+    0.5, 0.5, // forearm twists
+    0.5, 0.5, 0.5, 0.5, // wrists
+    0.3, 0.3, 0.3, 0.3, // ankles
+];
+
 /// Forward-kinematics output: joint positions (world, mm), each joint's frame (body-local axes of
 /// the segments it moves → world) and the end sites.
 #[derive(Debug, Clone, Copy, PartialEq)]

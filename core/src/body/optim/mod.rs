@@ -10,9 +10,10 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::fit::solver::{LeastSquares, symmetrize};
 
-/// Largest residual count a [`Residuals`] problem may have (the body objective has 30 reprojection,
-/// 15 joint-limit, 15 floor, 1 contact and 21 prior residuals; the floor calibration 9).
-pub const MAX_RESIDUALS: usize = 96;
+/// Largest residual count a [`Residuals`] problem may have (the body objective in the full model
+/// has 30 reprojection, 32 joint-limit, 17 floor, 1 contact and 48 prior residuals; in the reduced
+/// model 30, 15, 15, 1 and 21; the floor calibration 9).
+pub const MAX_RESIDUALS: usize = 128;
 
 /// A vector of residuals in N parameters; ½‖r‖² is minimised.
 pub trait Residuals<const N: usize> {
