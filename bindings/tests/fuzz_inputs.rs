@@ -204,6 +204,15 @@ fn body_calls_never_panic() {
         },
     )
     .unwrap();
+    let body_full = BodyTracker::new(
+        camera.clone(),
+        BodyTrackerConfig {
+            dimension_frames: 2,
+            full_model: true,
+            ..default_body_tracker_config()
+        },
+    )
+    .unwrap();
     let mut ok_bodies = 0;
     for case in 0..200 {
         let corners: Vec<Point2> = (0..[4, 4, 3, 5][r.below(4) as usize])
@@ -230,6 +239,7 @@ fn body_calls_never_panic() {
             },
             assume_contact: r.below(2) == 0,
             prior_weight_px: r.float(10.0),
+            full_model: r.below(2) == 0,
         };
         no_panic("BodyTracker::new", case, || {
             let _ = BodyTracker::new(cam, cfg);
@@ -253,11 +263,14 @@ fn body_calls_never_panic() {
                 position,
             });
         }
+        // Every other case goes to the tracker that refines in the full 54-DoF model.
+        let tracker = if case % 2 == 0 { &body } else { &body_full };
         no_panic("BodyTracker::fit", case, || {
-            ok_bodies += usize::from(body.fit(obs).is_ok());
+            ok_bodies += usize::from(tracker.fit(obs).is_ok());
         });
         if r.below(20) == 0 {
             body.reset();
+            body_full.reset();
         }
     }
     assert!(ok_bodies >= 20, "only {ok_bodies} body fits ran");

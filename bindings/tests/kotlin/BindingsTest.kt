@@ -258,9 +258,10 @@ class BindingsTest {
         assertEquals(760.0, cal.camera.intrinsics.fx, 8.0)
         assertTrue(cal.rmsPx < 0.5, "corner rms ${cal.rmsPx}")
         assertEquals(5.0, defaultBodyTrackerConfig().priorWeightPx)
+        assertEquals(false, defaultBodyTrackerConfig().fullModel)
         // The walker's joints carry 0.5 px of noise: a prior weight to match (the default, 5 px,
-        // is made for keypoint detectors).
-        BodyTracker(cal.camera, defaultBodyTrackerConfig().copy(dimensionFrames = 3u, priorWeightPx = 0.5)).use { t ->
+        // is made for keypoint detectors). Both body models: the reduced one and the full 54-DoF one.
+        for (full in listOf(false, true)) BodyTracker(cal.camera, defaultBodyTrackerConfig().copy(dimensionFrames = 3u, priorWeightPx = 0.5, fullModel = full)).use { t ->
             for ((k, line) in lines.withIndex()) {
                 val joints = namedPoints(line, "joints2d").map { (name, p) ->
                     BodyJoint2d(BodyJoint.values()[jointNames.indexOf(name)], Point2(p[0].toFloat(), p[1].toFloat()))

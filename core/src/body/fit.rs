@@ -961,6 +961,56 @@ mod tests {
     }
 
     #[test]
+    fn the_full_model_fits_what_the_reduced_one_cannot() {
+        // A body with shrugged clavicles, a tilted pelvis girdle and a bent upper back: the
+        // reduced model's rigid torso cannot place shoulders and hips where they are.
+        let skel =
+            Skeleton::new(Dimensions::mean(Convention::HumanEva), Convention::HumanEva).unwrap();
+        let fs = FullSkeleton::new(skel);
+        let cam = camera();
+        let mut p = hanim::embed(&truth_pose(&skel));
+        p[hanim::X_LSC + 1] = 0.3;
+        p[hanim::X_RSC + 1] = -0.1;
+        p[hanim::X_SACROILIAC + 1] = 0.12;
+        p[hanim::X_VT6] = 0.2;
+        assert_eq!(fs.limit_violation(&p), 0.0);
+        let mut posed = Posed::default();
+        fs.forward(&p, &mut posed);
+        let x = posed.output_joints();
+        let obs = observe(&cam, &x);
+        let fit = |full_model: bool| {
+            BodyFitter::new(BodyFitConfig {
+                prior_weight_px: 0.3,
+                full_model,
+                ..Default::default()
+            })
+            .fit(&obs, &cam, &skel)
+            .unwrap()
+        };
+        let err = |f: &BodyFit| {
+            (0..N_JOINTS)
+                .map(|i| (f.joints[i] - x[i]).norm())
+                .sum::<f64>()
+                / N_JOINTS as f64
+        };
+        let (reduced, full) = (fit(false), fit(true));
+        println!(
+            "reduced: {:.2} px, {:.1} mm; full: {:.2} px, {:.1} mm",
+            reduced.reprojection_rms_px,
+            err(&reduced),
+            full.reprojection_rms_px,
+            err(&full)
+        );
+        assert!(reduced.full_pose.is_none());
+        let fp = full.full_pose.unwrap();
+        assert_eq!(&fp[..N_POSE], &full.pose[..]);
+        assert!(full.reprojection_rms_px < 0.5 * reduced.reprojection_rms_px);
+        assert!(err(&full) < err(&reduced));
+        // The left clavicle went up, as it did.
+        assert!(fp[hanim::X_LSC + 1] > 0.1, "{}", fp[hanim::X_LSC + 1]);
+    }
+
+    #[test]
     fn exact_projections_of_the_model_are_fitted_to_millimetres() {
         let skel =
             Skeleton::new(Dimensions::mean(Convention::HumanEva), Convention::HumanEva).unwrap();

@@ -185,8 +185,9 @@ pub fn run(
     out: Option<&Path>,
     dimension_frames: usize,
     convention: ConventionArg,
-    prior_weight_px: f64,
+    config: BodyFitConfig,
 ) -> Result<bool, String> {
+    let prior_weight_px = config.prior_weight_px;
     if !(prior_weight_px.is_finite() && prior_weight_px >= 0.0) {
         return Err(format!(
             "--prior-weight must be finite and >= 0, got {prior_weight_px}"
@@ -209,10 +210,7 @@ pub fn run(
             None => groups.push((key, vec![i])),
         }
     }
-    let fitter = BodyFitter::new(BodyFitConfig {
-        prior_weight_px,
-        ..BodyFitConfig::default()
-    });
+    let fitter = BodyFitter::new(config);
     let estimator = DimensionEstimator::default();
     // Per valid line: its skeleton (or an error from the estimation) and the estimation time.
     let mut skeletons: HashMap<usize, Result<(Skeleton, u64), String>> = HashMap::new();

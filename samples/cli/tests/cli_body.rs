@@ -93,6 +93,13 @@ fn body_fit_example_recovers_the_walker() {
         default < 120.0,
         "mean joint error {default:.1} mm at the default prior weight"
     );
+    // The full 54-DoF model: same output contract, same accuracy class.
+    let full = walker_error(&["--prior-weight", "0.5", "--full-model"]);
+    eprintln!("walker: {weak:.1} mm reduced, {full:.1} mm full model (prior weight 0.5)");
+    assert!(
+        full < 50.0,
+        "mean joint error {full:.1} mm in the full model"
+    );
     for bad in ["-1", "NaN", "inf"] {
         let input = root().join("examples/body_fit_example.jsonl");
         let arg = format!("--prior-weight={bad}");
