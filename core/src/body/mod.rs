@@ -14,6 +14,11 @@
 //!    px² plus joint-limit, floor and contact penalties expressed in pixels, and the learnt pose
 //!    prior of [`prior`]).
 //!
+//! The kinematic model is the thesis' 21-joint, 54-DoF hierarchy ([`hanim`], with its posing
+//! features); steps 2–4 work in its reduced form ([`skeleton`]: 15 joints, 27 DoF, the spine bending
+//! at one joint, clavicles, pelvis girdle, wrists and ankles at rest), which it contains exactly, and
+//! [`BodyFitConfig::full_model`] adds a refinement in all 54 DoF.
+//!
 //! Body dimensions are estimated once per sequence on its first frames
 //! ([`fit::DimensionEstimator`]): DIRECT-L over the global scale, then COBYLA over the twelve
 //! body-part lengths.

@@ -1,5 +1,6 @@
-//! The kinematic body model: body dimensions, joint-definition conventions, the joint-angle pose
-//! vector, forward kinematics and the swing–twist joint limits.
+//! The kinematic body model in its reduced form (the subspace of [`super::hanim`]'s 21-joint,
+//! 54-DoF model the fitter works in): body dimensions, joint-definition conventions, the joint-angle
+//! pose vector, forward kinematics and the swing–twist joint limits.
 //!
 //! The skeleton has the 15 output joints (see [`super::Joint`]) and 27 degrees of freedom: 6 at the
 //! root; 3 at the lumbar spine; 2 at the neck (its twist cannot be seen from a single head point);
