@@ -115,18 +115,21 @@ fn humaneva_train_with_ground_truth_2d() {
     // The shipped table is the mean of all three subjects, rounded to the millimetre.
     row("all (shipped)", &Dimensions::mean(conv).lengths);
     assert_shipped_table(&per_subject, conv, 0.51);
-    let r = evaluate(
-        &Data {
-            he: &he,
-            refs: &refs,
-            per_subject: &per_subject,
-        },
-        &DimensionEstimator::default(),
-        Prior::LeaveOneOut,
-        DIMENSION_FRAMES,
-        true,
-        &BodyFitter::default(),
-    );
+    let run = |fitter: &BodyFitter| {
+        evaluate(
+            &Data {
+                he: &he,
+                refs: &refs,
+                per_subject: &per_subject,
+            },
+            &DimensionEstimator::default(),
+            Prior::LeaveOneOut,
+            DIMENSION_FRAMES,
+            true,
+            fitter,
+        )
+    };
+    let r = run(&BodyFitter::default());
     println!(
         "\nHumanEva-I Train, GT 2D, reference camera: {} frames in {} sequences",
         r.frames,
@@ -141,21 +144,10 @@ fn humaneva_train_with_ground_truth_2d() {
     assert!(r.pa_true.unwrap() < 75.0, "PA error with mocap dimensions");
 
     // The same refined in the full 54-DoF model (78.9 mm measured; mocap dimensions 69.5).
-    let full = evaluate(
-        &Data {
-            he: &he,
-            refs: &refs,
-            per_subject: &per_subject,
-        },
-        &DimensionEstimator::default(),
-        Prior::LeaveOneOut,
-        DIMENSION_FRAMES,
-        true,
-        &BodyFitter::new(monotrack_core::body::BodyFitConfig {
-            full_model: true,
-            ..Default::default()
-        }),
-    );
+    let full = run(&BodyFitter::new(monotrack_core::body::BodyFitConfig {
+        full_model: true,
+        ..Default::default()
+    }));
     println!("\nThe same in the full 54-DoF model:");
     full.print();
     assert!(full.reproj < r.reproj, "{:.2} px", full.reproj);
