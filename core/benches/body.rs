@@ -63,6 +63,16 @@ fn bench(c: &mut Criterion) {
     c.bench_function("body_pose_only", |b| {
         b.iter(|| fitter.fit(black_box(&obs), &cam, &truth).unwrap())
     });
+    // A tracked frame: refined from the previous frame's pose (here the same frame's fit: a
+    // still subject).
+    let last = fitter.fit(&obs, &cam, &truth).unwrap().pose;
+    c.bench_function("body_pose_tracked", |b| {
+        b.iter(|| {
+            fitter
+                .fit_tracked(black_box(&obs), &cam, &truth, Some(&last))
+                .unwrap()
+        })
+    });
     // The same refined in the full 54-DoF model.
     let full = BodyFitter::new(BodyFitConfig {
         full_model: true,

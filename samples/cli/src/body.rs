@@ -12,7 +12,7 @@
 
 use crate::{LineSink, read_lines};
 use monotrack_core::body::calib::{calibrate_floor, calibrate_floor_extrinsics};
-use monotrack_core::body::skeleton::dim;
+use monotrack_core::body::skeleton::{N_POSE, dim};
 use monotrack_core::body::{
     BodyCamera, BodyFitConfig, BodyFitter, Convention, DimensionEstimator, Dimensions, JOINT_NAMES,
     Joint, Joints2d, N_JOINTS, Skeleton,
@@ -244,13 +244,21 @@ pub fn run(
     }
     let mut sink = LineSink::new(out)?;
     let mut ok = true;
+    // Each sequence's last pose: its next frame is refined from it (`BodyFitter::fit_tracked`).
+    let mut previous: HashMap<String, [f64; N_POSE]> = HashMap::new();
     for (i, (n, f)) in parsed.iter().enumerate() {
         let result = f.as_ref().map_err(|e| e.clone()).and_then(|f| {
             let (skel, dim_us) = skeletons
                 .get(&i)
                 .cloned()
                 .unwrap_or_else(|| Err("no dimensions".into()))?;
-            fit_line(f, &fitter, &skel, dim_us)
+            let key = f.sequence.as_ref().map(|v| v.to_string());
+            let prev = key.as_ref().and_then(|k| previous.get(k));
+            let (v, pose) = fit_line(f, &fitter, &skel, dim_us, prev)?;
+            if let Some(k) = key {
+                previous.insert(k, pose);
+            }
+            Ok(v)
         });
         let v = result.unwrap_or_else(|e| {
             eprintln!("{}:{n}: {e}", input.display());
@@ -262,10 +270,17 @@ pub fn run(
     Ok(ok)
 }
 
-fn fit_line(f: &Frame, fitter: &BodyFitter, skel: &Skeleton, dim_us: u64) -> Result<Value, String> {
+/// One output line and the fitted pose.
+fn fit_line(
+    f: &Frame,
+    fitter: &BodyFitter,
+    skel: &Skeleton,
+    dim_us: u64,
+    previous: Option<&[f64; N_POSE]>,
+) -> Result<(Value, [f64; N_POSE]), String> {
     let t0 = Instant::now();
     let fit = fitter
-        .fit(&f.joints, &f.camera, skel)
+        .fit_tracked(&f.joints, &f.camera, skel, previous)
         .map_err(|e| e.to_string())?;
     let pose_us = t0.elapsed().as_micros() as u64;
     let joints: Map<String, Value> = JOINT_NAMES
@@ -306,5 +321,5 @@ fn fit_line(f: &Frame, fitter: &BodyFitter, skel: &Skeleton, dim_us: u64) -> Res
         json!({"calibrate": f.calibrate_us, "dimensions": dim_us, "pose": pose_us,
                "total": f.calibrate_us + dim_us + pose_us}),
     );
-    Ok(Value::Object(out))
+    Ok((Value::Object(out), fit.pose))
 }

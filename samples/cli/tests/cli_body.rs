@@ -95,7 +95,9 @@ fn body_fit_example_recovers_the_walker() {
     );
     // The full 54-DoF model: same output contract, same accuracy class.
     let full = walker_error(&["--prior-weight", "0.5", "--full-model"]);
-    eprintln!("walker: {weak:.1} mm reduced, {full:.1} mm full model (prior weight 0.5)");
+    eprintln!(
+        "walker: {weak:.1} mm reduced, {full:.1} mm full model (prior weight 0.5), {default:.1} mm at the default"
+    );
     assert!(
         full < 50.0,
         "mean joint error {full:.1} mm in the full model"
