@@ -658,7 +658,9 @@ public protocol BodyTrackerProtocol: AnyObject, Sendable {
     /**
      * Fits one frame's observed joints (at least the torso: pelvis or both hips, thorax or both
      * shoulders). On the `dimension_frames`-th frame the dimensions are estimated over the frames
-     * so far (pose + dimensions, thesis Alg. 10) and held afterwards.
+     * so far (pose + dimensions, thesis Alg. 10) and held afterwards. Each frame is refined from
+     * the previous frame's pose, and fitted from scratch as well when that fit is poor (HumanEva-I:
+     * 68.3 mm after Procrustes vs 79.8 with every frame from scratch).
      *
      * # Errors
      * `InvalidConfig` for a joint given twice, non-finite positions, or too few joints to place
@@ -667,7 +669,8 @@ public protocol BodyTrackerProtocol: AnyObject, Sendable {
     func fit(joints: [BodyJoint2d]) throws  -> BodyFitResult
     
     /**
-     * Forgets the estimated dimensions (a new person): the next frames estimate them again.
+     * Forgets the estimated dimensions and the last pose (a new person or a cut): the next frames
+     * estimate them again.
      */
     func reset() 
     
@@ -749,7 +752,9 @@ public convenience init(camera: BodyCameraPose, config: BodyTrackerConfig)throws
     /**
      * Fits one frame's observed joints (at least the torso: pelvis or both hips, thorax or both
      * shoulders). On the `dimension_frames`-th frame the dimensions are estimated over the frames
-     * so far (pose + dimensions, thesis Alg. 10) and held afterwards.
+     * so far (pose + dimensions, thesis Alg. 10) and held afterwards. Each frame is refined from
+     * the previous frame's pose, and fitted from scratch as well when that fit is poor (HumanEva-I:
+     * 68.3 mm after Procrustes vs 79.8 with every frame from scratch).
      *
      * # Errors
      * `InvalidConfig` for a joint given twice, non-finite positions, or too few joints to place
@@ -766,7 +771,8 @@ open func fit(joints: [BodyJoint2d])throws  -> BodyFitResult  {
 }
     
     /**
-     * Forgets the estimated dimensions (a new person): the next frames estimate them again.
+     * Forgets the estimated dimensions and the last pose (a new person or a cut): the next frames
+     * estimate them again.
      */
 open func reset()  {try! rustCall() {
         uniffiCallStatus in
@@ -4416,10 +4422,10 @@ private let initializationResult: InitializationResult = {
     if (uniffi_monotrack_ffi_checksum_func_run_benchmark() != 17130) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_monotrack_ffi_checksum_method_bodytracker_fit() != 61277) {
+    if (uniffi_monotrack_ffi_checksum_method_bodytracker_fit() != 15052) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_monotrack_ffi_checksum_method_bodytracker_reset() != 62891) {
+    if (uniffi_monotrack_ffi_checksum_method_bodytracker_reset() != 60972) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_method_facetracker_config() != 53659) {
