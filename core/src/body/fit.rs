@@ -88,8 +88,8 @@ impl Default for BodyFitConfig {
 pub const DEFAULT_PRIOR_WEIGHT_PX: f64 = 5.0;
 
 /// Default of [`BodyFitConfig::refit_cost_px2`]. HumanEva-I Train (README): 10 / 20 / 40 / 80 / 160
-/// → 68.6 / 68.6 / 68.3 / 70.9 / 73.5 mm after Procrustes; at 40 about one frame in ten is also
-/// fitted from scratch.
+/// → 68.6 / 68.6 / 68.3 / 70.9 / 73.5 mm after Procrustes; at 40, 174 of the 1,362 frames that
+/// have a previous one (13 %) are also fitted from scratch.
 pub const DEFAULT_REFIT_COST_PX2: f64 = 40.0;
 
 /// One frame's fit.
