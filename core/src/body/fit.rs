@@ -136,38 +136,48 @@ struct PoseProblem<'a> {
     contact: Option<usize>,
 }
 
-impl PoseProblem<'_> {
-    fn unpack(x: &SVector<f64, N_POSE>) -> [f64; N_POSE] {
-        let mut p = [0.0; N_POSE];
-        p.copy_from_slice(x.as_slice());
-        p
-    }
-}
-
 impl Residuals<N_POSE> for PoseProblem<'_> {
     fn residuals(&self, x: &SVector<f64, N_POSE>, r: &mut [f64; MAX_RESIDUALS]) -> usize {
-        let p = Self::unpack(x);
+        let p = unpack(x);
         let mut j = [Vector3::zeros(); N_JOINTS];
         self.skel.forward(&p, &mut j);
         let depth = reprojection_residuals(self.cam, self.obs, &j, r);
         let mut k = 2 * N_JOINTS;
         let mut lim = [0.0; N_LIMITS];
         self.skel.limit_violations(&p, &mut lim);
-        for v in lim {
-            r[k] = LIMIT_WEIGHT_PX * v;
-            k += 1;
-        }
+        k += limit_residuals(&lim, &mut r[k..]);
         k += floor_residuals(self.skel, self.cam, self.contact, &j, &depth, &mut r[k..]);
-        self.prior.residuals(&p, &mut r[k..k + N_PRIOR]);
-        for v in &mut r[k..k + N_PRIOR] {
-            *v *= self.prior_weight;
-        }
-        k + N_PRIOR
+        k + prior_residuals(self.prior, self.prior_weight, &p, &mut r[k..])
     }
 
     fn step(&self, i: usize) -> f64 {
         pose_fd_step(i)
     }
+}
+
+/// The parameters of `x` as an array.
+#[inline]
+fn unpack<const N: usize>(x: &SVector<f64, N>) -> [f64; N] {
+    x.data.0[0]
+}
+
+/// Writes the joint-limit residuals ([`LIMIT_WEIGHT_PX`] per unit of excess) of violations `lim`
+/// into `r`; returns how many.
+fn limit_residuals(lim: &[f64], r: &mut [f64]) -> usize {
+    for (o, v) in r.iter_mut().zip(lim) {
+        *o = LIMIT_WEIGHT_PX * v;
+    }
+    lim.len()
+}
+
+/// Writes the learnt prior's residuals of reduced pose `p`, `weight` px per standard deviation,
+/// into `r`; returns how many ([`N_PRIOR`]).
+fn prior_residuals(prior: &PosePrior, weight: f64, p: &[f64; N_POSE], r: &mut [f64]) -> usize {
+    prior.residuals(p, &mut r[..N_PRIOR]);
+    for v in &mut r[..N_PRIOR] {
+        *v *= weight;
+    }
+    N_PRIOR
 }
 
 /// Writes the weighted reprojection residuals of the 15 joints into `r[..30]` and returns the
@@ -242,17 +252,9 @@ struct FullPoseProblem<'a> {
     contact: Option<usize>,
 }
 
-impl FullPoseProblem<'_> {
-    fn unpack(x: &SVector<f64, N_FULL_POSE>) -> [f64; N_FULL_POSE] {
-        let mut p = [0.0; N_FULL_POSE];
-        p.copy_from_slice(x.as_slice());
-        p
-    }
-}
-
 impl Residuals<N_FULL_POSE> for FullPoseProblem<'_> {
     fn residuals(&self, x: &SVector<f64, N_FULL_POSE>, r: &mut [f64; MAX_RESIDUALS]) -> usize {
-        let p = Self::unpack(x);
+        let p = unpack(x);
         let mut posed = Posed::default();
         self.fs.forward(&p, &mut posed);
         let j = posed.output_joints();
@@ -260,10 +262,7 @@ impl Residuals<N_FULL_POSE> for FullPoseProblem<'_> {
         let mut k = 2 * N_JOINTS;
         let mut lim = [0.0; N_FULL_LIMITS];
         self.fs.limit_violations(&p, &mut lim);
-        for v in lim {
-            r[k] = LIMIT_WEIGHT_PX * v;
-            k += 1;
-        }
+        k += limit_residuals(&lim, &mut r[k..]);
         k += floor_residuals(
             &self.fs.base,
             self.cam,
@@ -281,12 +280,12 @@ impl Residuals<N_FULL_POSE> for FullPoseProblem<'_> {
             r[k] = FLOOR_WEIGHT * (-ANKLE_SINK_MM - t.z).max(0.0) * fx / z;
             k += 1;
         }
-        let reduced = hanim::reduced(&p);
-        self.prior.residuals(&reduced, &mut r[k..k + N_PRIOR]);
-        for v in &mut r[k..k + N_PRIOR] {
-            *v *= self.prior_weight;
-        }
-        k += N_PRIOR;
+        k += prior_residuals(
+            self.prior,
+            self.prior_weight,
+            &hanim::reduced(&p),
+            &mut r[k..],
+        );
         for (i, s) in hanim::EXTRA_PRIOR_STD.iter().enumerate() {
             r[k] = self.prior_weight * p[N_POSE + i] / (s * self.extra_std_scale);
             k += 1;
@@ -435,13 +434,8 @@ impl BodyFitter {
             for m in &mids {
                 let (ends, _) = ik::ray_sphere(&o, &de, m, l2);
                 for e in &ends {
-                    let upper = m - x[root.index()];
-                    let lower = e - m;
-                    let a = if arm {
-                        ik::arm_angles(left, &chest, &upper, &lower)
-                    } else {
-                        ik::leg_angles(left, &r0, &upper, &lower)
-                    };
+                    let parent = if arm { &chest } else { &r0 };
+                    let a = ik::limb_angles(left, arm, parent, &(m - x[root.index()]), &(e - m));
                     let mut q = p;
                     q[base..base + 4].copy_from_slice(&a);
                     let mut cost =
@@ -510,7 +504,7 @@ impl BodyFitter {
         // The refinement cannot jump between the depth branches of a limb (knee in front of or
         // behind the hip–ankle line as seen from the camera): re-run the IK choice from the refined
         // torso, judged by the full objective, and refine again when a branch wins.
-        let mut pose = PoseProblem::unpack(&v);
+        let mut pose = unpack(&v);
         let cost0 = report.cost;
         let mut best = (cost0, pose);
         for (left, arm) in [(true, true), (false, true), (true, false), (false, false)] {
@@ -534,7 +528,7 @@ impl BodyFitter {
                 iterations: report.iterations + r2.iterations,
                 ..r2
             };
-            pose = PoseProblem::unpack(&v);
+            pose = unpack(&v);
         }
         if self.config.full_model {
             return self.refine_full(obs, cam, skel, &pose, contact, report);
@@ -579,7 +573,7 @@ impl BodyFitter {
             .config
             .lm
             .minimize(&NumericLeastSquares(&problem), &mut v);
-        let full = FullPoseProblem::unpack(&v);
+        let full = unpack(&v);
         let mut posed = Posed::default();
         fs.forward(&full, &mut posed);
         let mut r = [0.0; MAX_RESIDUALS];
@@ -636,13 +630,14 @@ fn limb_candidates(
     for m in &mids {
         let (ends, _) = ik::ray_sphere(&o, &de, m, l2);
         for e in &ends {
-            let upper = m - x[root.index()];
-            let lower = e - m;
-            out[k] = Some(if arm {
-                ik::arm_angles(left, &chest, &upper, &lower)
-            } else {
-                ik::leg_angles(left, &r0, &upper, &lower)
-            });
+            let parent = if arm { &chest } else { &r0 };
+            out[k] = Some(ik::limb_angles(
+                left,
+                arm,
+                parent,
+                &(m - x[root.index()]),
+                &(e - m),
+            ));
             k += 1;
         }
     }

@@ -658,7 +658,7 @@ impl FullSkeleton {
         let mut o = Posed::default();
         self.forward(p, &mut o);
         let mid = o.joints[limb.spec().mid];
-        self.place_limb(p, limb, target, &mid)
+        self.place_limb(p, &o, limb, target, &mid)
     }
 
     /// Intermediate-joint feature (elbow or knee): the limb turns about its root–end axis so that
@@ -667,57 +667,50 @@ impl FullSkeleton {
         let mut o = Posed::default();
         self.forward(p, &mut o);
         let end = o.joints[limb.spec().end];
-        self.place_limb(p, limb, &end, target);
+        self.place_limb(p, &o, limb, &end, target);
     }
 
     /// Places a limb's end at `end` (or as near as its lengths allow) with its middle joint at the
-    /// point of the possible circle nearest `mid_hint`; returns the end's remaining distance.
+    /// point of the possible circle nearest `mid_hint`; returns the end's remaining distance. `o`
+    /// is `p` posed.
     fn place_limb(
         &self,
         p: &mut [f64; N_FULL_POSE],
+        o: &Posed,
         limb: Limb,
         end: &Vector3<f64>,
         mid_hint: &Vector3<f64>,
     ) -> f64 {
         let s = limb.spec();
-        let mut o = Posed::default();
-        self.forward(p, &mut o);
         let a = o.joints[s.root];
         let parent = o.frames[PARENT[s.root].unwrap_or(0)];
         let (r1, r2) = (self.base.len(s.upper), self.base.len(s.lower));
         let ab = end - a;
         let d = ab.norm();
-        let (m, e) = if d < 1e-9 {
+        if d < 1e-9 {
             return 0.0;
-        } else if d >= r1 + r2 || d <= (r1 - r2).abs() {
+        }
+        let (m, e) = match ik::sphere_circle(&a, r1, end, r2) {
             // Out of reach (or too close): straight towards the target.
-            let n = ab / d;
-            (a + n * r1, a + n * (r1 + r2))
-        } else {
-            let n = ab / d;
-            let x = (d * d + r1 * r1 - r2 * r2) / (2.0 * d);
-            let h = (r1 * r1 - x * x).max(0.0).sqrt();
-            let c = a + n * x;
-            let mut v = mid_hint - c;
-            v -= n * v.dot(&n);
-            if v.norm() < 1e-9 {
-                // The hint is on the axis: keep the current bend direction.
-                v = o.joints[s.mid] - c;
-                v -= n * v.dot(&n);
+            None => {
+                let n = ab / d;
+                (a + n * r1, a + n * (r1 + r2))
             }
-            if v.norm() < 1e-9 {
-                v = n.cross(&Vector3::z());
-                if v.norm() < 1e-9 {
-                    v = n.cross(&Vector3::x());
-                }
+            Some((c, n, h)) => {
+                let m = ik::circle_point_nearest(&c, &n, h, mid_hint)
+                    // The hint is on the axis: keep the current bend direction.
+                    .or_else(|| ik::circle_point_nearest(&c, &n, h, &o.joints[s.mid]))
+                    .unwrap_or_else(|| {
+                        let mut v = n.cross(&Vector3::z());
+                        if v.norm() < 1e-9 {
+                            v = n.cross(&Vector3::x());
+                        }
+                        c + v.normalize() * h
+                    });
+                (m, *end)
             }
-            (c + v.normalize() * h, *end)
         };
-        let q = if s.arm {
-            ik::arm_angles(s.left, &parent, &(m - a), &(e - m))
-        } else {
-            ik::leg_angles(s.left, &parent, &(m - a), &(e - m))
-        };
+        let q = ik::limb_angles(s.left, s.arm, &parent, &(m - a), &(e - m));
         p[s.base..s.base + 4].copy_from_slice(&q);
         (e - end).norm()
     }
@@ -761,11 +754,7 @@ impl FullSkeleton {
         }
         for cj in chain {
             let [ia, ib, it] = cj.params;
-            let e = cj.swing.swing_excess(p[ia], p[ib]);
-            if e > 0.0 {
-                p[ia] /= 1.0 + e;
-                p[ib] /= 1.0 + e;
-            }
+            (p[ia], p[ib]) = cj.swing.clamp_swing(p[ia], p[ib]);
             p[it] = p[it].clamp(cj.twist.0, cj.twist.1);
         }
         let mut o = Posed::default();
@@ -806,17 +795,8 @@ fn set_swing_twist_y(
     let y = Vector3::y();
     let sw = ik::swing_between(&y, &(local * y).normalize());
     let t_m = exp_so3(sw).transpose() * local;
-    let mut tw = t_m[(0, 2)].atan2(t_m[(0, 0)]);
-    let (mut a, mut b) = (sw.x, sw.z);
-    let e = swing_limit.swing_excess(a, b);
-    if e > 0.0 {
-        a /= 1.0 + e;
-        b /= 1.0 + e;
-    }
-    tw = tw.clamp(twist.0, twist.1);
-    p[params[0]] = a;
-    p[params[1]] = b;
-    p[params[2]] = tw;
+    (p[params[0]], p[params[1]]) = swing_limit.clamp_swing(sw.x, sw.z);
+    p[params[2]] = t_m[(0, 2)].atan2(t_m[(0, 0)]).clamp(twist.0, twist.1);
 }
 
 #[cfg(test)]

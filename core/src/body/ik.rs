@@ -54,6 +54,40 @@ pub fn ray_plane_z(origin: &Vector3<f64>, dir: &Vector3<f64>, height: f64) -> Op
     (s > 0.0).then(|| origin + dir * s)
 }
 
+/// The circle where the sphere of radius `r1` about `a` meets the one of radius `r2` about `b`:
+/// its centre, unit axis (a → b) and radius; `None` when they do not meet in a circle (a = b, too
+/// far apart, or one inside the other).
+pub fn sphere_circle(
+    a: &Vector3<f64>,
+    r1: f64,
+    b: &Vector3<f64>,
+    r2: f64,
+) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
+    let ab = b - a;
+    let d = ab.norm();
+    if d < 1e-9 || d >= r1 + r2 || d <= (r1 - r2).abs() {
+        return None;
+    }
+    let n = ab / d;
+    let x = (d * d + r1 * r1 - r2 * r2) / (2.0 * d);
+    let h = (r1 * r1 - x * x).max(0.0).sqrt();
+    Some((a + n * x, n, h))
+}
+
+/// The point of the circle (centre `c`, unit axis `n`, radius `h`) nearest `p`; `None` when `p`
+/// lies on the axis (every point is as near).
+pub fn circle_point_nearest(
+    c: &Vector3<f64>,
+    n: &Vector3<f64>,
+    h: f64,
+    p: &Vector3<f64>,
+) -> Option<Vector3<f64>> {
+    let mut v = p - c;
+    v -= n * v.dot(n);
+    let vn = v.norm();
+    (vn >= 1e-9).then(|| c + v * (h / vn))
+}
+
 /// A middle joint at distances `r1` from `a` and `r2` from `b` (the circle where the two spheres
 /// meet), at the circle point nearest the viewing ray `origin + s·dir`. When the spheres do not
 /// meet, the limb is straight towards `b`.
@@ -70,27 +104,18 @@ pub fn two_sphere_near_ray(
     if d < 1e-9 {
         return a + Vector3::new(0.0, 0.0, -r1);
     }
-    let n = ab / d;
-    if d >= r1 + r2 || d <= (r1 - r2).abs() {
-        return a + n * r1;
-    }
-    let x = (d * d + r1 * r1 - r2 * r2) / (2.0 * d);
-    let h = (r1 * r1 - x * x).max(0.0).sqrt();
-    let q = a + n * x;
+    let Some((q, n, h)) = sphere_circle(a, r1, b, r2) else {
+        return a + (ab / d) * r1;
+    };
     // The ray point nearest the circle's centre, then its direction within the circle's plane.
     let s = dir.dot(&(q - origin)).max(0.0);
-    let p = origin + dir * s;
-    let mut v = p - q;
-    v -= n * v.dot(&n);
-    let vn = v.norm();
-    if vn < 1e-9 {
+    circle_point_nearest(&q, &n, h, &(origin + dir * s)).unwrap_or_else(|| {
         // The ray passes through the circle's axis: any point will do; take the one towards the
         // camera.
         let mut w = origin - q;
         w -= n * w.dot(&n);
-        return q + w.normalize() * h;
-    }
-    q + v * (h / vn)
+        q + w.normalize() * h
+    })
 }
 
 /// The swing rotation vector taking unit `rest` onto unit `u` (perpendicular to `rest`).
@@ -198,6 +223,23 @@ pub fn leg_angles(
         .copied()
         .unwrap_or(cand[0]);
     [w.x, w.z, best.0, best.1]
+}
+
+/// A limb's four parameters ([`arm_angles`] or [`leg_angles`]): `parent` is the rotation of the
+/// frame the limb hangs from (the chest, or the clavicle in the full model, for an arm; the pelvis
+/// for a leg).
+pub fn limb_angles(
+    left: bool,
+    arm: bool,
+    parent: &Matrix3<f64>,
+    upper: &Vector3<f64>,
+    lower: &Vector3<f64>,
+) -> [f64; 4] {
+    if arm {
+        arm_angles(left, parent, upper, lower)
+    } else {
+        leg_angles(left, parent, upper, lower)
+    }
 }
 
 /// Neck parameters `[swing_x, swing_z]` pointing the neck along `dir` (world), given the chest

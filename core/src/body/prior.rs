@@ -297,23 +297,21 @@ pub fn fit_to_joints(
     let n = ik::neck_angles(&r0, &(joints[14] - joints[1]));
     p[P_NECK] = n[0];
     p[P_NECK + 1] = n[1];
-    for (left, base, sh, el, wr) in [(true, P_LARM, 2, 3, 4), (false, P_RARM, 5, 6, 7)] {
-        let a = ik::arm_angles(
+    // The spine is straight here, so the chest frame is the pelvis frame.
+    for (left, arm, base, a, b, c) in [
+        (true, true, P_LARM, 2, 3, 4),
+        (false, true, P_RARM, 5, 6, 7),
+        (true, false, P_LLEG, 8, 9, 10),
+        (false, false, P_RLEG, 11, 12, 13),
+    ] {
+        let q = ik::limb_angles(
             left,
+            arm,
             &r0,
-            &(joints[el] - joints[sh]),
-            &(joints[wr] - joints[el]),
+            &(joints[b] - joints[a]),
+            &(joints[c] - joints[b]),
         );
-        p[base..base + 4].copy_from_slice(&a);
-    }
-    for (left, base, hip, kn, an) in [(true, P_LLEG, 8, 9, 10), (false, P_RLEG, 11, 12, 13)] {
-        let a = ik::leg_angles(
-            left,
-            &r0,
-            &(joints[kn] - joints[hip]),
-            &(joints[an] - joints[kn]),
-        );
-        p[base..base + 4].copy_from_slice(&a);
+        p[base..base + 4].copy_from_slice(&q);
     }
     let problem = JointFit { skel, joints };
     let lm = LevenbergMarquardt {

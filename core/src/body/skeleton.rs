@@ -250,6 +250,16 @@ impl SwingTwistLimit {
         (e - 1.0).max(0.0)
     }
 
+    /// The swing (a, b) scaled back onto the cone when outside it (unchanged inside).
+    pub fn clamp_swing(&self, a: f64, b: f64) -> (f64, f64) {
+        let e = self.swing_excess(a, b);
+        if e > 0.0 {
+            (a / (1.0 + e), b / (1.0 + e))
+        } else {
+            (a, b)
+        }
+    }
+
     /// How far the twist lies outside its interval, radians (0 inside).
     pub fn twist_excess(&self, t: f64) -> f64 {
         (self.twist.0 - t).max(0.0) + (t - self.twist.1).max(0.0)
