@@ -8,10 +8,15 @@
 //!
 //! Every `NAME.onnx` in the folder whose name is an M3 net (level1, face, brows, mouth, eye) runs
 //! with that net's input shapes on a fixed varied input; prints the median and 10th percentile of
-//! 300 runs after 20 warm-up runs.
+//! 300 runs after 20 warm-up runs. Every `detector*.onnx` (face detector candidates,
+//! `core::detect`) runs at the network inputs of a 640×480 frame: 200×150 (min face 32 px),
+//! 320×240 and 400×300 (min face 16 px at 8 or 10 network pixels) and the 128×96 second pass.
 
 use std::time::Instant;
 use tract_onnx::prelude::*;
+
+/// Detector network inputs timed for `detector*.onnx` (height, width).
+const DETECTOR_INPUTS: [[usize; 2]; 4] = [[150, 200], [240, 320], [300, 400], [96, 128]];
 
 const NETS: [(&str, &[&[usize]]); 5] = [
     ("level1", &[&[1, 1, 64, 64]]),
@@ -26,14 +31,31 @@ fn main() -> TractResult<()> {
         eprintln!("usage: time_nets DIR (with level1.onnx, face.onnx, ... inside)");
         std::process::exit(2);
     };
+    let mut jobs: Vec<(String, Vec<Vec<usize>>)> = Vec::new();
     for (name, shapes) in NETS {
-        let path = format!("{dir}/{name}.onnx");
-        if !std::path::Path::new(&path).exists() {
-            continue;
+        if std::path::Path::new(&format!("{dir}/{name}.onnx")).exists() {
+            jobs.push((
+                name.to_string(),
+                shapes.iter().map(|s| s.to_vec()).collect(),
+            ));
         }
-        let mut model = tract_onnx::onnx().model_for_path(&path)?;
+    }
+    let mut detectors: Vec<String> = std::fs::read_dir(&dir)?
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.starts_with("detector") && n.ends_with(".onnx"))
+        .map(|n| n.trim_end_matches(".onnx").to_string())
+        .collect();
+    detectors.sort();
+    for name in detectors {
+        for [h, w] in DETECTOR_INPUTS {
+            jobs.push((format!("{name}@{w}x{h}"), vec![vec![1, 1, h, w]]));
+        }
+    }
+    for (name, shapes) in jobs {
+        let file = name.split('@').next().unwrap_or(&name);
+        let mut model = tract_onnx::onnx().model_for_path(format!("{dir}/{file}.onnx"))?;
         for (i, s) in shapes.iter().enumerate() {
-            model = model.with_input_fact(i, f32::fact(*s).into())?;
+            model = model.with_input_fact(i, f32::fact(s.as_slice()).into())?;
         }
         let plan = model.into_optimized()?.into_runnable()?;
         // Values like a real patch (0..1, varied): zeros could take faster paths than data.

@@ -51,6 +51,10 @@ def main():
         print(f"{path}: positives >= 0.5 {np.mean(p >= 0.5):.3f}, negatives >= 0.5 {np.mean(q >= 0.5):.3f},"
               f" AUC {auc:.4f} ({len(p)} / {len(q)}); detector false positives >= 0.5 {np.mean(d >= 0.5):.3f}"
               f" ({len(d)})")
+        # Stricter checks, as for accepting a new detection (TrackerConfig::min_detection_confidence).
+        for t in (0.8, 0.9, 0.95):
+            print(f"  at {t}: positives >= {t} {np.mean(p >= t):.3f}, negatives {np.mean(q >= t):.3f},"
+                  f" detector false positives {np.mean(d >= t):.3f}")
 
 
 if __name__ == "__main__":

@@ -1,13 +1,17 @@
-//! `monotrack detect IN.jsonl [--out OUT.jsonl] [--min-face PX] [--threshold P]`: the SDK's face
-//! detector on still images (an extension of CONTRACT.md). Input lines are `{"image": path}` (absolute,
-//! or relative to IN.jsonl's folder), as for `landmarks`; output lines are
+//! `monotrack detect IN.jsonl [--out OUT.jsonl] [--min-face PX] [--threshold P] [--face-prob]`: the
+//! SDK's face detector on still images (an extension of CONTRACT.md). Input lines are
+//! `{"image": path}` (absolute, or relative to IN.jsonl's folder), as for `landmarks`; output lines are
 //! `{"image", "width", "height", "faces": [{"box": [x, y, w, h], "score": s}], "timings_us": {"detect"}}`
-//! with boxes in the M3 convention (tight box of the 68 landmarks). A line that fails yields
-//! `{"line": N, "error": "..."}`, a message on stderr, and exit status 1 at the end.
+//! with boxes in the M3 convention (tight box of the 68 landmarks). With `--face-prob` every face
+//! also carries `"face_prob"`, M3 level 1's face probability on that box: the check `landmarks` and
+//! the tracker apply to every detection (they keep faces with `face_prob >= 0.5`), so the cascade's
+//! operating points can be measured; its time is not in `timings_us.detect`. A line that fails
+//! yields `{"line": N, "error": "..."}`, a message on stderr, and exit status 1 at the end.
 
 use crate::{LineSink, read_lines};
 use monotrack_core::detect::{DetectorConfig, FaceDetector};
 use monotrack_core::image::GrayImage;
+use monotrack_core::landmarks::M3;
 use serde::Deserialize;
 use serde_json::{Value, json};
 use std::path::Path;
@@ -22,10 +26,24 @@ fn round2(v: f32) -> f64 {
     (v as f64 * 100.0).round() / 100.0
 }
 
+fn round4(v: f32) -> f64 {
+    (v as f64 * 1e4).round() / 1e4
+}
+
 /// Runs the subcommand; returns whether every line succeeded.
-pub fn run(input: &Path, out: Option<&Path>, config: DetectorConfig) -> Result<bool, String> {
+pub fn run(
+    input: &Path,
+    out: Option<&Path>,
+    config: DetectorConfig,
+    face_prob: bool,
+) -> Result<bool, String> {
     let mut sink = LineSink::new(out)?;
     let mut det = FaceDetector::with_config(config).map_err(|e| e.to_string())?;
+    let mut m3 = if face_prob {
+        Some(M3::new().map_err(|e| e.to_string())?)
+    } else {
+        None
+    };
     let base = input.parent().unwrap_or(Path::new("."));
     let mut found = Vec::new();
     let mut ok = true;
@@ -39,15 +57,20 @@ pub fn run(input: &Path, out: Option<&Path>, config: DetectorConfig) -> Result<b
             let t0 = Instant::now();
             det.detect(&img, &mut found).map_err(|e| e.to_string())?;
             let us = t0.elapsed().as_micros() as u64;
-            let faces: Vec<Value> = found
-                .iter()
-                .map(|d| {
-                    json!({
-                        "box": [round2(d.rect.x), round2(d.rect.y), round2(d.rect.w), round2(d.rect.h)],
-                        "score": (d.score as f64 * 1e4).round() / 1e4,
-                    })
-                })
-                .collect();
+            let mut faces = Vec::with_capacity(found.len());
+            for d in &found {
+                let mut face = json!({
+                    "box": [round2(d.rect.x), round2(d.rect.y), round2(d.rect.w), round2(d.rect.h)],
+                    "score": round4(d.score),
+                });
+                if let Some(m3) = m3.as_mut() {
+                    let p = m3
+                        .face_confidence(&img, &d.rect)
+                        .map_err(|e| e.to_string())?;
+                    face["face_prob"] = json!(round4(p));
+                }
+                faces.push(face);
+            }
             Ok(json!({
                 "image": line.image, "width": img.width(), "height": img.height(),
                 "faces": faces, "timings_us": {"detect": us},

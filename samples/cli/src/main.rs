@@ -60,6 +60,9 @@ enum Command {
         /// Minimum face probability.
         #[arg(long, default_value_t = monotrack_core::detect::DetectorConfig::default().score_threshold)]
         threshold: f32,
+        /// Also report M3 level 1's face probability of every detection ("face_prob").
+        #[arg(long)]
+        face_prob: bool,
     },
     /// Track faces through a video file (via ffmpeg) or a directory of frames (file-name order).
     Track {
@@ -181,6 +184,7 @@ fn main() -> ExitCode {
             out,
             min_face,
             threshold,
+            face_prob,
         } => detect::run(
             &input,
             out.as_deref(),
@@ -189,6 +193,7 @@ fn main() -> ExitCode {
                 score_threshold: threshold,
                 ..Default::default()
             },
+            face_prob,
         ),
         Command::Track {
             input,

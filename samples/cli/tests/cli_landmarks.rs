@@ -150,3 +150,61 @@ fn landmarks_on_given_boxes_follow_the_contract() {
     assert!(stderr.contains(":4:") && stderr.contains(":5:") && stderr.contains(":6:"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn detect_reports_the_face_check_on_request() {
+    let dir = std::env::temp_dir().join(format!("monotrack_cli_detect_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(
+        root().join("samples/data/astronaut.jpg"),
+        dir.join("astronaut.jpg"),
+    )
+    .unwrap();
+    let manifest = dir.join("in.jsonl");
+    std::fs::write(&manifest, "{\"image\": \"astronaut.jpg\"}\n{broken\n").unwrap();
+    let run = |extra: &[&str]| {
+        let mut args = vec!["detect", manifest.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let out = monotrack(&args);
+        assert_eq!(out.status.code(), Some(1), "the broken line fails the run");
+        let text = String::from_utf8(out.stdout).unwrap();
+        let lines: Vec<serde_json::Value> = text
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        assert_eq!(lines.len(), 2);
+        assert!(
+            lines[1]["error"]
+                .as_str()
+                .unwrap()
+                .contains("malformed JSON")
+        );
+        lines[0]["faces"].as_array().unwrap().clone()
+    };
+    let plain = run(&[]);
+    assert!(!plain.is_empty());
+    assert!(plain.iter().all(|f| f.get("face_prob").is_none()));
+    // Down to score 0.3, so the detector's clutter is in the list for the check to judge.
+    let checked = run(&["--face-prob", "--threshold", "0.3"]);
+    let b = ASTRONAUT_BOX;
+    let mut on_face = 0;
+    for f in &checked {
+        let p = f["face_prob"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&p), "{f}");
+        let r: Vec<f64> = f["box"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let (cx, cy) = (r[0] + r[2] / 2.0, r[1] + r[3] / 2.0);
+        if cx > b[0] && cx < b[0] + b[2] && cy > b[1] && cy < b[1] + b[3] {
+            on_face += 1;
+            assert!(p >= 0.5, "the face passes the check: {f}");
+        } else {
+            assert!(p < 0.5, "clutter fails the check: {f}");
+        }
+    }
+    assert_eq!(on_face, 1, "{checked:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
