@@ -73,11 +73,14 @@ fn to_core(
         shape_frames: c.shape_frames as usize,
         ..core_track::TrackerConfig::default()
     };
-    let det = DetectorConfig {
-        min_face_px: c.min_face_size_px as f32,
-        ..DetectorConfig::default()
-    };
     core.validate()?;
+    let det = core_track::detector_config_for(
+        &core,
+        DetectorConfig {
+            min_face_px: c.min_face_size_px as f32,
+            ..DetectorConfig::default()
+        },
+    );
     Ok((core, det))
 }
 

@@ -61,9 +61,12 @@ const WINDOW_FACE_PX: f32 = 36.0;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct DetectorConfig {
-    /// Minimum face probability of a detection, 0..1. Default 0.6: the lowest threshold (0.05 steps)
-    /// that keeps false positives under 0.05 per image on the faces68 validation split at the
-    /// default min face (`models/train/detector/eval_peers.py`; `models/MODEL_CARD.md`).
+    /// Minimum face probability of a detection, 0..1. Default 0.7: the lowest threshold (0.05 steps)
+    /// that keeps the detector's own false positives under 0.05 per image on the faces68
+    /// validation split at the default min face (`models/train/detector/eval_peers.py`;
+    /// `models/MODEL_CARD.md`). The SDK's pipelines run it lower and let M3's face check decide
+    /// (`crate::track::TrackerConfig::min_detection_score`), which finds more faces at fewer false
+    /// positives.
     pub score_threshold: f32,
     /// Greedy NMS: a detection overlapping a better one by more than this IoU is dropped. Default
     /// 0.4: the heads' size ranges overlap, so one face can fire on two heads with boxes differing
@@ -71,9 +74,10 @@ pub struct DetectorConfig {
     pub nms_iou: f32,
     /// Smallest face to find (max side of the tight landmark box, image pixels). Sets the
     /// downscale: the frame is shrunk by `NET_MIN_FACE_PX / min_face_px` (never enlarged). Default
-    /// 32 px: a 640×480 frame runs at 200×150. Faces within ~1.5× of the minimum (10–16 network
-    /// pixels) are the ones the network misses most; at 32 px every faces68 validation face of
-    /// 40 px or more is found, at 40 px 96 % of them (`models/MODEL_CARD.md`).
+    /// 24 px: a 640×480 frame runs at 267×200 plus the 128×96 second pass, within the 5 ms budget
+    /// (16 px, 400×300, is not); faces within ~1.5× of the minimum (10–16 network pixels) are the
+    /// ones the network misses most, and 19 of the 128 faces68 validation faces are 17–39 px
+    /// (`models/MODEL_CARD.md`).
     pub min_face_px: f32,
     /// At most this many detections are returned (best first).
     pub max_faces: usize,
@@ -82,9 +86,9 @@ pub struct DetectorConfig {
 impl Default for DetectorConfig {
     fn default() -> Self {
         Self {
-            score_threshold: 0.6,
+            score_threshold: 0.7,
             nms_iou: 0.4,
-            min_face_px: 32.0,
+            min_face_px: 24.0,
             max_faces: 32,
         }
     }

@@ -26,7 +26,7 @@ pub mod flow;
 pub mod models;
 pub mod ncc;
 
-pub use models::{ModelDetector, Tracker};
+pub use models::{ModelDetector, Tracker, detector_config_for};
 
 use crate::camera::Intrinsics;
 use crate::error::{Error, Result};
@@ -41,6 +41,15 @@ use std::time::Instant;
 
 /// Most faces a tracker may be configured for (each face costs landmarks + fit per frame).
 pub const MAX_FACES_LIMIT: usize = 16;
+
+/// Default [`TrackerConfig::min_detection_score`]: detector candidates down to this go to M3's
+/// face check. With [`DEFAULT_MIN_DETECTION_CONFIDENCE`] and the detector's default min face, the
+/// highest faces68 validation recall at < 0.05 false positives per image
+/// (`models/train/detector/eval_peers.py`, `models/MODEL_CARD.md`).
+pub const DEFAULT_MIN_DETECTION_SCORE: f32 = 0.4;
+
+/// Default [`TrackerConfig::min_detection_confidence`] (see [`DEFAULT_MIN_DETECTION_SCORE`]).
+pub const DEFAULT_MIN_DETECTION_CONFIDENCE: f32 = 0.95;
 
 /// Face width (pixels) at which the flow threshold applies unscaled: the thesis' 5 px were set on
 /// 640×480 video of a user at arm's length, where the 68-point box spans about 200 px. The
@@ -110,8 +119,17 @@ pub struct TrackerConfig {
     pub max_faces: usize,
     /// Camera intrinsics of the upright image; `None` = the CONTRACT default for its size.
     pub camera: Option<Intrinsics>,
-    /// Detections scoring below this are ignored. 0.5: the detector's calibrated decision point.
+    /// Detections scoring below this are ignored. The detector proposes, M3's face check decides
+    /// ([`Self::min_detection_confidence`]), so this sits below the detector's standalone operating
+    /// point to keep small faces: with [`Self::min_detection_confidence`] it is the cascade's
+    /// operating point chosen on the faces68 validation split (`models/MODEL_CARD.md`, face
+    /// detector). [`crate::track::Tracker::with_default_models`] runs the detector at this threshold.
     pub min_detection_score: f32,
+    /// A new detection is accepted when M3's face confidence on its box is at least this. Stricter
+    /// than [`Self::min_face_confidence`]: a detection is a guess anywhere in the frame, a tracked
+    /// window is where the face just was. On jittered validation faces 99.8 % score ≥ 0.95 while 1.7 %
+    /// of the detector's false positives do (`models/train/eval_face_check.py`).
+    pub min_detection_confidence: f32,
     /// A tracked window whose face confidence is below this is a loss. 0.5: the classifier's
     /// decision point (M3 level 1 is trained with a balanced face / non-face loss).
     pub min_face_confidence: f32,
@@ -155,7 +173,8 @@ impl Default for TrackerConfig {
             mode: Mode::Video,
             max_faces: 1,
             camera: None,
-            min_detection_score: 0.5,
+            min_detection_score: DEFAULT_MIN_DETECTION_SCORE,
+            min_detection_confidence: DEFAULT_MIN_DETECTION_CONFIDENCE,
             min_face_confidence: 0.5,
             min_ncc_score: 0.5,
             search_margin: 0.5,
@@ -200,6 +219,7 @@ impl TrackerConfig {
             c.validate()?;
         }
         unit_interval("min_detection_score", self.min_detection_score)?;
+        unit_interval("min_detection_confidence", self.min_detection_confidence)?;
         unit_interval("min_face_confidence", self.min_face_confidence)?;
         unit_interval("match_iou", self.match_iou)?;
         if !(self.min_ncc_score.is_finite() && (-1.0..=1.0).contains(&self.min_ncc_score)) {
@@ -724,7 +744,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 let conf = self
                     .estimator
                     .face_confidence(image, &rect, &mut self.checked)?;
-                if conf >= self.config.min_face_confidence {
+                if conf >= self.config.min_detection_confidence {
                     self.ranked.push((rect, score, conf, self.checked));
                 }
             }
@@ -1040,6 +1060,10 @@ mod tests {
             },
             TrackerConfig {
                 min_detection_score: 1.5,
+                ..Default::default()
+            },
+            TrackerConfig {
+                min_detection_confidence: -0.1,
                 ..Default::default()
             },
             TrackerConfig {

@@ -67,20 +67,37 @@ impl RegionDetector for ModelDetector {
 pub type Tracker = FaceTracker<ModelDetector, M3>;
 
 impl FaceTracker<ModelDetector, M3> {
-    /// A tracker over the embedded detector (default settings) and M3.
+    /// A tracker over the embedded detector (default settings, score threshold
+    /// [`TrackerConfig::min_detection_score`]: M3's face check decides) and M3.
     ///
     /// # Errors
     /// As [`FaceTracker::new`], plus [`crate::Error::ModelLoad`] if an embedded model cannot be
     /// loaded.
     pub fn with_default_models(config: TrackerConfig) -> Result<Self> {
-        Self::with_detector_config(config, DetectorConfig::default())
+        // The tracker's own errors first (a NaN score would otherwise surface as the detector's).
+        config.validate()?;
+        Self::with_detector_config(
+            config,
+            detector_config_for(&config, DetectorConfig::default()),
+        )
     }
 
-    /// A tracker over the embedded models with detector settings of the caller's choosing.
+    /// A tracker over the embedded models with detector settings of the caller's choosing. The
+    /// detector's own `score_threshold` applies before [`TrackerConfig::min_detection_score`];
+    /// [`detector_config_for`] aligns the two.
     ///
     /// # Errors
     /// As [`FaceTracker::with_default_models`].
     pub fn with_detector_config(config: TrackerConfig, detector: DetectorConfig) -> Result<Self> {
         FaceTracker::new(ModelDetector::new(detector)?, M3::new()?, config)
+    }
+}
+
+/// `detector` with its score threshold at the tracker's `min_detection_score`, so every candidate
+/// the tracker would consider reaches M3's face check (kept inside the detector's valid range).
+pub fn detector_config_for(config: &TrackerConfig, detector: DetectorConfig) -> DetectorConfig {
+    DetectorConfig {
+        score_threshold: config.min_detection_score.clamp(0.01, 0.99),
+        ..detector
     }
 }

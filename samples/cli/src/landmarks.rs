@@ -5,18 +5,15 @@
 
 use crate::json::{CameraJson, intrinsics, put_fit};
 use crate::{LineSink, read_lines};
-use monotrack_core::detect::{Detection, FaceDetector};
+use monotrack_core::detect::{Detection, DetectorConfig, FaceDetector};
 use monotrack_core::fit::{Msbp, MsbpConfig};
 use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::{BROW_GESTURES, FaceLandmarks, M3, MOUTH_GESTURES, N_POINTS};
+use monotrack_core::track::{TrackerConfig, detector_config_for};
 use serde::Deserialize;
 use serde_json::{Map, Value, json};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-/// M3 face probability a detection needs (the tracker's default `min_face_confidence`: the
-/// classifier's decision point, trained on balanced faces / non-faces).
-const MIN_FACE_CONFIDENCE: f32 = 0.5;
 
 #[derive(Deserialize)]
 struct FaceIn {
@@ -46,7 +43,10 @@ impl Pipeline {
     /// Face boxes and scores of the whole image, by the SDK's detector (default settings).
     fn detect(&mut self) -> Result<Vec<(Rect, Option<f32>)>, String> {
         if self.detector.is_none() {
-            self.detector = Some(FaceDetector::new().map_err(|e| e.to_string())?);
+            // The tracker's cascade: candidates down to its detection score, accepted by M3's
+            // face check at its detection confidence.
+            let config = detector_config_for(&TrackerConfig::default(), DetectorConfig::default());
+            self.detector = Some(FaceDetector::with_config(config).map_err(|e| e.to_string())?);
         }
         let det = self.detector.as_mut().ok_or("detector unavailable")?;
         det.detect(&self.gray, &mut self.found)
@@ -59,7 +59,7 @@ impl Pipeline {
                 .m3
                 .face_confidence(&self.gray, &d.rect)
                 .map_err(|e| e.to_string())?;
-            if p >= MIN_FACE_CONFIDENCE {
+            if p >= TrackerConfig::default().min_detection_confidence {
                 faces.push((d.rect, Some(d.score)));
             }
         }
