@@ -1024,7 +1024,9 @@ mod tests {
             face: &Rect,
             _: &mut FaceLandmarks,
         ) -> Result<f32> {
-            Ok(if self.find(face).is_some() { 0.9 } else { 0.1 })
+            // A face the classifier is sure of: above both the tracked-window and the
+            // new-detection levels.
+            Ok(if self.find(face).is_some() { 0.99 } else { 0.1 })
         }
     }
 
