@@ -93,6 +93,19 @@ private fun nv21Frame(): Pair<ByteBuffer, Int> {
     return direct(bytes) to stride
 }
 
+/**
+ * The NV21 buffer of a sensor mounted at 90°: the astronaut turned by 270°, so the frame's rotation 90
+ * makes it upright again (faces reach the SDK upright, as a camera app's would). Returns the buffer,
+ * its row stride and its width and height.
+ */
+private fun nv21SensorFrame(): Triple<ByteBuffer, Int, Pair<Int, Int>> {
+    val (w, h, pixels) = reference(270, false)
+    val stride = w + PAD
+    val bytes = ByteArray(stride * h + stride * ((h + 1) / 2)) { 128.toByte() }
+    for (y in 0 until h) for (x in 0 until w) bytes[y * stride + x] = pixels[y * w + x]
+    return Triple(direct(bytes), stride, w to h)
+}
+
 private fun desc(format: PixelFormat, stride: Int, rot: Int, mirrored: Boolean = false, uvRowStride: Int = 0, uvPixelStride: Int = 0) =
     FrameDesc(image.width.toUInt(), image.height.toUInt(), format, stride.toUInt(), uvRowStride.toUInt(), uvPixelStride.toUInt(), rot.toUInt(), mirrored)
 
@@ -217,10 +230,14 @@ class BindingsTest {
             assertThrows(MonotrackException.InvalidFrame::class.java) {
                 t.processFrame(direct(ByteArray(10)), d, 3_000_000L)
             }
-            val (nv, s2) = nv21Frame()
-            val still = t.processImage(nv, desc(PixelFormat.NV21, s2, 90, uvRowStride = s2, uvPixelStride = 2))
+            val (nv, s2, size) = nv21SensorFrame()
+            val still = t.processImage(
+                nv,
+                FrameDesc(size.first.toUInt(), size.second.toUInt(), PixelFormat.NV21, s2.toUInt(), s2.toUInt(), 2u, 90u, false),
+            )
             assertEquals(1, still.faces.size, "the face in the rotated NV21 frame")
-            assertEquals(image.height.toUInt(), still.frameWidth)
+            assertEquals(image.width.toUInt(), still.frameWidth)
+            assertEquals(image.height.toUInt(), still.frameHeight)
             t.reset()
             assertEquals(FaceState.DETECTED, t.processFrame(buf, d, 1L).faces[0].state)
         }
