@@ -31,10 +31,12 @@ fn main() -> TractResult<()> {
         eprintln!("usage: time_nets DIR (with level1.onnx, face.onnx, ... inside)");
         std::process::exit(2);
     };
-    let mut jobs: Vec<(String, Vec<Vec<usize>>)> = Vec::new();
+    // (label printed, ONNX file stem, input shapes)
+    let mut jobs: Vec<(String, String, Vec<Vec<usize>>)> = Vec::new();
     for (name, shapes) in NETS {
         if std::path::Path::new(&format!("{dir}/{name}.onnx")).exists() {
             jobs.push((
+                name.to_string(),
                 name.to_string(),
                 shapes.iter().map(|s| s.to_vec()).collect(),
             ));
@@ -48,11 +50,14 @@ fn main() -> TractResult<()> {
     detectors.sort();
     for name in detectors {
         for [h, w] in DETECTOR_INPUTS {
-            jobs.push((format!("{name}@{w}x{h}"), vec![vec![1, 1, h, w]]));
+            jobs.push((
+                format!("{name}@{w}x{h}"),
+                name.clone(),
+                vec![vec![1, 1, h, w]],
+            ));
         }
     }
-    for (name, shapes) in jobs {
-        let file = name.split('@').next().unwrap_or(&name);
+    for (name, file, shapes) in jobs {
         let mut model = tract_onnx::onnx().model_for_path(format!("{dir}/{file}.onnx"))?;
         for (i, s) in shapes.iter().enumerate() {
             model = model.with_input_fact(i, f32::fact(s.as_slice()).into())?;

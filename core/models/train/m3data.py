@@ -282,23 +282,28 @@ def load_faces68(split):
     return images, faces
 
 
-def load_genki(split):
-    """GENKI-4K crops: (gray 64x64, smile 0/1). Our own split: file number % 5 == 0 is held out."""
+def genki_files(split):
+    """GENKI-4K crops of our split ('train' | 'test'): (path, smile 0/1, file name). File number
+    % 5 == 0 is held out ('test')."""
     base = os.path.join(DATA, "expression", "genki4k", "train")
     out = []
     for label in (0, 1):
         d = os.path.join(base, str(label))
         for f in sorted(os.listdir(d)):
             n = int("".join(ch for ch in f if ch.isdigit()))
-            if (n % 5 == 0) != (split == "test"):
-                continue
-            out.append((load_gray(os.path.join(d, f)), label, f))
+            if (n % 5 == 0) == (split == "test"):
+                out.append((os.path.join(d, f), label, f))
     return out
 
 
+def load_genki(split):
+    """GENKI-4K crops: (gray 64x64, smile 0/1, file name) of genki_files(split)."""
+    return [(load_gray(path), label, f) for path, label, f in genki_files(split)]
+
+
 # Level-1 hard negatives: the shipped detector's false positives (detector/train.py's decoding, run
-# with onnxruntime on detector.onnx at these minimum face sizes and this score, lower than the SDK's
-# 0.6 default so that near misses count too). A false positive overlaps no annotated face (IoU < 0.3)
+# with onnxruntime on detector.onnx at these minimum face sizes and this score, lower than the
+# detector's standalone threshold so that near misses count too). A false positive overlaps no annotated face (IoU < 0.3)
 # and has its centre outside every unannotated face (detector/unlabeled.py).
 DETECTOR_FP_MIN_SCORE = 0.3
 DETECTOR_FP_MIN_FACES = (16.0, 24.0, 32.0, 48.0)

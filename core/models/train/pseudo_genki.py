@@ -38,14 +38,7 @@ def default_path():
 def main(out=None):
     out = out or default_path()
     os.makedirs(os.path.dirname(out), exist_ok=True)
-    base = os.path.join(D.DATA, "expression", "genki4k", "train")
-    images = []
-    for label in (0, 1):
-        d = os.path.join(base, str(label))
-        for f in sorted(os.listdir(d)):
-            n = int("".join(ch for ch in f if ch.isdigit()))
-            if n % 5 != 0:
-                images.append(os.path.abspath(os.path.join(d, f)))
+    images = [os.path.abspath(path) for path, _, _ in D.genki_files("train")]
     boxes = [FIRST_BOX] * len(images)
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(ROUNDS):

@@ -996,8 +996,15 @@ mod tests {
         Joints2d::full(std::array::from_fn(|i| cam.project(&x[i])))
     }
 
-    #[test]
-    fn tracked_frames_start_from_the_last_pose_and_fall_back_to_scratch() {
+    /// The mean HumanEva skeleton at [`truth_pose`] seen by [`camera`]: skeleton, camera, pose,
+    /// joints and their exact projections.
+    fn exact_scene() -> (
+        Skeleton,
+        BodyCamera,
+        [f64; N_POSE],
+        [Vector3<f64>; N_JOINTS],
+        Joints2d,
+    ) {
         let skel =
             Skeleton::new(Dimensions::mean(Convention::HumanEva), Convention::HumanEva).unwrap();
         let cam = camera();
@@ -1005,6 +1012,12 @@ mod tests {
         let mut x = [Vector3::zeros(); N_JOINTS];
         skel.forward(&p, &mut x);
         let obs = observe(&cam, &x);
+        (skel, cam, p, x, obs)
+    }
+
+    #[test]
+    fn tracked_frames_start_from_the_last_pose_and_fall_back_to_scratch() {
+        let (skel, cam, p, x, obs) = exact_scene();
         let fitter = BodyFitter::default();
         let scratch = fitter.fit(&obs, &cam, &skel).unwrap();
         // No previous frame: the scratch fit.
@@ -1098,13 +1111,7 @@ mod tests {
 
     #[test]
     fn exact_projections_of_the_model_are_fitted_to_millimetres() {
-        let skel =
-            Skeleton::new(Dimensions::mean(Convention::HumanEva), Convention::HumanEva).unwrap();
-        let cam = camera();
-        let p = truth_pose(&skel);
-        let mut x = [Vector3::zeros(); N_JOINTS];
-        skel.forward(&p, &mut x);
-        let obs = observe(&cam, &x);
+        let (skel, cam, _, x, obs) = exact_scene();
         // The prior weight is the 2D noise the fit expects (px per standard deviation of the
         // prior): the default, made for real keypoints, trades 1.5 px of reprojection for a pose
         // nearer Human3.6M's mean, ~0.1 m off in the world frame (the same basin: the joint angles
@@ -1154,13 +1161,7 @@ mod tests {
 
     #[test]
     fn bad_observations_are_typed_errors() {
-        let skel =
-            Skeleton::new(Dimensions::mean(Convention::HumanEva), Convention::HumanEva).unwrap();
-        let cam = camera();
-        let p = truth_pose(&skel);
-        let mut x = [Vector3::zeros(); N_JOINTS];
-        skel.forward(&p, &mut x);
-        let mut obs = observe(&cam, &x);
+        let (skel, cam, _, _, mut obs) = exact_scene();
         obs.points[3][0] = f64::NAN;
         assert!(matches!(
             BodyFitter::default().fit(&obs, &cam, &skel),

@@ -44,8 +44,9 @@ pub const MAX_FACES_LIMIT: usize = 16;
 
 /// Default [`TrackerConfig::min_detection_score`]: detector candidates down to this go to M3's
 /// face check. With [`DEFAULT_MIN_DETECTION_CONFIDENCE`] and the detector's default min face, the
-/// highest faces68 validation recall at < 0.05 false positives per image
-/// (`models/train/detector/eval_peers.py`, `models/MODEL_CARD.md`).
+/// highest faces68 validation recall at < 0.05 false positives per image (0.3 finds the same faces
+/// at more false positives: 0.047 against 0.028 per image; `models/train/detector/eval_peers.py`,
+/// `models/MODEL_CARD.md`).
 pub const DEFAULT_MIN_DETECTION_SCORE: f32 = 0.4;
 
 /// Default [`TrackerConfig::min_detection_confidence`] (see [`DEFAULT_MIN_DETECTION_SCORE`]).

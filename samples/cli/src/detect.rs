@@ -4,7 +4,8 @@
 //! `{"image", "width", "height", "faces": [{"box": [x, y, w, h], "score": s}], "timings_us": {"detect"}}`
 //! with boxes in the M3 convention (tight box of the 68 landmarks). With `--face-prob` every face
 //! also carries `"face_prob"`, M3 level 1's face probability on that box: the check `landmarks` and
-//! the tracker apply to every detection (they keep faces with `face_prob >= 0.5`), so the cascade's
+//! the tracker apply to every detection (they keep faces with `face_prob` at least
+//! `track::DEFAULT_MIN_DETECTION_CONFIDENCE`, 0.95), so the cascade's
 //! operating points can be measured; its time is not in `timings_us.detect`. A line that fails
 //! yields `{"line": N, "error": "..."}`, a message on stderr, and exit status 1 at the end.
 

@@ -9,7 +9,7 @@ use monotrack_core::detect::{Detection, DetectorConfig, FaceDetector};
 use monotrack_core::fit::{Msbp, MsbpConfig};
 use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::{BROW_GESTURES, FaceLandmarks, M3, MOUTH_GESTURES, N_POINTS};
-use monotrack_core::track::{TrackerConfig, detector_config_for};
+use monotrack_core::track::{DEFAULT_MIN_DETECTION_CONFIDENCE, TrackerConfig, detector_config_for};
 use serde::Deserialize;
 use serde_json::{Map, Value, json};
 use std::path::{Path, PathBuf};
@@ -40,7 +40,7 @@ struct Pipeline {
 }
 
 impl Pipeline {
-    /// Face boxes and scores of the whole image, by the SDK's detector (default settings).
+    /// Face boxes and scores of the whole image, found as the tracker finds them (default settings).
     fn detect(&mut self) -> Result<Vec<(Rect, Option<f32>)>, String> {
         if self.detector.is_none() {
             // The tracker's cascade: candidates down to its detection score, accepted by M3's
@@ -59,7 +59,7 @@ impl Pipeline {
                 .m3
                 .face_confidence(&self.gray, &d.rect)
                 .map_err(|e| e.to_string())?;
-            if p >= TrackerConfig::default().min_detection_confidence {
+            if p >= DEFAULT_MIN_DETECTION_CONFIDENCE {
                 faces.push((d.rect, Some(d.score)));
             }
         }

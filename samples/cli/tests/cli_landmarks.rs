@@ -19,6 +19,19 @@ fn monotrack(args: &[&str]) -> std::process::Output {
         .expect("run monotrack")
 }
 
+/// A fresh temporary folder holding a copy of the sample image (`astronaut.jpg`), for manifests
+/// with relative paths.
+fn dir_with_astronaut(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("monotrack-cli-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(
+        root().join("samples/data/astronaut.jpg"),
+        dir.join("astronaut.jpg"),
+    )
+    .unwrap();
+    dir
+}
+
 fn norm(v: &serde_json::Value) -> f64 {
     v.as_array()
         .unwrap()
@@ -30,13 +43,7 @@ fn norm(v: &serde_json::Value) -> f64 {
 
 #[test]
 fn landmarks_on_given_boxes_follow_the_contract() {
-    let dir = std::env::temp_dir().join(format!("monotrack-cli-lm-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::copy(
-        root().join("samples/data/astronaut.jpg"),
-        dir.join("astronaut.jpg"),
-    )
-    .unwrap();
+    let dir = dir_with_astronaut("lm");
     let input = dir.join("in.jsonl");
     let b = ASTRONAUT_BOX;
     let good = format!(
@@ -153,13 +160,7 @@ fn landmarks_on_given_boxes_follow_the_contract() {
 
 #[test]
 fn detect_reports_the_face_check_on_request() {
-    let dir = std::env::temp_dir().join(format!("monotrack_cli_detect_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::copy(
-        root().join("samples/data/astronaut.jpg"),
-        dir.join("astronaut.jpg"),
-    )
-    .unwrap();
+    let dir = dir_with_astronaut("detect");
     let manifest = dir.join("in.jsonl");
     std::fs::write(&manifest, "{\"image\": \"astronaut.jpg\"}\n{broken\n").unwrap();
     let run = |extra: &[&str]| {
