@@ -67,6 +67,7 @@ class M3:
         out68 = np.zeros((68, 2))
         out68[self.cfg["level1"]["indices68"]] = pts32
         refs68 = out68.copy()  # level 1's points; the eye corners are replaced after the eye zone
+        level1_68 = out68.copy()
         res = {"yaw_probs": yaw, "face_prob": face}
         # M3_IO.md: the eye zone runs first, and its eye corners replace level 1's as references.
         for name in sorted(self.zones, key=lambda n: n != "eye"):
@@ -90,7 +91,9 @@ class M3:
                 refs68[corners] = out68[corners]
             else:
                 pts, g, _ = self._zone(z, sess, gray, refs68[r[0]], refs68[r[1]], yaw, False)
-                out68[z["indices68"]] = pts
+                # M3_IO.md: a landmarks-only zone may blend its points with level 1's.
+                w = np.array(z.get("level1_weight") or [0.0] * len(pts))[:, None]
+                out68[z["indices68"]] = (1 - w) * pts + w * level1_68[z["indices68"]]
                 if z.get("gestures"):
                     res[name] = dict(zip(z["gestures"], softmax(g).tolist()))
         res["landmarks68"] = out68

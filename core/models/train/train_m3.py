@@ -99,6 +99,7 @@ class Data:
         self.mirrored = [np.ascontiguousarray(im[:, ::-1]) for im in self.imgs]
         # The teacher-labelled faces come after the annotated ones (mirrors included).
         self.n_annotated = 2 * len(self.labelled)
+        self.hard = []  # (image index, box) of detector false positives, by mine_hard_negatives
 
     def faces_for(self, net):
         """The faces `net` samples: with the teacher-labelled ones for PSEUDO_NETS. Other nets see
@@ -112,7 +113,6 @@ class Data:
         n = self.n_annotated
         return np.concatenate([weights[:n] * (1 - PSEUDO_SHARE) / weights[:n].sum(),
                                weights[n:] * PSEUDO_SHARE / weights[n:].sum()])
-        self.hard = []  # (image index, box) of detector false positives, by mine_hard_negatives
 
     def mine_hard_negatives(self):
         self.hard = D.detector_false_positives(self.paths, self.labelled)
@@ -402,14 +402,18 @@ def main():
     ap.add_argument("--zone-trunk", default=None)
     # e.g. --zone-size face=48x48 (the patch size in m3.json follows)
     ap.add_argument("--zone-size", default=None)
+    # Nets that learn from the teacher-labelled GENKI-4K faces too (default PSEUDO_NETS), e.g. face,mouth
+    ap.add_argument("--pseudo-nets", default=None)
     # Results differ from the CPU run's in the last bits (GPU kernels); the shipped weights are CPU's.
     ap.add_argument("--device", default="cpu")
     # Zone nets train in this many processes at once after level 1 (each net seeds itself, so the
     # result does not depend on it).
     ap.add_argument("--jobs", type=int, default=min(4, os.cpu_count() or 1))
     a = ap.parse_args()
-    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE
+    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS
     DEVICE = torch.device(a.device)
+    if a.pseudo_nets is not None:
+        PSEUDO_NETS = tuple(n for n in a.pseudo_nets.split(",") if n)
     if a.level1_trunk:
         LEVEL1_TRUNK = a.level1_trunk
     if a.level1_hidden:
@@ -431,7 +435,7 @@ def main():
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
-            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} device={DEVICE}")
+            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS} device={DEVICE}")
     pseudo = None
     if any(n in only for n in PSEUDO_NETS):
         pseudo = os.environ.get("MONOTRACK_PSEUDO") or pseudo_genki.default_path()
@@ -465,6 +469,7 @@ def run_zones_in_processes(zones, a, fh):
             "--device", a.device, "--zone-trunk", ",".join(f"{k}={v}" for k, v in ZONE_TRUNK.items())]
     if a.zone_size:
         base += ["--zone-size", a.zone_size]
+    base += ["--pseudo-nets", ",".join(PSEUDO_NETS)]
     pending, running = list(zones), []
     while pending or running:
         while pending and len(running) < a.jobs:

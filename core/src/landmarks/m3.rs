@@ -91,6 +91,11 @@ pub struct ZoneConfig {
     /// Whether the net outputs a gaze vector.
     #[serde(default)]
     pub gaze: bool,
+    /// Per point of `indices68`, the weight of level 1's estimate in the merged point (0: the
+    /// zone's point alone). Only landmarks-only zones may blend, and only at level-1 points: the
+    /// thesis' zones win in their zones (`M3_IO.md`).
+    #[serde(default)]
+    pub level1_weight: Option<Vec<f64>>,
 }
 
 /// `m3.json`: everything the inference needs besides the weights (`models/M3_IO.md`).
@@ -172,7 +177,8 @@ impl ZoneKind {
 }
 
 impl ZoneConfig {
-    fn validate(&self, name: &str, covered: &mut [bool; N_POINTS]) -> Result<()> {
+    /// `level1` = the level-1 `indices68`.
+    fn validate(&self, name: &str, level1: &[usize], covered: &mut [bool; N_POINTS]) -> Result<()> {
         let kind = ZoneKind::of(name);
         check_side(&format!("{name}.width"), self.width)?;
         check_side(&format!("{name}.height"), self.height)?;
@@ -211,6 +217,23 @@ impl ZoneConfig {
                 "{name}.gaze = {}: only the eye gives gaze",
                 self.gaze
             )));
+        }
+        if let Some(w) = &self.level1_weight {
+            if kind != ZoneKind::Plain || w.len() != self.indices68.len() {
+                return Err(bad(format!(
+                    "{name}.level1_weight: {} weights for {} points (landmarks-only zones only)",
+                    w.len(),
+                    self.indices68.len()
+                )));
+            }
+            for (&wk, &i) in w.iter().zip(&self.indices68) {
+                if !(0.0..=1.0).contains(&wk) || (wk > 0.0 && !level1.contains(&i)) {
+                    return Err(bad(format!(
+                        "{name}.level1_weight of point {i} = {wk}: must be in 0..=1, and 0 \
+                         where level 1 gives no point"
+                    )));
+                }
+            }
         }
         match (kind, &self.mirror_ref68, &self.mirror_indices68) {
             (ZoneKind::Eye, Some(_), Some(mi)) => {
@@ -263,7 +286,7 @@ impl M3Config {
             }
         }
         for (name, z) in &self.zones {
-            z.validate(name, &mut covered)?;
+            z.validate(name, &l1.indices68, &mut covered)?;
         }
         if let Some(i) = covered.iter().position(|c| !c) {
             return Err(bad(format!("landmark {i} is produced by no network")));
@@ -284,6 +307,8 @@ struct Zone {
     mirror: Option<([usize; 2], Vec<usize>)>,
     /// Template positions in patch pixels.
     q: [[f64; 2]; 2],
+    /// `(68 index, level-1 weight)` of the points blended with level 1's.
+    level1_blend: Vec<(usize, f64)>,
     bilateral: Option<Bilateral>,
     equalize: bool,
     net: Net,
@@ -325,6 +350,12 @@ impl Zone {
             indices68: cfg.indices68.clone(),
             mirror: cfg.mirror_ref68.zip(cfg.mirror_indices68.clone()),
             q: cfg.template.map(|t| [t[0] * w as f64, t[1] * h as f64]),
+            level1_blend: cfg
+                .level1_weight
+                .iter()
+                .flat_map(|w| cfg.indices68.iter().copied().zip(w.iter().copied()))
+                .filter(|&(_, w)| w > 0.0)
+                .collect(),
             bilateral: cfg
                 .bilateral
                 .map(|b| Bilateral::new(b.d, b.sigma_color, b.sigma_space)),
@@ -497,8 +528,10 @@ pub struct M3 {
     crop: Vec<u8>,
     /// The merged 68 points of the face in progress, image pixels.
     pts: [[f64; 2]; N_POINTS],
-    /// The level-1 points of the face in progress (zone references).
+    /// The zone references of the face in progress: level 1's points, then the eye corners.
     ref_pts: [[f64; 2]; N_POINTS],
+    /// Level 1's points of the face in progress (for the zones that blend with them).
+    level1_pts: [[f64; 2]; N_POINTS],
 }
 
 /// What level 1 gives besides its points.
@@ -559,6 +592,7 @@ impl M3 {
             zones,
             pts: [[0.0; 2]; N_POINTS],
             ref_pts: [[0.0; 2]; N_POINTS],
+            level1_pts: [[0.0; 2]; N_POINTS],
         })
     }
 
@@ -673,6 +707,7 @@ impl M3 {
         // Zone references are level 1's points, except the eye zone's own references (the eye
         // corners), which its output replaces: it runs first (M3_IO.md).
         self.ref_pts = self.pts;
+        self.level1_pts = self.pts;
         for zone in &mut self.zones {
             if zone.kind == ZoneKind::Eye {
                 let [right, left] = zone.run_eyes(image, &self.ref_pts, &yaw, &mut self.pts)?;
@@ -692,6 +727,10 @@ impl M3 {
             let refs = &self.ref_pts;
             let map = zone.map(refs[zone.ref68[0]], refs[zone.ref68[1]], false)?;
             zone.run_one(image, &map, &yaw, &mut self.pts)?;
+            for &(i, w) in &zone.level1_blend {
+                let (z, l) = (self.pts[i], self.level1_pts[i]);
+                self.pts[i] = [(1.0 - w) * z[0] + w * l[0], (1.0 - w) * z[1] + w * l[1]];
+            }
             match zone.kind {
                 ZoneKind::Brows => softmax(zone.net.output(1)?, &mut out.brows),
                 ZoneKind::Mouth => softmax(zone.net.output(1)?, &mut out.mouth),
@@ -791,6 +830,43 @@ mod tests {
     }
 
     #[test]
+    fn level1_weight_blends_the_face_zone_with_level_1() {
+        let img = image();
+        let face = Rect::new(40.0, 20.0, 70.0, 80.0);
+        let run = |weight: Option<f64>| {
+            let json = json_with(|v| {
+                let n = v["zones"]["face"]["indices68"].as_array().unwrap().len();
+                v["zones"]["face"]["level1_weight"] = match weight {
+                    Some(w) => serde_json::json!(vec![w; n]),
+                    None => Value::Null,
+                };
+            });
+            let mut m3 = M3::from_bytes(&json, EMBEDDED_FILES).unwrap();
+            let mut out = FaceLandmarks::default();
+            m3.estimate(&img, &face, &mut out).unwrap();
+            let mut l1 = FaceLandmarks::default();
+            m3.level1(&img, &face, &mut l1).unwrap();
+            (m3.config().zones["face"].indices68.clone(), out, l1)
+        };
+        let (idx, zone, l1) = run(Some(0.0));
+        let (_, half, _) = run(Some(0.5));
+        let (_, full, _) = run(Some(1.0));
+        let (_, none, _) = run(None);
+        assert_eq!(none.points, zone.points);
+        for i in 0..N_POINTS {
+            let (z, h, f) = (zone.points[i], half.points[i], full.points[i]);
+            if idx.contains(&i) {
+                assert_eq!(f, l1.points[i], "{i}");
+                for c in 0..2 {
+                    assert!((h[c] - 0.5 * (z[c] + f[c])).abs() < 1e-3, "{i}: {h:?}");
+                }
+            } else {
+                assert_eq!((h, f), (z, z), "{i}: only the face zone's points blend");
+            }
+        }
+    }
+
+    #[test]
     fn bad_inputs_are_invalid_input() {
         let mut m3 = M3::new().unwrap();
         let img = image();
@@ -834,6 +910,17 @@ mod tests {
             json_with(|v| v["zones"]["eye"]["mirror_ref68"] = Value::Null),
             json_with(|v| {
                 v["zones"]["mouth"]["template"] = serde_json::json!([[0.5, 0.5], [0.5, 0.5]])
+            }),
+            // Blending with level 1: not in a thesis zone, one weight per point, 0..=1, and
+            // only where level 1 has a point.
+            json_with(|v| v["zones"]["mouth"]["level1_weight"] = serde_json::json!(vec![0.5; 20])),
+            json_with(|v| v["zones"]["face"]["level1_weight"] = serde_json::json!(vec![0.5; 3])),
+            json_with(|v| v["zones"]["face"]["level1_weight"] = serde_json::json!(vec![1.5; 26])),
+            json_with(|v| v["zones"]["face"]["level1_weight"] = serde_json::json!(vec![-0.1; 26])),
+            json_with(|v| {
+                // Point 49 (level 1 gives none) in the face zone, blended with level 1.
+                v["zones"]["face"]["indices68"][0] = 49.into();
+                v["zones"]["face"]["level1_weight"] = serde_json::json!(vec![0.5; 26]);
             }),
         ] {
             assert!(
