@@ -736,9 +736,12 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 r.is_valid() && s.is_finite() && *s >= self.config.min_detection_score
             });
             // Every detection must pass the classifier tracked windows are checked with (M3's
-            // face confidence), and they are ranked by it: the compact detector scores some
-            // face-like clutter and oversized boxes above the real face (core/models/MODEL_CARD.md).
-            // Detector score order first, so equal confidences keep it (the sort below is stable).
+            // face confidence). They are ranked by detector score × confidence: the compact
+            // detector scores some face-like clutter and oversized boxes above the real face
+            // (core/models/MODEL_CARD.md), and the confidence alone saturates near 1 on small
+            // clutter too (subtitle characters at 20 px pass at 0.99-1.0 while the real face
+            // scores 0.95 / 0.99), so neither ranks well alone. Detector score order first, so
+            // equal products keep it (the sort below is stable).
             self.detections.sort_by(|a, b| b.1.total_cmp(&a.1));
             self.ranked.clear();
             for &(rect, score) in &self.detections {
@@ -749,7 +752,8 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                     self.ranked.push((rect, score, conf, self.checked));
                 }
             }
-            self.ranked.sort_by(|a, b| b.2.total_cmp(&a.2));
+            self.ranked
+                .sort_by(|a, b| (b.1 * b.2).total_cmp(&(a.1 * a.2)));
             for k in 0..self.ranked.len() {
                 let (rect, score, _, checked) = self.ranked[k];
                 // The track this detection belongs to, by overlap with its region this frame
@@ -960,6 +964,8 @@ mod tests {
     #[derive(Default)]
     struct Truth {
         faces: Vec<([[f32; 2]; N_POINTS], f32)>,
+        /// Face check confidence per face (0.99 for faces beyond the list).
+        confidence: Vec<f32>,
     }
 
     fn tight(points: &[[f32; 2]]) -> Rect {
@@ -999,13 +1005,17 @@ mod tests {
     }
 
     impl Est<'_> {
-        fn find(&self, face: &Rect) -> Option<[[f32; 2]; N_POINTS]> {
+        fn find_index(&self, face: &Rect) -> Option<usize> {
             self.truth
                 .borrow()
                 .faces
                 .iter()
-                .map(|(p, _)| *p)
-                .find(|p| tight(p).iou(face) > 0.4)
+                .position(|(p, _)| tight(p).iou(face) > 0.4)
+        }
+
+        fn find(&self, face: &Rect) -> Option<[[f32; 2]; N_POINTS]> {
+            self.find_index(face)
+                .map(|i| self.truth.borrow().faces[i].0)
         }
     }
 
@@ -1025,9 +1035,18 @@ mod tests {
             face: &Rect,
             _: &mut FaceLandmarks,
         ) -> Result<f32> {
-            // A face the classifier is sure of: above both the tracked-window and the
-            // new-detection levels.
-            Ok(if self.find(face).is_some() { 0.99 } else { 0.1 })
+            // By default a face the classifier is sure of: above both the tracked-window and
+            // the new-detection levels.
+            Ok(match self.find_index(face) {
+                Some(i) => self
+                    .truth
+                    .borrow()
+                    .confidence
+                    .get(i)
+                    .copied()
+                    .unwrap_or(0.99),
+                None => 0.1,
+            })
         }
     }
 
@@ -1236,6 +1255,44 @@ mod tests {
                 assert!(r.timings.total_us >= r.timings.fit_us);
             }
             assert_eq!(t.detector().calls, 1);
+        }
+    }
+
+    #[test]
+    fn detections_rank_by_detector_score_times_confidence() {
+        // The video case: small clutter (subtitle characters) that the detector scores low
+        // but the face check passes at 1.0, against the face at 0.95 / 0.99. Either order of
+        // the two in the detector's output, the face takes the only slot.
+        let cam = Intrinsics::default_for(640, 480).unwrap();
+        let poses = [
+            Pose::from_euler_deg(10.0, 0.0, 0.0, Vector3::new(-120.0, -20.0, 700.0)),
+            Pose::from_euler_deg(-15.0, 5.0, 0.0, Vector3::new(110.0, 30.0, 650.0)),
+        ];
+        for (scores, confidence, want) in
+            [([0.5, 0.95], [1.0, 0.99], 1), ([0.95, 0.5], [0.99, 1.0], 0)]
+        {
+            let truth = std::cell::RefCell::new(Truth {
+                faces: (0..2)
+                    .map(|i| (face_points(&poses[i], &cam, [0.0; 2]), scores[i]))
+                    .collect(),
+                confidence: confidence.to_vec(),
+            });
+            let mut t = FaceTracker::new(
+                Det {
+                    truth: &truth,
+                    calls: 0,
+                },
+                Est { truth: &truth },
+                TrackerConfig {
+                    mode: Mode::Image,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let r = t.process(&shifted([0.0; 2]), 0).unwrap();
+            assert_eq!(r.faces.len(), 1);
+            let b = tight(&truth.borrow().faces[want].0);
+            assert!(r.faces[0].rect.iou(&b) > 0.5, "{scores:?} {confidence:?}");
         }
     }
 
