@@ -4,7 +4,8 @@ validation split: positives = landmark boxes with tracker-like jitter (centre ±
 negatives drawn as in training (`m3data.level1_negative`: shifted off the face, far too large, a part
 of the face, anywhere in the image), seeded; and the shipped detector's false positives on the
 validation images (`m3data.detector_false_positives`: what the face check must reject in the CLI and
-the tracker). Prints, per model, the share of positives and of each kind of negative at or above 0.5
+the tracker); and rendered caption text (`m3data.text_negative`, seeded; backgrounds from the
+validation images; needs pillow and `apt-get install fonts-wqy-microhei`). Prints, per model, the share of positives and of each kind of negative at or above 0.5
 (the tracker's `min_face_confidence`) and the ROC AUC against the drawn negatives.
 
     python3 core/models/train/eval_face_check.py [LEVEL1.onnx ...]   # default: the shipped one
@@ -45,16 +46,23 @@ def main():
                     (pos if positive else neg)[k].append(float(r.run(img, box)[2]))
     fps = D.detector_false_positives(img_paths, faces)
     det = [[float(r.run(imgs[k], box)[2]) for k, box in fps] for r in runners]
-    for path, p, q, d in zip(paths, pos, neg, det):
-        p, q, d = np.array(p), np.array(q), np.array(d)
+    text = [[] for _ in runners]
+    for img in imgs:
+        for _ in range(ROUNDS):
+            canvas, c, s = D.text_negative(img, rng)
+            box = np.array([c[0] - s / 2, c[1] - s / 2, s, s])
+            for k, r in enumerate(runners):
+                text[k].append(float(r.run(canvas, box)[2]))
+    for path, p, q, d, x in zip(paths, pos, neg, det, text):
+        p, q, d, x = np.array(p), np.array(q), np.array(d), np.array(x)
         auc = (p[:, None] > q[None, :]).mean() + 0.5 * (p[:, None] == q[None, :]).mean()
         print(f"{path}: positives >= 0.5 {np.mean(p >= 0.5):.3f}, negatives >= 0.5 {np.mean(q >= 0.5):.3f},"
               f" AUC {auc:.4f} ({len(p)} / {len(q)}); detector false positives >= 0.5 {np.mean(d >= 0.5):.3f}"
-              f" ({len(d)})")
+              f" ({len(d)}); caption text >= 0.5 {np.mean(x >= 0.5):.3f} ({len(x)})")
         # Stricter checks, as for accepting a new detection (TrackerConfig::min_detection_confidence).
         for t in (0.8, 0.9, 0.95):
             print(f"  at {t}: positives >= {t} {np.mean(p >= t):.3f}, negatives {np.mean(q >= t):.3f},"
-                  f" detector false positives {np.mean(d >= t):.3f}")
+                  f" detector false positives {np.mean(d >= t):.3f}, caption text {np.mean(x >= t):.3f}")
 
 
 if __name__ == "__main__":

@@ -257,6 +257,53 @@ def level1_negative(c, s, shape, rng):
     return c, s
 
 
+# Font for rendered caption text (`text_negative`): WenQuanYi Micro Hei (Debian `fonts-wqy-microhei`,
+# Apache-2.0 / GPL), CJK and Latin glyphs. Evaluation data only, never shipped.
+TEXT_FONT = "/usr/share/fonts/truetype/wqy/wqy-microhei.ttc"
+_FONTS = {}
+
+
+def text_negative(img, rng):
+    """Rendered caption text as a level-1 negative: returns (canvas, centre, side) with a square over
+    one or two glyphs. Why: news video captions (white CJK or Latin glyphs of about 20 px, often
+    outlined, on a dark band) reach the face check as detector candidates, and level 1 passes some at
+    0.97-1.0 (eval_face_check.py measures it; training level 1 with them was tried and not kept,
+    MODEL_CARD.md). The background is a region of `img`,
+    darkened or under a flat band; glyph size, colour, outline, characters and the square are drawn
+    from `rng`."""
+    from PIL import Image, ImageDraw, ImageFont
+    if not os.path.exists(TEXT_FONT):
+        raise SystemExit(f"{TEXT_FONT} missing: apt-get install fonts-wqy-microhei (level 1's text negatives)")
+    g = int(rng.integers(14, 49))  # glyph size, canvas pixels
+    n = 6
+    H, W = 3 * g, (n + 2) * g
+    h, w = img.shape
+    y0, x0 = int(rng.integers(0, max(1, h - H))), int(rng.integers(0, max(1, w - W)))
+    bg = img[y0:y0 + H, x0:x0 + W].astype(np.float32)
+    if bg.shape != (H, W):
+        bg = cv2.resize(bg, (W, H), interpolation=cv2.INTER_LINEAR)
+    bg *= rng.uniform(0.25, 1.0)
+    if rng.random() < 0.4:  # a flat caption band behind the text
+        bg[:] = rng.uniform(0, 255) if rng.random() < 0.3 else rng.uniform(0, 80)
+    canvas = Image.fromarray(bg.clip(0, 255).astype(np.uint8))
+    if g not in _FONTS:
+        _FONTS[g] = ImageFont.truetype(TEXT_FONT, g)
+    chars = []
+    for _ in range(n):
+        if rng.random() < 0.7:
+            chars.append(chr(int(rng.integers(0x4E00, 0x9FA6))))
+        else:
+            chars.append("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789"[int(rng.integers(62))])
+    dark = rng.random() < 0.2  # dark text on light ground, sometimes
+    fill = int(rng.uniform(0, 60)) if dark else int(rng.uniform(170, 256))
+    stroke = int(rng.integers(0, 3)) if rng.random() < 0.5 else 0
+    ImageDraw.Draw(canvas).text((0.5 * g, H / 2 - 0.6 * g), "".join(chars), font=_FONTS[g], fill=fill,
+                                stroke_width=stroke, stroke_fill=255 - fill)
+    k = int(rng.integers(0, n - 1))
+    c = np.array([0.5 * g + (k + rng.uniform(0.5, 1.5)) * g, H / 2 + rng.uniform(-0.2, 0.2) * g])
+    return np.asarray(canvas), c, g * rng.uniform(0.8, 1.8)
+
+
 def load_faces68(split):
     """Faces of the faces68 split ('train' | 'val'): dicts with image index, landmarks, labels."""
     teacher = {}

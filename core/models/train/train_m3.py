@@ -404,16 +404,19 @@ def main():
     ap.add_argument("--zone-size", default=None)
     # Nets that learn from the teacher-labelled GENKI-4K faces too (default PSEUDO_NETS), e.g. face,mouth
     ap.add_argument("--pseudo-nets", default=None)
+    ap.add_argument("--pseudo-share", type=float, default=None)
     # Results differ from the CPU run's in the last bits (GPU kernels); the shipped weights are CPU's.
     ap.add_argument("--device", default="cpu")
     # Zone nets train in this many processes at once after level 1 (each net seeds itself, so the
     # result does not depend on it).
     ap.add_argument("--jobs", type=int, default=min(4, os.cpu_count() or 1))
     a = ap.parse_args()
-    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS
+    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE
     DEVICE = torch.device(a.device)
     if a.pseudo_nets is not None:
         PSEUDO_NETS = tuple(n for n in a.pseudo_nets.split(",") if n)
+    if a.pseudo_share is not None:
+        PSEUDO_SHARE = a.pseudo_share
     if a.level1_trunk:
         LEVEL1_TRUNK = a.level1_trunk
     if a.level1_hidden:
@@ -435,7 +438,7 @@ def main():
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
-            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS} device={DEVICE}")
+            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} device={DEVICE}")
     pseudo = None
     if any(n in only for n in PSEUDO_NETS):
         pseudo = os.environ.get("MONOTRACK_PSEUDO") or pseudo_genki.default_path()
@@ -469,7 +472,7 @@ def run_zones_in_processes(zones, a, fh):
             "--device", a.device, "--zone-trunk", ",".join(f"{k}={v}" for k, v in ZONE_TRUNK.items())]
     if a.zone_size:
         base += ["--zone-size", a.zone_size]
-    base += ["--pseudo-nets", ",".join(PSEUDO_NETS)]
+    base += ["--pseudo-nets", ",".join(PSEUDO_NETS), "--pseudo-share", str(PSEUDO_SHARE)]
     pending, running = list(zones), []
     while pending or running:
         while pending and len(running) < a.jobs:
