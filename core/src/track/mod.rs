@@ -116,7 +116,9 @@ pub enum Mode {
 pub struct TrackerConfig {
     /// Image or video mode.
     pub mode: Mode,
-    /// Most faces tracked at once (1..=[`MAX_FACES_LIMIT`]).
+    /// Most faces tracked at once (1..=[`MAX_FACES_LIMIT`]). When a detector run finds more
+    /// accepted faces than free slots, those with the highest detector score × face confidence
+    /// take them.
     pub max_faces: usize,
     /// Camera intrinsics of the upright image; `None` = the CONTRACT default for its size.
     pub camera: Option<Intrinsics>,
