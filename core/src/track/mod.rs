@@ -1052,6 +1052,29 @@ mod tests {
         }
     }
 
+    /// A tracker on the mock detector and estimator over `truth`.
+    fn mock_tracker<'a>(
+        truth: &'a std::cell::RefCell<Truth>,
+        config: TrackerConfig,
+    ) -> Result<FaceTracker<Det<'a>, Est<'a>>> {
+        FaceTracker::new(Det { truth, calls: 0 }, Est { truth }, config)
+    }
+
+    fn image_mode() -> TrackerConfig {
+        TrackerConfig {
+            mode: Mode::Image,
+            ..Default::default()
+        }
+    }
+
+    /// Two faces side by side at arm's length, turned a little.
+    fn two_poses() -> [Pose; 2] {
+        [
+            Pose::from_euler_deg(10.0, 0.0, 0.0, Vector3::new(-120.0, -20.0, 700.0)),
+            Pose::from_euler_deg(-15.0, 5.0, 0.0, Vector3::new(110.0, 30.0, 650.0)),
+        ]
+    }
+
     /// The model's landmarks at `pose`, moved by `shift` pixels.
     fn face_points(pose: &Pose, cam: &Intrinsics, shift: [f32; 2]) -> [[f32; 2]; N_POINTS] {
         let mut p = [[0.0; 2]; N_LANDMARKS];
@@ -1145,12 +1168,8 @@ mod tests {
         assert_eq!(c.mode, Mode::Image);
         assert_eq!(c.search_margin, TrackerConfig::default().search_margin);
         let truth = std::cell::RefCell::new(Truth::default());
-        let made = FaceTracker::new(
-            Det {
-                truth: &truth,
-                calls: 0,
-            },
-            Est { truth: &truth },
+        let made = mock_tracker(
+            &truth,
             TrackerConfig {
                 max_faces: 0,
                 ..Default::default()
@@ -1163,15 +1182,7 @@ mod tests {
     fn video_timestamps_must_increase() {
         let truth = std::cell::RefCell::new(Truth::default());
         let img = GrayImage::new(64, 48);
-        let mut t = FaceTracker::new(
-            Det {
-                truth: &truth,
-                calls: 0,
-            },
-            Est { truth: &truth },
-            TrackerConfig::default(),
-        )
-        .unwrap();
+        let mut t = mock_tracker(&truth, TrackerConfig::default()).unwrap();
         let r = t.process(&img, 1_000).unwrap();
         assert_eq!(r.state(), FrameState::Lost);
         assert!(r.detector_ran);
@@ -1186,18 +1197,7 @@ mod tests {
         t.reset();
         assert!(t.process(&img, 0).is_ok());
         // Image mode accepts any order.
-        let mut t = FaceTracker::new(
-            Det {
-                truth: &truth,
-                calls: 0,
-            },
-            Est { truth: &truth },
-            TrackerConfig {
-                mode: Mode::Image,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let mut t = mock_tracker(&truth, image_mode()).unwrap();
         assert!(t.process(&img, 5).is_ok());
         assert!(t.process(&img, 5).is_ok());
         assert!(t.process(&img, 1).is_ok());
@@ -1206,10 +1206,7 @@ mod tests {
     #[test]
     fn two_faces_keep_their_ids_while_tracked() {
         let cam = Intrinsics::default_for(640, 480).unwrap();
-        let poses = [
-            Pose::from_euler_deg(10.0, 0.0, 0.0, Vector3::new(-120.0, -20.0, 700.0)),
-            Pose::from_euler_deg(-15.0, 5.0, 0.0, Vector3::new(110.0, 30.0, 650.0)),
-        ];
+        let poses = two_poses();
         let truth = std::cell::RefCell::new(Truth::default());
         let set_truth = |shift: [f32; 2]| {
             truth.borrow_mut().faces = vec![
@@ -1218,12 +1215,8 @@ mod tests {
             ];
         };
         for max_faces in [2usize, 1] {
-            let mut t = FaceTracker::new(
-                Det {
-                    truth: &truth,
-                    calls: 0,
-                },
-                Est { truth: &truth },
+            let mut t = mock_tracker(
+                &truth,
                 TrackerConfig {
                     max_faces,
                     new_face_interval: 0,
@@ -1266,10 +1259,7 @@ mod tests {
         // but the face check passes at 1.0, against the face at 0.95 / 0.99. Either order of
         // the two in the detector's output, the face takes the only slot.
         let cam = Intrinsics::default_for(640, 480).unwrap();
-        let poses = [
-            Pose::from_euler_deg(10.0, 0.0, 0.0, Vector3::new(-120.0, -20.0, 700.0)),
-            Pose::from_euler_deg(-15.0, 5.0, 0.0, Vector3::new(110.0, 30.0, 650.0)),
-        ];
+        let poses = two_poses();
         for (scores, confidence, want) in
             [([0.5, 0.95], [1.0, 0.99], 1), ([0.95, 0.5], [0.99, 1.0], 0)]
         {
@@ -1279,18 +1269,7 @@ mod tests {
                     .collect(),
                 confidence: confidence.to_vec(),
             });
-            let mut t = FaceTracker::new(
-                Det {
-                    truth: &truth,
-                    calls: 0,
-                },
-                Est { truth: &truth },
-                TrackerConfig {
-                    mode: Mode::Image,
-                    ..Default::default()
-                },
-            )
-            .unwrap();
+            let mut t = mock_tracker(&truth, image_mode()).unwrap();
             let r = t.process(&shifted([0.0; 2]), 0).unwrap();
             assert_eq!(r.faces.len(), 1);
             let b = tight(&truth.borrow().faces[want].0);
