@@ -19,8 +19,12 @@ def parse_trunk(spec):
     return layers
 
 
-def downsampling(spec):
-    return 2 ** sum(mode in "sp" for _, mode in parse_trunk(spec))
+def out_side(n, spec):
+    """Side of the trunk's output map for an input side n: a stride-2 3x3 convolution with padding 1
+    gives ceil(n / 2), a 2x2 max-pool floor(n / 2), so sides need not be multiples of 16."""
+    for _, mode in parse_trunk(spec):
+        n = (n + 1) // 2 if mode == "s" else n // 2 if mode == "p" else n
+    return n
 
 
 def trunk(spec):
@@ -44,7 +48,7 @@ class Level1(nn.Module):
     def __init__(self, size=64, spec="16s-32s-48s-64s", hidden=128, n_points=32):
         super().__init__()
         self.trunk = trunk(spec)
-        r = size // downsampling(spec)
+        r = out_side(size, spec)
         self.fc = nn.Sequential(nn.Flatten(), nn.Linear(last_channels(spec) * r * r, hidden), nn.ReLU(inplace=True))
         self.landmarks = nn.Linear(hidden, 2 * n_points)
         self.yaw = nn.Linear(hidden, 5)
@@ -64,8 +68,8 @@ class Level2(nn.Module):
     def __init__(self, width, height, n_points, n_gestures=0, gaze=False, spec="8s-16s-32s-48s", hidden=64):
         super().__init__()
         self.trunk = trunk(spec)
-        k = downsampling(spec)
-        self.fc1 = nn.Sequential(nn.Flatten(), nn.Linear(last_channels(spec) * (width // k) * (height // k), hidden),
+        side = last_channels(spec) * out_side(width, spec) * out_side(height, spec)
+        self.fc1 = nn.Sequential(nn.Flatten(), nn.Linear(side, hidden),
                                  nn.ReLU(inplace=True))
         self.fc2 = nn.Sequential(nn.Linear(hidden + 5, hidden), nn.ReLU(inplace=True))
         self.landmarks = nn.Linear(hidden, 2 * n_points)
