@@ -268,9 +268,8 @@ def text_negative(img, rng):
     one or two glyphs. Why: news video captions (white CJK or Latin glyphs of about 20 px, often
     outlined, on a dark band) reach the face check as detector candidates, and level 1 passes some at
     0.97-1.0 (eval_face_check.py measures it; training level 1 with them was tried and not kept,
-    MODEL_CARD.md). The background is a region of `img`,
-    darkened or under a flat band; glyph size, colour, outline, characters and the square are drawn
-    from `rng`."""
+    MODEL_CARD.md). The background is a region of `img`, darkened or under a flat band; glyph size,
+    colour, outline, characters and the square are drawn from `rng`."""
     from PIL import Image, ImageDraw, ImageFont
     if not os.path.exists(TEXT_FONT):
         raise SystemExit(f"{TEXT_FONT} missing: apt-get install fonts-wqy-microhei (level 1's text negatives)")

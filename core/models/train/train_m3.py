@@ -48,7 +48,7 @@ BATCH = 64
 # Nets that also learn from GENKI-4K crops labelled by the PFLD teacher (pseudo_genki.py), and their
 # share of those nets' batches. The face zone (jaw + nose) overfits faces68 (training-split NME: jaw
 # 3.4 % against 7.9 % on validation); with the teacher's faces its validation jaw NME fell 7.93 ->
-# 7.60 % (MODEL_CARD.md).
+# 7.70 % (the 64x64 zone, before the level-1 blend; MODEL_CARD.md).
 PSEUDO_NETS = ("face",)
 PSEUDO_SHARE = 0.4
 # Trunks (m3nets.trunk spec strings) of the shipped models; --level1-trunk / --zone-trunk override
