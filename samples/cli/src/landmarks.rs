@@ -28,6 +28,10 @@ struct LineIn {
     faces: Option<Vec<FaceIn>>,
 }
 
+/// A face to finish: its box, the detector's score (none for a given box) and, for a detected
+/// face, level 1's output from the face check.
+type FaceToDo = (Rect, Option<f32>, Option<FaceLandmarks>);
+
 /// Everything reused from line to line.
 struct Pipeline {
     m3: M3,
@@ -40,8 +44,9 @@ struct Pipeline {
 }
 
 impl Pipeline {
-    /// Face boxes and scores of the whole image, found as the tracker finds them (default settings).
-    fn detect(&mut self) -> Result<Vec<(Rect, Option<f32>)>, String> {
+    /// Face boxes, scores and level-1 outputs of the whole image, found as the tracker finds them
+    /// (default settings).
+    fn detect(&mut self) -> Result<Vec<FaceToDo>, String> {
         if self.detector.is_none() {
             // The tracker's cascade: candidates down to its detection score, accepted by M3's
             // face check at its detection confidence.
@@ -53,14 +58,16 @@ impl Pipeline {
             .map_err(|e| e.to_string())?;
         // As in the tracker: a detection must also pass M3's face classifier, which rejects the
         // face-like clutter the compact detector scores high (core/models/MODEL_CARD.md).
+        // The check is level 1 on the face's box: its output is kept, so an accepted face only
+        // needs level 2 (`M3::refine`), as in the tracker.
         let mut faces = Vec::with_capacity(self.found.len());
         for d in &self.found {
             let p = self
                 .m3
-                .face_confidence(&self.gray, &d.rect)
+                .level1(&self.gray, &d.rect, &mut self.lm)
                 .map_err(|e| e.to_string())?;
             if p >= DEFAULT_MIN_DETECTION_CONFIDENCE {
-                faces.push((d.rect, Some(d.score)));
+                faces.push((d.rect, Some(d.score), Some(self.lm)));
             }
         }
         Ok(faces)
@@ -141,12 +148,12 @@ fn landmarks_line(text: &str, base: &Path, p: &mut Pipeline) -> Result<Value, St
     let (w, h) = (p.gray.width() as u32, p.gray.height() as u32);
     let cam = intrinsics(line.camera, w, h).map_err(|e| e.to_string())?;
     let t_detect = Instant::now();
-    let boxes: Vec<(Rect, Option<f32>)> = match &line.faces {
+    let boxes: Vec<FaceToDo> = match &line.faces {
         Some(faces) => faces
             .iter()
             .map(|f| {
                 let [x, y, bw, bh] = f.bbox;
-                (Rect::new(x, y, bw, bh), None)
+                (Rect::new(x, y, bw, bh), None, None)
             })
             .collect(),
         None => p.detect()?,
@@ -158,10 +165,17 @@ fn landmarks_line(text: &str, base: &Path, p: &mut Pipeline) -> Result<Value, St
     };
     let (mut landmarks_us, mut fit_us) = (0u64, 0u64);
     let mut faces = Vec::with_capacity(boxes.len());
-    for (k, (rect, det_score)) in boxes.iter().enumerate() {
+    for (k, (rect, det_score, checked)) in boxes.iter().enumerate() {
         let t0 = Instant::now();
-        p.m3.estimate(&p.gray, rect, &mut p.lm)
-            .map_err(|e| format!("face {k}: {e}"))?;
+        // A detected face's level 1 ran in the face check (timed under `detect`).
+        match checked {
+            Some(level1) => {
+                p.lm = *level1;
+                p.m3.refine(&p.gray, &mut p.lm)
+            }
+            None => p.m3.estimate(&p.gray, rect, &mut p.lm),
+        }
+        .map_err(|e| format!("face {k}: {e}"))?;
         landmarks_us += t0.elapsed().as_micros() as u64;
         let mut pts = [[0.0f64; 2]; N_POINTS];
         for (d, s) in pts.iter_mut().zip(&p.lm.points) {
