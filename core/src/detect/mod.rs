@@ -3,10 +3,11 @@
 //! The network (`models/detector/detector.onnx`, trained by `models/train/detector/train.py` on
 //! the faces68 training split; see `models/MODEL_CARD.md`) is fully convolutional: it takes the
 //! frame shrunk by area averaging so that a face of [`DetectorConfig::min_face_px`] becomes
-//! [`NET_MIN_FACE_PX`] pixels, and returns "centre heatmap" heads at strides 8, 16, 32 and 64. Each
-//! head cell holds a face logit, the face centre's offset from the cell anchor
-//! (`stride · (i + 0.5)`, in cells) and `log(w / stride)`, `log(h / stride)`. Decoding keeps 3×3
-//! local maxima of the logits above the score threshold and merges heads by greedy NMS.
+//! [`NET_MIN_FACE_PX`] pixels, and returns "centre heatmap" heads at the strides `detector.json`
+//! lists (8, 16, 32 and 64 for the shipped network; checked at load). Each head cell holds a face
+//! logit, the face centre's offset from the cell anchor (`stride · (i + 0.5)`, in cells) and
+//! `log(w / stride)`, `log(h / stride)`. Decoding keeps 3×3 local maxima of the logits above the
+//! score threshold and merges heads by greedy NMS.
 //!
 //! Boxes follow the M3 convention (`models/M3_IO.md`): the tight bounding box of the 68 landmarks,
 //! in image pixels (pixel (i, j) covers `[i, i+1)×[j, j+1)`).
@@ -34,8 +35,11 @@ static MODEL_JSON: &str = include_str!("../../models/detector/detector.json");
 /// `LEVEL_RANGES`); 10 px leaves a margin. Checked against `detector.json` at load.
 pub const NET_MIN_FACE_PX: f32 = 10.0;
 
-/// Strides of the network's heads, in network pixels (the order of its outputs).
-pub const STRIDES: [usize; 4] = [8, 16, 32, 64];
+/// Most heads a network may have (strides 2 to 128); bounds the description check.
+const MAX_HEADS: usize = 7;
+
+/// The head [`FaceDetector::score_window`] reads.
+const WINDOW_STRIDE: usize = 16;
 
 /// Channels per head cell: face logit, dx, dy, log w, log h.
 const HEAD_CHANNELS: usize = 5;
@@ -162,6 +166,10 @@ struct ShapePlan {
 pub struct FaceDetector {
     config: DetectorConfig,
     model: InferenceModel,
+    /// Strides of the network's heads, in network pixels, in the order of its outputs.
+    strides: Vec<usize>,
+    /// Index of the [`WINDOW_STRIDE`] head among the outputs.
+    window_head: usize,
     plans: Vec<ShapePlan>,
     tick: u64,
     resampler: AreaResampler,
@@ -199,18 +207,15 @@ impl FaceDetector {
         config.validate()?;
         let desc: ModelDesc = serde_json::from_str(MODEL_JSON)
             .map_err(|e| Error::ModelLoad(format!("detector.json: {e}")))?;
-        if desc.strides != STRIDES || desc.net_min_face_px != NET_MIN_FACE_PX {
-            return Err(Error::ModelLoad(format!(
-                "detector.json (strides {:?}, net_min_face_px {}) disagrees with the decoder",
-                desc.strides, desc.net_min_face_px
-            )));
-        }
+        let window_head = check_desc(&desc)?;
         let model = tract_onnx::onnx()
             .model_for_read(&mut std::io::Cursor::new(MODEL_ONNX))
             .map_err(|e| Error::ModelLoad(format!("detector.onnx: {e}")))?;
         Ok(Self {
             config,
             model,
+            strides: desc.strides,
+            window_head,
             plans: Vec::with_capacity(MAX_PLANS),
             tick: 0,
             resampler: AreaResampler::default(),
@@ -328,7 +333,7 @@ impl FaceDetector {
             outputs.map_err(internal)?
         };
         let logit_thr = logit(self.config.score_threshold);
-        for (k, &stride) in STRIDES.iter().enumerate() {
+        for (k, &stride) in self.strides.iter().enumerate() {
             let t = outputs
                 .get(k)
                 .ok_or_else(|| Error::Internal("detector: missing head output".into()))?;
@@ -391,7 +396,7 @@ impl FaceDetector {
         let outputs = outputs.map_err(internal)?;
         // Stride-16 head: the patch centre (32, 32) lies between cells 1 and 2 on each axis.
         let t = outputs
-            .get(1)
+            .get(self.window_head)
             .ok_or_else(|| Error::Internal("detector: missing head output".into()))?;
         let shape = t.shape();
         if shape.len() != 4 || shape[1] != HEAD_CHANNELS || shape[2] < 3 || shape[3] < 3 {
@@ -409,6 +414,37 @@ impl FaceDetector {
         debug_assert!(gh * gw * HEAD_CHANNELS == data.len());
         Ok(sigmoid(best))
     }
+}
+
+/// Checks the network description against what this decoder supports and returns the index of
+/// the [`WINDOW_STRIDE`] head.
+fn check_desc(desc: &ModelDesc) -> Result<usize> {
+    let bad = |why: &str| {
+        Error::ModelLoad(format!(
+            "detector.json (strides {:?}, net_min_face_px {}): {why}",
+            desc.strides, desc.net_min_face_px
+        ))
+    };
+    if desc.net_min_face_px != NET_MIN_FACE_PX {
+        return Err(bad("net_min_face_px disagrees with the decoder"));
+    }
+    if desc.strides.is_empty() || desc.strides.len() > MAX_HEADS {
+        return Err(bad("expected 1 to 7 heads"));
+    }
+    if !desc
+        .strides
+        .iter()
+        .all(|&s| s.is_power_of_two() && (2..=128).contains(&s))
+        || !desc.strides.windows(2).all(|p| p[0] < p[1])
+    {
+        return Err(bad(
+            "strides must be increasing powers of two from 2 to 128",
+        ));
+    }
+    desc.strides
+        .iter()
+        .position(|&s| s == WINDOW_STRIDE)
+        .ok_or_else(|| bad("no stride-16 head (score_window reads it)"))
 }
 
 #[inline]
@@ -519,6 +555,40 @@ mod tests {
         out.clear();
         nms(&mut c, 0.4, 1, &mut out);
         assert_eq!(out.len(), 1);
+    }
+
+    #[test]
+    fn model_description_is_checked() {
+        let desc = |strides: &[usize], m: f32| ModelDesc {
+            strides: strides.to_vec(),
+            net_min_face_px: m,
+        };
+        assert_eq!(
+            check_desc(&desc(&[4, 8, 16, 32, 64], NET_MIN_FACE_PX)).ok(),
+            Some(2)
+        );
+        assert_eq!(
+            check_desc(&desc(&[8, 16, 32, 64], NET_MIN_FACE_PX)).ok(),
+            Some(1)
+        );
+        for bad in [
+            desc(&[8, 16, 32, 64], NET_MIN_FACE_PX + 1.0),
+            desc(&[], NET_MIN_FACE_PX),
+            desc(&[8, 32, 64], NET_MIN_FACE_PX),
+            desc(&[16, 8], NET_MIN_FACE_PX),
+            desc(&[12, 16], NET_MIN_FACE_PX),
+            desc(&[1, 16], NET_MIN_FACE_PX),
+            desc(&[16, 256], NET_MIN_FACE_PX),
+            desc(&[2, 4, 8, 16, 32, 64, 128, 128], NET_MIN_FACE_PX),
+        ] {
+            assert!(
+                matches!(check_desc(&bad), Err(Error::ModelLoad(_))),
+                "{:?}",
+                bad.strides
+            );
+        }
+        let shipped: ModelDesc = serde_json::from_str(MODEL_JSON).unwrap();
+        assert!(check_desc(&shipped).is_ok());
     }
 
     #[test]
