@@ -6,7 +6,7 @@
 //! cargo run --release -p monotrack-core --example time_nets -- /tmp/trunks
 //! ```
 //!
-//! Every `NAME.onnx` in the folder whose name is an M3 net (level1, face, brows, mouth, eye) runs
+//! Every `NAME.onnx` in the folder whose name is an M3 net (level1, face, brows, mouth, eye, nose) runs
 //! with that net's input shapes on a fixed varied input; prints the median and 10th percentile of
 //! 300 runs after 20 warm-up runs. Every `detector*.onnx` (face detector candidates,
 //! `core::detect`) runs at the network inputs of a 640×480 frame: 200×150 (min face 32 px at 10
@@ -26,12 +26,13 @@ const DETECTOR_INPUTS: [[usize; 2]; 6] = [
     [96, 128],
 ];
 
-const NETS: [(&str, &[&[usize]]); 5] = [
+const NETS: [(&str, &[&[usize]]); 6] = [
     ("level1", &[&[1, 1, 64, 64]]),
     ("face", &[&[1, 1, 48, 48], &[1, 5]]),
     ("brows", &[&[1, 1, 32, 64], &[1, 5]]),
     ("mouth", &[&[1, 1, 48, 48], &[1, 5]]),
     ("eye", &[&[1, 1, 24, 40], &[1, 5]]),
+    ("nose", &[&[1, 1, 32, 32], &[1, 5]]),
 ];
 
 fn main() -> TractResult<()> {

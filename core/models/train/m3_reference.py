@@ -69,8 +69,9 @@ class M3:
         refs68 = out68.copy()  # level 1's points; the eye corners are replaced after the eye zone
         level1_68 = out68.copy()
         res = {"yaw_probs": yaw, "face_prob": face}
-        # M3_IO.md: the eye zone runs first, and its eye corners replace level 1's as references.
-        for name in sorted(self.zones, key=lambda n: n != "eye"):
+        # M3_IO.md: the eye zone runs first, and its eye corners replace level 1's as references; the
+        # others run in name order, so where two give the same point the later name's wins.
+        for name in sorted(self.zones, key=lambda n: (n != "eye", n)):
             z, sess = self.zones[name]
             r = z["ref68"]
             if name == "eye":

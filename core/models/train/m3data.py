@@ -74,6 +74,13 @@ ZONES = {
     "face": {"width": 48, "height": 48, "ref68": [36, 45], "template": [[0.32, 0.3], [0.68, 0.3]],
              "indices68": list(range(0, 17)) + list(range(27, 36)), "bilateral": None, "equalize": False,
              "level1_weight": [0.5] * 17 + [0.3] * 9},
+    # The nose at a finer scale (another addition): a 32x32 patch on the outer eye corners around the
+    # nose alone. It runs after the face zone (zones other than the eye run in name order) and so
+    # replaces the face zone's nose points, blended 0.8 / 0.2 with level 1's: on the validation split
+    # the nose NME falls 3.77 -> 3.14 % (the zone alone 3.20 %; MODEL_CARD.md).
+    "nose": {"width": 32, "height": 32, "ref68": [36, 45], "template": [[0.15, 0.25], [0.85, 0.25]],
+             "indices68": list(range(27, 36)), "bilateral": None, "equalize": False,
+             "level1_weight": [0.2] * 9},
 }
 LEVEL1 = {"input_size": 64, "crop_scale": 1.3}
 

@@ -561,6 +561,19 @@ mod tests {
     }
 
     #[test]
+    fn shipped_face_models_fit_the_size_budget() {
+        // The budget for all face networks together: 1.5 MB of weights (the ONNX files; m3.json
+        // and detector.json are configuration).
+        let m3: usize = crate::landmarks::EMBEDDED_FILES
+            .iter()
+            .filter(|(name, _)| name.ends_with(".onnx"))
+            .map(|(_, b)| b.len())
+            .sum();
+        let total = m3 + MODEL_ONNX.len();
+        assert!(total <= 1_500_000, "{total} bytes of face networks");
+    }
+
+    #[test]
     fn model_description_is_checked() {
         let desc = |strides: &[usize], m: f32| ModelDesc {
             strides: strides.to_vec(),

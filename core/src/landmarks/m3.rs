@@ -19,6 +19,7 @@ pub const EMBEDDED_FILES: &[(&str, &[u8])] = &[
     ("eye.onnx", include_bytes!("../../models/m3/eye.onnx")),
     ("mouth.onnx", include_bytes!("../../models/m3/mouth.onnx")),
     ("face.onnx", include_bytes!("../../models/m3/face.onnx")),
+    ("nose.onnx", include_bytes!("../../models/m3/nose.onnx")),
 ];
 
 /// Number of level-1 landmarks (`M3_IO.md`).
@@ -835,6 +836,8 @@ mod tests {
         let face = Rect::new(40.0, 20.0, 70.0, 80.0);
         let run = |weight: Option<f64>| {
             let json = json_with(|v| {
+                // Without the nose zone, which would replace the face zone's nose points.
+                v["zones"].as_object_mut().unwrap().remove("nose");
                 let n = v["zones"]["face"]["indices68"].as_array().unwrap().len();
                 v["zones"]["face"]["level1_weight"] = match weight {
                     Some(w) => serde_json::json!(vec![w; n]),
@@ -864,6 +867,46 @@ mod tests {
                 assert_eq!((h, f), (z, z), "{i}: only the face zone's points blend");
             }
         }
+    }
+
+    #[test]
+    fn a_later_zone_replaces_an_earlier_zones_points() {
+        let img = image();
+        let face = Rect::new(40.0, 20.0, 70.0, 80.0);
+        let run = |edit: &dyn Fn(&mut Value)| {
+            let mut m3 = M3::from_bytes(&json_with(edit), EMBEDDED_FILES).unwrap();
+            let mut out = FaceLandmarks::default();
+            m3.estimate(&img, &face, &mut out).unwrap();
+            out
+        };
+        let nose: Vec<usize> = (27..36).collect();
+        let shipped = run(&|_| {});
+        // The nose zone at full level-1 weight gives level 1's nose whatever the face zone says.
+        let l1 = {
+            let mut m3 = M3::new().unwrap();
+            let mut l1 = FaceLandmarks::default();
+            m3.level1(&img, &face, &mut l1).unwrap();
+            l1
+        };
+        let all_l1 = run(&|v| v["zones"]["nose"]["level1_weight"] = serde_json::json!(vec![1.0; 9]));
+        let face_zero = run(&|v| {
+            v["zones"]["nose"]["level1_weight"] = serde_json::json!(vec![1.0; 9]);
+            v["zones"]["face"]["level1_weight"] = serde_json::json!(vec![0.0; 26]);
+        });
+        let no_nose = run(&|v| {
+            v["zones"].as_object_mut().unwrap().remove("nose");
+        });
+        for i in 0..N_POINTS {
+            if nose.contains(&i) {
+                assert_eq!(all_l1.points[i], l1.points[i], "{i}");
+                assert_eq!(face_zero.points[i], l1.points[i], "{i}");
+                assert_ne!(no_nose.points[i], shipped.points[i], "{i}: the nose zone's point");
+            } else {
+                assert_eq!(no_nose.points[i], shipped.points[i], "{i}");
+            }
+        }
+        // Jaw points still come from the face zone's blend.
+        assert_ne!(face_zero.points[8], all_l1.points[8]);
     }
 
     #[test]
