@@ -888,7 +888,8 @@ mod tests {
             m3.level1(&img, &face, &mut l1).unwrap();
             l1
         };
-        let all_l1 = run(&|v| v["zones"]["nose"]["level1_weight"] = serde_json::json!(vec![1.0; 9]));
+        let all_l1 =
+            run(&|v| v["zones"]["nose"]["level1_weight"] = serde_json::json!(vec![1.0; 9]));
         let face_zero = run(&|v| {
             v["zones"]["nose"]["level1_weight"] = serde_json::json!(vec![1.0; 9]);
             v["zones"]["face"]["level1_weight"] = serde_json::json!(vec![0.0; 26]);
@@ -900,7 +901,10 @@ mod tests {
             if nose.contains(&i) {
                 assert_eq!(all_l1.points[i], l1.points[i], "{i}");
                 assert_eq!(face_zero.points[i], l1.points[i], "{i}");
-                assert_ne!(no_nose.points[i], shipped.points[i], "{i}: the nose zone's point");
+                assert_ne!(
+                    no_nose.points[i], shipped.points[i],
+                    "{i}: the nose zone's point"
+                );
             } else {
                 assert_eq!(no_nose.points[i], shipped.points[i], "{i}");
             }
