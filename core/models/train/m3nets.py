@@ -68,8 +68,8 @@ class Level2(nn.Module):
     def __init__(self, width, height, n_points, n_gestures=0, gaze=False, spec="8s-16s-32s-48s", hidden=64):
         super().__init__()
         self.trunk = trunk(spec)
-        side = last_channels(spec) * out_side(width, spec) * out_side(height, spec)
-        self.fc1 = nn.Sequential(nn.Flatten(), nn.Linear(side, hidden),
+        features = last_channels(spec) * out_side(width, spec) * out_side(height, spec)
+        self.fc1 = nn.Sequential(nn.Flatten(), nn.Linear(features, hidden),
                                  nn.ReLU(inplace=True))
         self.fc2 = nn.Sequential(nn.Linear(hidden + 5, hidden), nn.ReLU(inplace=True))
         self.landmarks = nn.Linear(hidden, 2 * n_points)

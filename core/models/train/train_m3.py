@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Trains the five M3 networks (level 1 + four zone nets) and exports them to core/models/m3/ (ONNX opset 17 + m3.json).
+"""Trains the six M3 networks (level 1 + five zone nets) and exports them to core/models/m3/ (ONNX opset 17 + m3.json).
 
     python3 core/models/train/train_m3.py [--steps-scale 1.0] [--only level1,brows,eye,mouth,face,nose]
 

@@ -14,7 +14,9 @@ import numpy as np
 import cv2
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, HERE)
 import eval_m3 as E, m3data as D, m3_reference as R, onnxruntime as ort  # noqa: E402
+from unlabeled import iou  # noqa: E402
 MODELS = os.path.join(HERE, "..", "..")
 paths, faces = D.load_faces68("val")
 boxes = E.jittered_boxes(faces)
@@ -34,9 +36,6 @@ def win(gray, b):
 pos, neg = [], []
 byimg = {}
 for f in faces: byimg.setdefault(f["image"], []).append(D.box_of(f["pts"]))
-def iou(a, b):
-    x0, y0 = max(a[0], b[0]), max(a[1], b[1]); x1, y1 = min(a[0]+a[2], b[0]+b[2]), min(a[1]+a[3], b[1]+b[3])
-    i = max(0, x1-x0) * max(0, y1-y0); return i / (a[2]*a[3] + b[2]*b[3] - i)
 for f, b in zip(faces, boxes):
     g = D.load_gray(paths[f["image"]]).astype(np.uint8)
     gf = g.astype(np.float32)
