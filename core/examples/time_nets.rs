@@ -6,8 +6,9 @@
 //! cargo run --release -p monotrack-core --example time_nets -- /tmp/trunks
 //! ```
 //!
-//! Every `NAME.onnx` in the folder whose name is an M3 net (level1, face, brows, mouth, eye, nose) runs
-//! with that net's input shapes on a fixed varied input; prints the median and 10th percentile of
+//! Every `NAME.onnx` in the folder whose name is an M3 net (level1, face, brows, mouth, eye, nose, mouth_fine) runs
+//! with that net's input shapes on a fixed varied input (a zone named in the folder's `m3.json`
+//! with its patch size there; one patch per run, so the eye's two take twice its figure); prints the median and 10th percentile of
 //! 300 runs after 20 warm-up runs. Every `detector*.onnx` (face detector candidates,
 //! `core::detect`) runs at the network inputs of a 640×480 frame: 200×150 (min face 32 px at 10
 //! network pixels), 213×160 and 267×200 (min face 24 px at 8 or 10), 320×240 and 400×300 (min
@@ -26,13 +27,14 @@ const DETECTOR_INPUTS: [[usize; 2]; 6] = [
     [96, 128],
 ];
 
-const NETS: [(&str, &[&[usize]]); 6] = [
+const NETS: [(&str, &[&[usize]]); 7] = [
     ("level1", &[&[1, 1, 64, 64]]),
     ("face", &[&[1, 1, 48, 48], &[1, 5]]),
     ("brows", &[&[1, 1, 32, 64], &[1, 5]]),
     ("mouth", &[&[1, 1, 48, 48], &[1, 5]]),
     ("eye", &[&[1, 1, 24, 40], &[1, 5]]),
     ("nose", &[&[1, 1, 32, 32], &[1, 5]]),
+    ("mouth_fine", &[&[1, 1, 40, 48], &[1, 5]]),
 ];
 
 fn main() -> TractResult<()> {
@@ -42,7 +44,33 @@ fn main() -> TractResult<()> {
     };
     // (label printed, ONNX file stem, input shapes)
     let mut jobs: Vec<(String, String, Vec<Vec<usize>>)> = Vec::new();
+    // Zones an `m3.json` in the folder names (other sizes, new zones) replace the table's.
+    let zones: Vec<(String, usize, usize)> = std::fs::read(format!("{dir}/m3.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|v| v.get("zones")?.as_object().cloned())
+        .map(|z| {
+            z.iter()
+                .filter_map(|(name, c)| {
+                    let side = |k: &str| c.get(k)?.as_u64().map(|v| v as usize);
+                    Some((name.clone(), side("width")?, side("height")?))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    for (name, w, h) in &zones {
+        if std::path::Path::new(&format!("{dir}/{name}.onnx")).exists() {
+            jobs.push((
+                name.clone(),
+                name.clone(),
+                vec![vec![1, 1, *h, *w], vec![1, 5]],
+            ));
+        }
+    }
     for (name, shapes) in NETS {
+        if zones.iter().any(|(n, _, _)| n == name) {
+            continue;
+        }
         if std::path::Path::new(&format!("{dir}/{name}.onnx")).exists() {
             jobs.push((
                 name.to_string(),

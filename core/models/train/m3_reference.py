@@ -91,10 +91,16 @@ class M3:
                 corners = list(z["ref68"]) + list(z["mirror_ref68"])
                 refs68[corners] = out68[corners]
             else:
-                pts, g, _ = self._zone(z, sess, gray, refs68[r[0]], refs68[r[1]], yaw, False)
-                # M3_IO.md: a landmarks-only zone may blend its points with level 1's.
-                w = np.array(z.get("level1_weight") or [0.0] * len(pts))[:, None]
-                out68[z["indices68"]] = (1 - w) * pts + w * level1_68[z["indices68"]]
+                src = out68 if z.get("refs", "level1") == "merged" else refs68
+                pts, g, _ = self._zone(z, sess, gray, src[r[0]], src[r[1]], yaw, False)
+                # M3_IO.md: a landmarks-only zone may blend its points with level 1's or with the
+                # points as they stood before it ran.
+                idx = z["indices68"]
+                if z.get("prior_weight"):
+                    w, other = np.array(z["prior_weight"])[:, None], out68[idx]
+                else:
+                    w, other = np.array(z.get("level1_weight") or [0.0] * len(pts))[:, None], level1_68[idx]
+                out68[idx] = (1 - w) * pts + w * other
                 if z.get("gestures"):
                     res[name] = dict(zip(z["gestures"], softmax(g).tolist()))
         res["landmarks68"] = out68

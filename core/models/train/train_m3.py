@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Trains the six M3 networks (level 1 + five zone nets) and exports them to core/models/m3/ (ONNX opset 17 + m3.json).
+"""Trains the seven M3 networks (level 1 + six zone nets) and exports them to core/models/m3/ (ONNX opset 17 + m3.json).
 
-    python3 core/models/train/train_m3.py [--steps-scale 1.0] [--only level1,brows,eye,mouth,face,nose]
+    python3 core/models/train/train_m3.py [--steps-scale 1.0] [--only level1,brows,eye,mouth,face,nose,mouth_fine]
 
 Seeds are fixed (numpy, torch, python; each net seeds itself); one CPU thread per process by default
 (MONOTRACK_TRAIN_THREADS); level 1 first, then the zone nets in up to --jobs processes at once.
@@ -55,10 +55,10 @@ PSEUDO_SHARE = 0.4
 # them for experiments.
 LEVEL1_TRUNK = "16s-32s-48s-48c-64s"
 LEVEL1_HIDDEN = 128
-ZONE_TRUNK = {"eye": "8s-16s-16c-32s", "face": "16s-32s-48s-48c-96s", "mouth": "16s-32s-48s-48c-64s",
-              "default": "8s-16s-32s-32c-48s"}
-STEPS = {"level1": 15000, "brows": 10000, "eye": 10000, "mouth": 12500, "face": 15000, "nose": 10000}
-ZONE_SEED = {"brows": 2, "eye": 3, "mouth": 4, "face": 5, "nose": 6}
+ZONE_TRUNK = {"eye": "8s-16s-16c-32s", "face": "16s-32s-48s-48c-96s", "default": "8s-16s-32s-32c-48s"}
+STEPS = {"level1": 15000, "brows": 10000, "eye": 10000, "mouth": 12500, "face": 15000, "nose": 10000,
+         "mouth_fine": 10000}
+ZONE_SEED = {"brows": 2, "eye": 3, "mouth": 4, "face": 5, "nose": 6, "mouth_fine": 7}
 DEVICE = torch.device("cpu")
 
 
@@ -394,7 +394,7 @@ def genki_with_refs(level1_path, split):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps-scale", type=float, default=1.0)
-    ap.add_argument("--only", default="level1,brows,eye,mouth,face,nose")
+    ap.add_argument("--only", default="level1,brows,eye,mouth,face,nose,mouth_fine")
     # Architecture experiments (defaults = the shipped models), m3nets.trunk specs: e.g.
     # --level1-trunk 16s-32s-48s-64s --zone-trunk eye=8s-16s-32s,default=8s-16s-32s-48s
     ap.add_argument("--level1-trunk", default=None)
@@ -451,7 +451,7 @@ def main():
         log(fh, f"level1 hard negatives: {data.mine_hard_negatives()} detector false positives on the training images")
         m = train_level1(data, steps["level1"], fh)
         export(m, os.path.join(OUT, "level1.onnx"), ["image"], [(1, 1, 64, 64)], ["landmarks", "yaw_logits", "face_logit"])
-    zones = [n for n in ("face", "mouth", "brows", "nose", "eye") if n in only]  # longest first
+    zones = [n for n in ("face", "mouth", "brows", "mouth_fine", "nose", "eye") if n in only]  # longest first
     if a.jobs > 1 and len(zones) > 1:
         run_zones_in_processes(zones, a, fh)
         zones = []

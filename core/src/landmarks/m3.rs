@@ -20,6 +20,10 @@ pub const EMBEDDED_FILES: &[(&str, &[u8])] = &[
     ("mouth.onnx", include_bytes!("../../models/m3/mouth.onnx")),
     ("face.onnx", include_bytes!("../../models/m3/face.onnx")),
     ("nose.onnx", include_bytes!("../../models/m3/nose.onnx")),
+    (
+        "mouth_fine.onnx",
+        include_bytes!("../../models/m3/mouth_fine.onnx"),
+    ),
 ];
 
 /// Number of level-1 landmarks (`M3_IO.md`).
@@ -97,6 +101,25 @@ pub struct ZoneConfig {
     /// thesis' zones win in their zones (`M3_IO.md`).
     #[serde(default)]
     pub level1_weight: Option<Vec<f64>>,
+    /// Per point of `indices68`, the weight of the point as it stood before this zone ran (level
+    /// 1's or an earlier zone's) in the merged point. Landmarks-only zones only, not together
+    /// with `level1_weight` (`M3_IO.md`).
+    #[serde(default)]
+    pub prior_weight: Option<Vec<f64>>,
+    /// Where the reference points come from (default: level 1's, with the eye zone's corners).
+    #[serde(default)]
+    pub refs: RefSource,
+}
+
+/// The points a zone's references are read from (`refs` in `m3.json`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RefSource {
+    /// Level 1's points, with the eye zone's refined corners.
+    #[default]
+    Level1,
+    /// The merged 68 points as they stand when the zone runs (after the zones before it).
+    Merged,
 }
 
 /// `m3.json`: everything the inference needs besides the weights (`models/M3_IO.md`).
@@ -177,9 +200,18 @@ impl ZoneKind {
     }
 }
 
+/// What the zones validated so far make available, in run order (`M3_IO.md`).
+struct Given {
+    /// Points given by level 1 or a zone that runs earlier.
+    merged: [bool; N_POINTS],
+    /// Points a `"refs": "level1"` zone may reference: level 1's and the eye zone's corners.
+    level1_refs: [bool; N_POINTS],
+}
+
 impl ZoneConfig {
-    /// `level1` = the level-1 `indices68`.
-    fn validate(&self, name: &str, level1: &[usize], covered: &mut [bool; N_POINTS]) -> Result<()> {
+    /// Checks the zone against the contract; `level1` = the level-1 `indices68`, `given` = what
+    /// the zones before it (in run order) give, updated with this zone's points.
+    fn validate(&self, name: &str, level1: &[usize], given: &mut Given) -> Result<()> {
         let kind = ZoneKind::of(name);
         check_side(&format!("{name}.width"), self.width)?;
         check_side(&format!("{name}.height"), self.height)?;
@@ -189,14 +221,37 @@ impl ZoneConfig {
                 "{name}.template must hold two distinct finite points"
             )));
         }
-        for r in self.ref68.iter().chain(self.mirror_ref68.iter().flatten()) {
-            if *r >= N_POINTS {
-                return Err(bad(format!("{name}: reference index {r} ≥ {N_POINTS}")));
+        if kind == ZoneKind::Eye && self.refs != RefSource::Level1 {
+            return Err(bad(format!(
+                "{name}.refs: the eye zone reads level 1's corners"
+            )));
+        }
+        let available = match self.refs {
+            RefSource::Level1 => &given.level1_refs,
+            RefSource::Merged => &given.merged,
+        };
+        for &r in self.ref68.iter().chain(self.mirror_ref68.iter().flatten()) {
+            if !available.get(r).copied().unwrap_or(false) {
+                let refs = match self.refs {
+                    RefSource::Level1 => "level1",
+                    RefSource::Merged => "merged",
+                };
+                return Err(bad(format!(
+                    "{name}: reference point {r} is not given before the zone runs \
+                     (refs {refs:?})"
+                )));
             }
         }
         let (n_points, gestures) = kind.contract();
         let n = n_points.unwrap_or(self.indices68.len().max(1));
-        check_indices(&format!("{name}.indices68"), &self.indices68, n, covered)?;
+        // Checked before this zone's points join `given`: its prior is what ran before it.
+        self.check_blend(name, kind, level1, &given.merged)?;
+        check_indices(
+            &format!("{name}.indices68"),
+            &self.indices68,
+            n,
+            &mut given.merged,
+        )?;
         if let Some(b) = &self.bilateral {
             if !(b.sigma_color.is_finite() && b.sigma_space.is_finite()) || b.d > MAX_BILATERAL_D {
                 return Err(bad(format!("{name}.bilateral out of range: {b:?}")));
@@ -219,26 +274,18 @@ impl ZoneConfig {
                 self.gaze
             )));
         }
-        if let Some(w) = &self.level1_weight {
-            if kind != ZoneKind::Plain || w.len() != self.indices68.len() {
-                return Err(bad(format!(
-                    "{name}.level1_weight: {} weights for {} points (landmarks-only zones only)",
-                    w.len(),
-                    self.indices68.len()
-                )));
-            }
-            for (&wk, &i) in w.iter().zip(&self.indices68) {
-                if !(0.0..=1.0).contains(&wk) || (wk > 0.0 && !level1.contains(&i)) {
-                    return Err(bad(format!(
-                        "{name}.level1_weight of point {i} = {wk}: must be in 0..=1, and 0 \
-                         where level 1 gives no point"
-                    )));
-                }
-            }
-        }
         match (kind, &self.mirror_ref68, &self.mirror_indices68) {
             (ZoneKind::Eye, Some(_), Some(mi)) => {
-                check_indices(&format!("{name}.mirror_indices68"), mi, n, covered)
+                check_indices(
+                    &format!("{name}.mirror_indices68"),
+                    mi,
+                    n,
+                    &mut given.merged,
+                )?;
+                for &r in self.ref68.iter().chain(self.mirror_ref68.iter().flatten()) {
+                    given.level1_refs[r] = true;
+                }
+                Ok(())
             }
             (ZoneKind::Eye, _, _) => Err(bad(format!(
                 "{name} needs mirror_ref68 and mirror_indices68"
@@ -246,6 +293,45 @@ impl ZoneConfig {
             (_, None, None) => Ok(()),
             _ => Err(bad(format!("{name}: only the eye zone is mirrored"))),
         }
+    }
+
+    /// `level1_weight` / `prior_weight`: one weight in 0..=1 per point of a landmarks-only zone,
+    /// not both, and > 0 only where the other estimate exists (`prior` = points given before the
+    /// zone runs).
+    fn check_blend(
+        &self,
+        name: &str,
+        kind: ZoneKind,
+        level1: &[usize],
+        prior: &[bool; N_POINTS],
+    ) -> Result<()> {
+        let (field, w, exists): (_, _, &dyn Fn(usize) -> bool) =
+            match (&self.level1_weight, &self.prior_weight) {
+                (None, None) => return Ok(()),
+                (Some(w), None) => ("level1_weight", w, &|i| level1.contains(&i)),
+                (None, Some(w)) => ("prior_weight", w, &|i| prior.get(i) == Some(&true)),
+                (Some(_), Some(_)) => {
+                    return Err(bad(format!(
+                        "{name}: level1_weight and prior_weight together"
+                    )));
+                }
+            };
+        if kind != ZoneKind::Plain || w.len() != self.indices68.len() {
+            return Err(bad(format!(
+                "{name}.{field}: {} weights for {} points (landmarks-only zones only)",
+                w.len(),
+                self.indices68.len()
+            )));
+        }
+        for (&wk, &i) in w.iter().zip(&self.indices68) {
+            if !(0.0..=1.0).contains(&wk) || (wk > 0.0 && !exists(i)) {
+                return Err(bad(format!(
+                    "{name}.{field} of point {i} = {wk}: must be in 0..=1, and 0 where there \
+                     is no point to blend with"
+                )));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -279,20 +365,32 @@ impl M3Config {
                 l1.yaw_classes_deg
             )));
         }
-        let mut covered = [false; N_POINTS];
-        check_indices("level1.indices68", &l1.indices68, N_LEVEL1, &mut covered)?;
+        let mut merged = [false; N_POINTS];
+        check_indices("level1.indices68", &l1.indices68, N_LEVEL1, &mut merged)?;
         for required in ["brows", "eye", "mouth"] {
             if !self.zones.contains_key(required) {
                 return Err(bad(format!("zone {required:?} missing")));
             }
         }
-        for (name, z) in &self.zones {
-            z.validate(name, &l1.indices68, &mut covered)?;
+        let mut given = Given {
+            merged,
+            level1_refs: merged,
+        };
+        for (name, z) in self.run_order() {
+            z.validate(name, &l1.indices68, &mut given)?;
         }
-        if let Some(i) = covered.iter().position(|c| !c) {
+        if let Some(i) = given.merged.iter().position(|c| !c) {
             return Err(bad(format!("landmark {i} is produced by no network")));
         }
         Ok(())
+    }
+}
+
+impl M3Config {
+    /// The zones in the order they run: the eye first, then the others by name (`M3_IO.md`).
+    fn run_order(&self) -> impl Iterator<Item = (&String, &ZoneConfig)> {
+        let eye = self.zones.iter().filter(|(n, _)| n.as_str() == "eye");
+        eye.chain(self.zones.iter().filter(|(n, _)| n.as_str() != "eye"))
     }
 }
 
@@ -310,6 +408,10 @@ struct Zone {
     q: [[f64; 2]; 2],
     /// `(68 index, level-1 weight)` of the points blended with level 1's.
     level1_blend: Vec<(usize, f64)>,
+    /// `(68 index, prior weight)` of the points blended with their value before the zone ran.
+    prior_blend: Vec<(usize, f64)>,
+    /// References from the merged points instead of level 1's (`"refs": "merged"`).
+    merged_refs: bool,
     bilateral: Option<Bilateral>,
     equalize: bool,
     net: Net,
@@ -351,12 +453,9 @@ impl Zone {
             indices68: cfg.indices68.clone(),
             mirror: cfg.mirror_ref68.zip(cfg.mirror_indices68.clone()),
             q: cfg.template.map(|t| [t[0] * w as f64, t[1] * h as f64]),
-            level1_blend: cfg
-                .level1_weight
-                .iter()
-                .flat_map(|w| cfg.indices68.iter().copied().zip(w.iter().copied()))
-                .filter(|&(_, w)| w > 0.0)
-                .collect(),
+            level1_blend: blend_pairs(&cfg.indices68, cfg.level1_weight.as_deref()),
+            prior_blend: blend_pairs(&cfg.indices68, cfg.prior_weight.as_deref()),
+            merged_refs: cfg.refs == RefSource::Merged,
             bilateral: cfg
                 .bilateral
                 .map(|b| Bilateral::new(b.d, b.sigma_color, b.sigma_space)),
@@ -520,6 +619,20 @@ fn normalized(v: [f64; 3]) -> [f64; 3] {
     [v[0] / n, v[1] / n, v[2] / n]
 }
 
+/// `(68 index, weight)` for the points of `indices` with a weight above 0.
+fn blend_pairs(indices: &[usize], weights: Option<&[f64]>) -> Vec<(usize, f64)> {
+    weights
+        .iter()
+        .flat_map(|w| indices.iter().copied().zip(w.iter().copied()))
+        .filter(|&(_, w)| w > 0.0)
+        .collect()
+}
+
+/// `(1 − w) · a + w · b`.
+fn lerp(a: [f64; 2], b: [f64; 2], w: f64) -> [f64; 2] {
+    [(1.0 - w) * a[0] + w * b[0], (1.0 - w) * a[1] + w * b[1]]
+}
+
 /// The M3 landmark and gesture detector (thesis section 3.3). See the module docs.
 #[derive(Debug)]
 pub struct M3 {
@@ -533,6 +646,8 @@ pub struct M3 {
     ref_pts: [[f64; 2]; N_POINTS],
     /// Level 1's points of the face in progress (for the zones that blend with them).
     level1_pts: [[f64; 2]; N_POINTS],
+    /// The merged points before the running zone (for `prior_weight`).
+    prior_pts: [[f64; 2]; N_POINTS],
 }
 
 /// What level 1 gives besides its points.
@@ -594,6 +709,7 @@ impl M3 {
             pts: [[0.0; 2]; N_POINTS],
             ref_pts: [[0.0; 2]; N_POINTS],
             level1_pts: [[0.0; 2]; N_POINTS],
+            prior_pts: [[0.0; 2]; N_POINTS],
         })
     }
 
@@ -706,7 +822,8 @@ impl M3 {
         }
         let yaw = out.yaw_probs;
         // Zone references are level 1's points, except the eye zone's own references (the eye
-        // corners), which its output replaces: it runs first (M3_IO.md).
+        // corners), which its output replaces: it runs first (M3_IO.md). A `"refs": "merged"`
+        // zone reads the merged points instead.
         self.ref_pts = self.pts;
         self.level1_pts = self.pts;
         for zone in &mut self.zones {
@@ -725,12 +842,21 @@ impl M3 {
                 }
                 continue;
             }
-            let refs = &self.ref_pts;
+            let refs = if zone.merged_refs {
+                &self.pts
+            } else {
+                &self.ref_pts
+            };
             let map = zone.map(refs[zone.ref68[0]], refs[zone.ref68[1]], false)?;
+            if !zone.prior_blend.is_empty() {
+                self.prior_pts = self.pts;
+            }
             zone.run_one(image, &map, &yaw, &mut self.pts)?;
             for &(i, w) in &zone.level1_blend {
-                let (z, l) = (self.pts[i], self.level1_pts[i]);
-                self.pts[i] = [(1.0 - w) * z[0] + w * l[0], (1.0 - w) * z[1] + w * l[1]];
+                self.pts[i] = lerp(self.pts[i], self.level1_pts[i], w);
+            }
+            for &(i, w) in &zone.prior_blend {
+                self.pts[i] = lerp(self.pts[i], self.prior_pts[i], w);
             }
             match zone.kind {
                 ZoneKind::Brows => softmax(zone.net.output(1)?, &mut out.brows),
@@ -914,6 +1040,55 @@ mod tests {
     }
 
     #[test]
+    fn prior_weight_blends_with_the_earlier_zones_points_from_merged_refs() {
+        let img = image();
+        let face = Rect::new(40.0, 20.0, 70.0, 80.0);
+        let run = |edit: &dyn Fn(&mut Value)| {
+            let mut m3 = M3::from_bytes(&json_with(edit), EMBEDDED_FILES).unwrap();
+            let mut out = FaceLandmarks::default();
+            m3.estimate(&img, &face, &mut out).unwrap();
+            out
+        };
+        let weights = |w: f64| serde_json::json!(vec![w; 20]);
+        let shipped = run(&|_| {});
+        let w = shipped_prior_weight();
+        let without = run(&|v| {
+            v["zones"].as_object_mut().unwrap().remove("mouth_fine");
+        });
+        let all_prior = run(&|v| v["zones"]["mouth_fine"]["prior_weight"] = weights(1.0));
+        let alone = run(&|v| v["zones"]["mouth_fine"]["prior_weight"] = Value::Null);
+        let level1_refs = run(&|v| {
+            v["zones"]["mouth_fine"]["prior_weight"] = Value::Null;
+            v["zones"]["mouth_fine"]["refs"] = "level1".into();
+        });
+        for i in 0..N_POINTS {
+            if (48..68).contains(&i) {
+                assert_eq!(all_prior.points[i], without.points[i], "{i}");
+                assert_ne!(alone.points[i], without.points[i], "{i}");
+                for c in 0..2 {
+                    let want =
+                        (1.0 - w) * alone.points[i][c] as f64 + w * without.points[i][c] as f64;
+                    assert!((f64::from(shipped.points[i][c]) - want).abs() < 1e-3, "{i}");
+                }
+                // Level 1's mouth corners are not the mouth zone's: another patch.
+                assert_ne!(level1_refs.points[i], alone.points[i], "{i}");
+            } else {
+                assert_eq!(shipped.points[i], without.points[i], "{i}");
+            }
+        }
+        // Gestures come from the mouth zone alone.
+        assert_eq!(shipped.mouth, without.mouth);
+    }
+
+    /// The shipped `mouth_fine` blend (one weight for all its points).
+    fn shipped_prior_weight() -> f64 {
+        let cfg = M3Config::from_json(embedded("m3.json")).unwrap();
+        let w = cfg.zones["mouth_fine"].prior_weight.clone().unwrap();
+        assert!(w.iter().all(|&x| x == w[0]) && w[0] > 0.0 && w[0] < 1.0);
+        w[0]
+    }
+
+    #[test]
     fn bad_inputs_are_invalid_input() {
         let mut m3 = M3::new().unwrap();
         let img = image();
@@ -968,6 +1143,28 @@ mod tests {
                 // Point 49 (level 1 gives none) in the face zone, blended with level 1.
                 v["zones"]["face"]["indices68"][0] = 49.into();
                 v["zones"]["face"]["level1_weight"] = serde_json::json!(vec![0.5; 26]);
+            }),
+            // Blending with the prior point: not with level1_weight, not in a thesis zone, and
+            // only where a point exists before the zone runs (49 comes from the later mouth).
+            json_with(|v| v["zones"]["face"]["prior_weight"] = serde_json::json!(vec![0.5; 26])),
+            json_with(|v| v["zones"]["mouth"]["prior_weight"] = serde_json::json!(vec![0.5; 20])),
+            json_with(|v| {
+                v["zones"]["face"]["indices68"][0] = 49.into();
+                v["zones"]["face"]["level1_weight"] = Value::Null;
+                v["zones"]["face"]["prior_weight"] = serde_json::json!(vec![0.5; 26]);
+            }),
+            json_with(|v| v["zones"]["mouth_fine"]["refs"] = "everything".into()),
+            // References must exist when the zone runs: the eye reads level 1's corners; a
+            // level-1 zone cannot reference a zone's point; a merged zone not a later zone's.
+            json_with(|v| v["zones"]["eye"]["refs"] = "merged".into()),
+            json_with(|v| v["zones"]["mouth"]["ref68"] = serde_json::json!([49, 8])),
+            json_with(|v| {
+                v["zones"]["mouth_fine"]["refs"] = "level1".into();
+                v["zones"]["mouth_fine"]["ref68"] = serde_json::json!([51, 54]);
+            }),
+            json_with(|v| {
+                v["zones"]["face"]["refs"] = "merged".into();
+                v["zones"]["face"]["ref68"] = serde_json::json!([49, 36]);
             }),
         ] {
             assert!(

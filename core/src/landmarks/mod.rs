@@ -2,13 +2,15 @@
 //!
 //! Level 1 runs on the face crop and gives 32 landmarks, a 5-class head yaw and a face confidence;
 //! level-2 zone networks (brows, eye — one model, the left eye mirrored — and mouth, plus this
-//! project's face zone for the jaw and nose and nose zone for the nose alone) run on
-//! similarity-normalised patches plus the level-1 yaw and give their zone's landmarks, gestures and
-//! gaze; the two are merged into the 68-point iBUG order (the face and nose zones' points averaged
-//! with level 1's, `level1_weight`; the nose zone, running later, replaces the face zone's nose).
-//! The preprocessing contract shared with the training scripts is `models/M3_IO.md`.
+//! project's face zone for the jaw and nose, nose zone for the nose alone and `mouth_fine` zone for
+//! the lips on the mouth zone's corners) run on similarity-normalised patches plus the level-1 yaw
+//! and give their zone's landmarks, gestures and gaze; the two are merged into the 68-point iBUG
+//! order (the face and nose zones' points averaged with level 1's, `level1_weight`, and the
+//! `mouth_fine` zone's with the mouth zone's, `prior_weight`; a zone running later replaces an
+//! earlier one's points). The preprocessing contract shared with the training scripts is
+//! `models/M3_IO.md`.
 //!
-//! [`M3`] holds the six networks (embedded with `include_bytes!`, optimised once by tract when it
+//! [`M3`] holds the seven networks (embedded with `include_bytes!`, optimised once by tract when it
 //! is built) and every buffer one face needs, so [`M3::estimate`] allocates nothing after its first
 //! call beyond the per-run output tensors tract itself creates. Preprocessing lives in [`warp`]
 //! (affine crop/patch sampling) and [`filter`] (bilateral filter, histogram equalisation).
@@ -19,7 +21,7 @@ mod m3;
 mod net;
 pub mod warp;
 
-pub use m3::{BilateralConfig, EMBEDDED_FILES, Level1Config, M3, M3Config, ZoneConfig};
+pub use m3::{BilateralConfig, EMBEDDED_FILES, Level1Config, M3, M3Config, RefSource, ZoneConfig};
 
 /// Number of landmarks in the merged output (iBUG 68).
 pub const N_POINTS: usize = 68;
