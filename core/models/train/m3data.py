@@ -82,13 +82,13 @@ ZONES = {
              "indices68": list(range(27, 36)), "bilateral": None, "equalize": False,
              "level1_weight": [0.2] * 9},
     # The lips at a finer scale (another addition): a 48x40 patch on the mouth zone's corners 48 and
-    # 54 ("refs": "merged"; it runs after the mouth zone by name), blended 0.6 / 0.4 with the mouth
+    # 54 ("refs": "merged"; it runs after the mouth zone by name), blended 0.7 / 0.3 with the mouth
     # zone's points (prior_weight). Trained on the annotated corners jittered like every zone's
-    # references. On the validation split the mouth NME falls 3.74 -> 3.28 % (the zone alone 3.43 %;
-    # MODEL_CARD.md). No bilateral filter: with it 3.25 %, at about twice the added time per face.
+    # references. On the validation split the mouth NME falls 3.74 -> 3.16 % (the zone alone 3.25 %;
+    # MODEL_CARD.md). No bilateral filter (measured: no gain, more time per face).
     "mouth_fine": {"width": 48, "height": 40, "ref68": [48, 54], "template": [[0.1, 0.4], [0.9, 0.4]],
                    "indices68": list(range(48, 68)), "refs": "merged", "bilateral": None, "equalize": False,
-                   "prior_weight": [0.4] * 20},
+                   "prior_weight": [0.3] * 20},
 }
 LEVEL1 = {"input_size": 64, "crop_scale": 1.3}
 

@@ -55,7 +55,8 @@ PSEUDO_SHARE = 0.4
 # them for experiments.
 LEVEL1_TRUNK = "16s-32s-48s-48c-64s"
 LEVEL1_HIDDEN = 128
-ZONE_TRUNK = {"eye": "8s-16s-16c-32s", "face": "16s-32s-48s-48c-96s", "default": "8s-16s-32s-32c-48s"}
+ZONE_TRUNK = {"eye": "8s-16s-16c-32s", "face": "16s-32s-48s-48c-96s", "mouth_fine": "8s-16s-32s-32c-32s",
+              "default": "8s-16s-32s-32c-48s"}
 STEPS = {"level1": 15000, "brows": 10000, "eye": 10000, "mouth": 12500, "face": 15000, "nose": 10000,
          "mouth_fine": 10000}
 ZONE_SEED = {"brows": 2, "eye": 3, "mouth": 4, "face": 5, "nose": 6, "mouth_fine": 7}
