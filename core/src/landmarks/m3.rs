@@ -995,16 +995,19 @@ mod tests {
         }
     }
 
+    /// The test face's landmarks with the shipped weights and `m3.json` edited by `edit`.
+    fn estimate_with(edit: &dyn Fn(&mut Value)) -> FaceLandmarks {
+        let mut m3 = M3::from_bytes(&json_with(edit), EMBEDDED_FILES).unwrap();
+        let mut out = FaceLandmarks::default();
+        m3.estimate(&image(), &Rect::new(40.0, 20.0, 70.0, 80.0), &mut out)
+            .unwrap();
+        out
+    }
+
     #[test]
     fn a_later_zone_replaces_an_earlier_zones_points() {
-        let img = image();
-        let face = Rect::new(40.0, 20.0, 70.0, 80.0);
-        let run = |edit: &dyn Fn(&mut Value)| {
-            let mut m3 = M3::from_bytes(&json_with(edit), EMBEDDED_FILES).unwrap();
-            let mut out = FaceLandmarks::default();
-            m3.estimate(&img, &face, &mut out).unwrap();
-            out
-        };
+        let run = estimate_with;
+        let (img, face) = (image(), Rect::new(40.0, 20.0, 70.0, 80.0));
         let nose: Vec<usize> = (27..36).collect();
         let shipped = run(&|_| {});
         // The nose zone at full level-1 weight gives level 1's nose whatever the face zone says.
@@ -1041,14 +1044,7 @@ mod tests {
 
     #[test]
     fn prior_weight_blends_with_the_earlier_zones_points_from_merged_refs() {
-        let img = image();
-        let face = Rect::new(40.0, 20.0, 70.0, 80.0);
-        let run = |edit: &dyn Fn(&mut Value)| {
-            let mut m3 = M3::from_bytes(&json_with(edit), EMBEDDED_FILES).unwrap();
-            let mut out = FaceLandmarks::default();
-            m3.estimate(&img, &face, &mut out).unwrap();
-            out
-        };
+        let run = estimate_with;
         let weights = |w: f64| serde_json::json!(vec![w; 20]);
         let shipped = run(&|_| {});
         let w = shipped_prior_weight();
