@@ -694,13 +694,12 @@ impl M3 {
             &["landmarks", "yaw_logits", "face_logit"],
         )?;
         check_outputs("level1", &mut level1, &[2 * N_LEVEL1, 5, 1])?;
-        let mut zones = cfg
-            .zones
-            .iter()
+        // The order `validate` checked the references in (the eye first: its corners are the
+        // other zones' references).
+        let zones = cfg
+            .run_order()
             .map(|(name, z)| Zone::new(name, z, file(&z.file)?))
             .collect::<Result<Vec<_>>>()?;
-        // The eye zone first: its corners are the other zones' references (M3_IO.md).
-        zones.sort_by_key(|z| z.kind != ZoneKind::Eye);
         Ok(Self {
             crop: Vec::with_capacity(s * s),
             cfg,
