@@ -22,7 +22,7 @@ const CENTER_JITTER: f32 = 0.05;
 /// Box scale jitter, fraction (uniform ±).
 const SCALE_JITTER: f32 = 0.10;
 /// Bound on the overall mean NME: 4.27 % measured with the shipped weights of stop 19 (128 faces,
-/// this seed; 4.75 % at stop 12, 5.28 % with the first weights) plus margin for retraining noise.
+/// this seed; 4.75 % with earlier weights, 5.28 % with the first) plus margin for retraining noise.
 const MAX_MEAN_NME: f64 = 0.05;
 
 const ZONES: [(&str, std::ops::Range<usize>); 5] = [
