@@ -200,18 +200,20 @@ impl ZoneKind {
     }
 }
 
-/// What the zones validated so far make available, in run order (`M3_IO.md`).
+/// The points that exist when a zone runs, in run order (`M3_IO.md`).
 struct Given {
-    /// Points given by level 1 or a zone that runs earlier.
+    /// Level 1's points: what a `"refs": "level1"` zone may reference (the eye zone's corners,
+    /// which replace level 1's, are level-1 points) and `level1_weight` may blend with.
+    level1: [bool; N_POINTS],
+    /// Points given by level 1 or a zone that runs earlier: what a `"refs": "merged"` zone may
+    /// reference and `prior_weight` may blend with.
     merged: [bool; N_POINTS],
-    /// Points a `"refs": "level1"` zone may reference: level 1's and the eye zone's corners.
-    level1_refs: [bool; N_POINTS],
 }
 
 impl ZoneConfig {
-    /// Checks the zone against the contract; `level1` = the level-1 `indices68`, `given` = what
-    /// the zones before it (in run order) give, updated with this zone's points.
-    fn validate(&self, name: &str, level1: &[usize], given: &mut Given) -> Result<()> {
+    /// Checks the zone against the contract; `given` = what exists before it runs (in run order),
+    /// updated with this zone's points.
+    fn validate(&self, name: &str, given: &mut Given) -> Result<()> {
         let kind = ZoneKind::of(name);
         check_side(&format!("{name}.width"), self.width)?;
         check_side(&format!("{name}.height"), self.height)?;
@@ -226,16 +228,12 @@ impl ZoneConfig {
                 "{name}.refs: the eye zone reads level 1's corners"
             )));
         }
-        let available = match self.refs {
-            RefSource::Level1 => &given.level1_refs,
-            RefSource::Merged => &given.merged,
+        let (available, refs) = match self.refs {
+            RefSource::Level1 => (&given.level1, "level1"),
+            RefSource::Merged => (&given.merged, "merged"),
         };
         for &r in self.ref68.iter().chain(self.mirror_ref68.iter().flatten()) {
             if !available.get(r).copied().unwrap_or(false) {
-                let refs = match self.refs {
-                    RefSource::Level1 => "level1",
-                    RefSource::Merged => "merged",
-                };
                 return Err(bad(format!(
                     "{name}: reference point {r} is not given before the zone runs \
                      (refs {refs:?})"
@@ -245,7 +243,7 @@ impl ZoneConfig {
         let (n_points, gestures) = kind.contract();
         let n = n_points.unwrap_or(self.indices68.len().max(1));
         // Checked before this zone's points join `given`: its prior is what ran before it.
-        self.check_blend(name, kind, level1, &given.merged)?;
+        self.check_blend(name, kind, given)?;
         check_indices(
             &format!("{name}.indices68"),
             &self.indices68,
@@ -275,18 +273,12 @@ impl ZoneConfig {
             )));
         }
         match (kind, &self.mirror_ref68, &self.mirror_indices68) {
-            (ZoneKind::Eye, Some(_), Some(mi)) => {
-                check_indices(
-                    &format!("{name}.mirror_indices68"),
-                    mi,
-                    n,
-                    &mut given.merged,
-                )?;
-                for &r in self.ref68.iter().chain(self.mirror_ref68.iter().flatten()) {
-                    given.level1_refs[r] = true;
-                }
-                Ok(())
-            }
+            (ZoneKind::Eye, Some(_), Some(mi)) => check_indices(
+                &format!("{name}.mirror_indices68"),
+                mi,
+                n,
+                &mut given.merged,
+            ),
             (ZoneKind::Eye, _, _) => Err(bad(format!(
                 "{name} needs mirror_ref68 and mirror_indices68"
             ))),
@@ -296,26 +288,18 @@ impl ZoneConfig {
     }
 
     /// `level1_weight` / `prior_weight`: one weight in 0..=1 per point of a landmarks-only zone,
-    /// not both, and > 0 only where the other estimate exists (`prior` = points given before the
-    /// zone runs).
-    fn check_blend(
-        &self,
-        name: &str,
-        kind: ZoneKind,
-        level1: &[usize],
-        prior: &[bool; N_POINTS],
-    ) -> Result<()> {
-        let (field, w, exists): (_, _, &dyn Fn(usize) -> bool) =
-            match (&self.level1_weight, &self.prior_weight) {
-                (None, None) => return Ok(()),
-                (Some(w), None) => ("level1_weight", w, &|i| level1.contains(&i)),
-                (None, Some(w)) => ("prior_weight", w, &|i| prior.get(i) == Some(&true)),
-                (Some(_), Some(_)) => {
-                    return Err(bad(format!(
-                        "{name}: level1_weight and prior_weight together"
-                    )));
-                }
-            };
+    /// not both, and > 0 only where the other estimate exists before the zone runs.
+    fn check_blend(&self, name: &str, kind: ZoneKind, given: &Given) -> Result<()> {
+        let (field, w, exists) = match (&self.level1_weight, &self.prior_weight) {
+            (None, None) => return Ok(()),
+            (Some(w), None) => ("level1_weight", w, &given.level1),
+            (None, Some(w)) => ("prior_weight", w, &given.merged),
+            (Some(_), Some(_)) => {
+                return Err(bad(format!(
+                    "{name}: level1_weight and prior_weight together"
+                )));
+            }
+        };
         if kind != ZoneKind::Plain || w.len() != self.indices68.len() {
             return Err(bad(format!(
                 "{name}.{field}: {} weights for {} points (landmarks-only zones only)",
@@ -324,7 +308,8 @@ impl ZoneConfig {
             )));
         }
         for (&wk, &i) in w.iter().zip(&self.indices68) {
-            if !(0.0..=1.0).contains(&wk) || (wk > 0.0 && !exists(i)) {
+            if !(0.0..=1.0).contains(&wk) || (wk > 0.0 && !exists.get(i).copied().unwrap_or(false))
+            {
                 return Err(bad(format!(
                     "{name}.{field} of point {i} = {wk}: must be in 0..=1, and 0 where there \
                      is no point to blend with"
@@ -365,19 +350,19 @@ impl M3Config {
                 l1.yaw_classes_deg
             )));
         }
-        let mut merged = [false; N_POINTS];
-        check_indices("level1.indices68", &l1.indices68, N_LEVEL1, &mut merged)?;
+        let mut level1 = [false; N_POINTS];
+        check_indices("level1.indices68", &l1.indices68, N_LEVEL1, &mut level1)?;
         for required in ["brows", "eye", "mouth"] {
             if !self.zones.contains_key(required) {
                 return Err(bad(format!("zone {required:?} missing")));
             }
         }
         let mut given = Given {
-            merged,
-            level1_refs: merged,
+            level1,
+            merged: level1,
         };
         for (name, z) in self.run_order() {
-            z.validate(name, &l1.indices68, &mut given)?;
+            z.validate(name, &mut given)?;
         }
         if let Some(i) = given.merged.iter().position(|c| !c) {
             return Err(bad(format!("landmark {i} is produced by no network")));
