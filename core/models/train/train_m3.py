@@ -26,6 +26,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import m3data as D  # noqa: E402
 from m3nets import Level1, Level2, n_params  # noqa: E402
 import onnx_f16  # noqa: E402
+import onnx_q8  # noqa: E402
+import onnx_tract  # noqa: E402
 import pseudo_genki  # noqa: E402
 
 OUT = os.environ.get("MONOTRACK_M3_OUT", os.path.join(D.REPO, "core", "models", "m3"))
@@ -370,7 +372,11 @@ def export(model, path, names_in, shapes_in, names_out):
     args = tuple(torch.zeros(s) for s in shapes_in)
     torch.onnx.export(model, args, path, input_names=names_in, output_names=names_out, opset_version=17,
                       dynamo=False, do_constant_folding=True)
+    # Storage: weights as float16, then int8 per output channel (half the bytes again; 4.285 ->
+    # 4.286 % NME); ReLU written in the form tract fuses (same outputs, 6-7 % faster).
     onnx_f16.to_f16(path)
+    onnx_q8.to_q8(path)
+    onnx_tract.fusable_relu(path)
 
 
 def genki_with_refs(level1_path, split):

@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use tract_onnx::prelude::*;
 
-/// The network, embedded (≈ 215 KB: float16 weight storage, float32 compute).
+/// The network, embedded (≈ 216 KB: float16 weight storage, float32 compute).
 static MODEL_ONNX: &[u8] = include_bytes!("../../models/detector/detector.onnx");
 /// The network's description written by the training script (strides, minimum face size).
 static MODEL_JSON: &str = include_str!("../../models/detector/detector.json");
