@@ -3,8 +3,8 @@
 tract lowers a convolution to a matrix product followed by a reshape, and lowers Relu to a
 max-by-scalar that it does not fuse across that reshape, so every ReLU became a pass of its own over
 the activations; a LeakyRelu after the reshape is fused into the matrix product's store. Measured
-with `core/examples/time_nets.rs` on this machine (medians of 300 runs, three alternating runs):
-each M3 network 6-7 % faster (the seven: 561 -> 523 us), outputs unchanged (LeakyRelu(0) gives
+with `core/examples/time_nets.rs` on this machine (medians of 300 runs, alternating runs): each M3
+network 6-7 % faster (the seven summed: 560-579 -> 523-527 us), outputs unchanged (LeakyRelu(0) gives
 max(x, 0) up to the sign of zero, which no later layer can see).
 
     python3 core/models/train/onnx_tract.py MODEL.onnx [...]   # in place
