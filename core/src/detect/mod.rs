@@ -556,6 +556,24 @@ mod tests {
         assert_eq!(out.len(), 1);
     }
 
+    /// `models/train/detector/train.py` writes ReLUs in the form tract fuses (`onnx_tract.py`); a
+    /// re-export without that pass still loads and gives the same boxes, so only this catches it.
+    #[test]
+    fn shipped_detector_has_fusable_relus() {
+        let proto = tract_onnx::onnx()
+            .proto_model_for_read(&mut &*MODEL_ONNX)
+            .unwrap();
+        let ops: Vec<String> = proto
+            .graph
+            .unwrap()
+            .node
+            .into_iter()
+            .map(|n| n.op_type)
+            .collect();
+        assert!(!ops.iter().any(|o| o == "Relu"), "a Relu node");
+        assert!(ops.iter().any(|o| o == "LeakyRelu"), "no LeakyRelu");
+    }
+
     #[test]
     fn shipped_face_models_fit_the_size_budget() {
         // The budget for all face networks together: 1.5 MB of weights (the ONNX files; m3.json
