@@ -103,5 +103,10 @@ class M3:
                 out68[idx] = (1 - w) * pts + w * other
                 if z.get("gestures"):
                     res[name] = dict(zip(z["gestures"], softmax(g).tolist()))
+        # M3_IO.md: the label-convention offset, along image x in units of the outer-eye-corner
+        # distance of the merged points.
+        off = self.cfg.get("x_offset_iod", 0.0)
+        if off:
+            out68[:, 0] += off * np.linalg.norm(out68[36] - out68[45])
         res["landmarks68"] = out68
         return res

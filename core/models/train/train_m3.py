@@ -4,7 +4,8 @@
     python3 core/models/train/train_m3.py [--steps-scale 1.0] [--only level1,brows,eye,mouth,face,nose,mouth_fine]
 
 Seeds are fixed (numpy, torch, python; each net seeds itself); one CPU thread per process by default
-(MONOTRACK_TRAIN_THREADS); level 1 first, then the zone nets in up to --jobs processes at once.
+(MONOTRACK_TRAIN_THREADS); level 1 first, then the zone nets in up to --jobs processes at once, then
+m3.json's label-convention offset from the training split (calibrate_m3.py) once every net exists.
 Writes next to the weights: train_log.txt (losses per step window) and the validation metrics
 (metrics.json, by eval_m3.py). Data: ../shared/data (faces68, its MediaPipe teacher, GENKI-4K);
 the split rule and the preprocessing are core/models/M3_IO.md's.
@@ -28,6 +29,7 @@ from m3nets import Level1, Level2, n_params  # noqa: E402
 import onnx_f16  # noqa: E402
 import onnx_q8  # noqa: E402
 import onnx_tract  # noqa: E402
+import calibrate_m3  # noqa: E402
 import pseudo_genki  # noqa: E402
 
 OUT = os.environ.get("MONOTRACK_M3_OUT", os.path.join(D.REPO, "core", "models", "m3"))
@@ -417,6 +419,8 @@ def main():
     # Zone nets train in this many processes at once after level 1 (each net seeds itself, so the
     # result does not depend on it).
     ap.add_argument("--jobs", type=int, default=min(4, os.cpu_count() or 1))
+    # Set for the zone processes run_zones_in_processes starts: their parent calibrates at the end.
+    ap.add_argument("--no-calibrate", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
     global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE
     DEVICE = torch.device(a.device)
@@ -471,11 +475,16 @@ def main():
         outs = ["landmarks"] + (["gaze"] if z.get("gaze") else ["gesture_logits"] if z.get("gestures") else [])
         export(m, os.path.join(OUT, f"{name}.onnx"), ["patch", "yaw"], [(1, 1, z["height"], z["width"]), (1, 5)], outs)
     write_config()
+    # The label-convention offset (calibrate_m3.py) depends on every net: estimated once they all exist.
+    if not a.no_calibrate and all(os.path.exists(os.path.join(OUT, f))
+                                  for f in ["level1.onnx"] + [f"{n}.onnx" for n in D.ZONES]):
+        value, n = calibrate_m3.write(OUT)
+        log(fh, f"x_offset_iod = {value} (calibrate_m3.py, {n} training faces)")
     log(fh, f"done {only}")
 
 
 def run_zones_in_processes(zones, a, fh):
-    base = [sys.executable, os.path.abspath(__file__), "--jobs", "1", "--steps-scale", str(a.steps_scale),
+    base = [sys.executable, os.path.abspath(__file__), "--jobs", "1", "--no-calibrate", "--steps-scale", str(a.steps_scale),
             "--device", a.device, "--zone-trunk", ",".join(f"{k}={v}" for k, v in ZONE_TRUNK.items())]
     if a.zone_size:
         base += ["--zone-size", a.zone_size]

@@ -133,7 +133,16 @@ pub struct M3Config {
     /// mirrored) and `mouth` (mouth gestures) are required; further zones (e.g. `face`) give
     /// landmarks only.
     pub zones: BTreeMap<String, ZoneConfig>,
+    /// Added to the x of every output point, in units of the distance between the output's outer
+    /// eye corners (points 36 and 45); 0 when absent. The annotations' systematic x offset, which
+    /// the nets cannot learn from mirrored training faces (`models/M3_IO.md`).
+    #[serde(default)]
+    pub x_offset_iod: f64,
 }
+
+/// Largest `x_offset_iod` accepted from `m3.json` (the shipped value is below 0.01): a larger one
+/// is a corrupt or mistaken configuration, not a label convention.
+const MAX_X_OFFSET_IOD: f64 = 0.05;
 
 fn bad(msg: String) -> Error {
     Error::ModelLoad(format!("m3.json: {msg}"))
@@ -337,6 +346,12 @@ impl M3Config {
             return Err(bad(format!(
                 "version {} (this build reads 1)",
                 self.version
+            )));
+        }
+        if !(self.x_offset_iod.is_finite() && self.x_offset_iod.abs() <= MAX_X_OFFSET_IOD) {
+            return Err(bad(format!(
+                "x_offset_iod = {} (|value| ≤ {MAX_X_OFFSET_IOD})",
+                self.x_offset_iod
             )));
         }
         let l1 = &self.level1;
@@ -613,6 +628,11 @@ fn blend_pairs(indices: &[usize], weights: Option<&[f64]>) -> Vec<(usize, f64)> 
         .collect()
 }
 
+/// Euclidean distance between two points.
+fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
 /// `(1 − w) · a + w · b`.
 fn lerp(a: [f64; 2], b: [f64; 2], w: f64) -> [f64; 2] {
     [(1.0 - w) * a[0] + w * b[0], (1.0 - w) * a[1] + w * b[1]]
@@ -848,8 +868,9 @@ impl M3 {
                 ZoneKind::Eye | ZoneKind::Plain => {}
             }
         }
+        let dx = self.cfg.x_offset_iod * distance(self.pts[36], self.pts[45]);
         for (o, p) in out.points.iter_mut().zip(&self.pts) {
-            *o = [p[0] as f32, p[1] as f32];
+            *o = [(p[0] + dx) as f32, p[1] as f32];
         }
         Ok(())
     }
@@ -946,8 +967,10 @@ mod tests {
         let face = Rect::new(40.0, 20.0, 70.0, 80.0);
         let run = |weight: Option<f64>| {
             let json = json_with(|v| {
-                // Without the nose zone, which would replace the face zone's nose points.
+                // Without the nose zone, which would replace the face zone's nose points, and
+                // without the label offset, which level 1's own points do not carry.
                 v["zones"].as_object_mut().unwrap().remove("nose");
+                v["x_offset_iod"] = serde_json::json!(0.0);
                 let n = v["zones"]["face"]["indices68"].as_array().unwrap().len();
                 v["zones"]["face"]["level1_weight"] = match weight {
                     Some(w) => serde_json::json!(vec![w; n]),
@@ -980,12 +1003,40 @@ mod tests {
     }
 
     /// The test face's landmarks with the shipped weights and `m3.json` edited by `edit`.
+    /// Runs the shipped nets with an edited `m3.json` whose label offset is 0 unless the edit sets
+    /// it, so that points compare with level 1's and the zones' own.
     fn estimate_with(edit: &dyn Fn(&mut Value)) -> FaceLandmarks {
-        let mut m3 = M3::from_bytes(&json_with(edit), EMBEDDED_FILES).unwrap();
+        let json = json_with(|v| {
+            v["x_offset_iod"] = serde_json::json!(0.0);
+            edit(v);
+        });
+        let mut m3 = M3::from_bytes(&json, EMBEDDED_FILES).unwrap();
         let mut out = FaceLandmarks::default();
         m3.estimate(&image(), &Rect::new(40.0, 20.0, 70.0, 80.0), &mut out)
             .unwrap();
         out
+    }
+
+    #[test]
+    fn x_offset_moves_every_point_along_x_by_its_share_of_the_eye_corner_distance() {
+        let base = estimate_with(&|v| v["x_offset_iod"] = serde_json::json!(0.0));
+        let absent = estimate_with(&|v| {
+            v.as_object_mut().unwrap().remove("x_offset_iod");
+        });
+        assert_eq!(absent.points, base.points);
+        let moved = estimate_with(&|v| v["x_offset_iod"] = serde_json::json!(0.04));
+        let [a, b] = [base.points[36], base.points[45]];
+        let iod = f64::from(a[0] - b[0]).hypot(f64::from(a[1] - b[1]));
+        assert!(iod > 5.0, "{iod}");
+        for (m, p) in moved.points.iter().zip(&base.points) {
+            assert!(
+                (f64::from(m[0] - p[0]) - 0.04 * iod).abs() < 1e-3,
+                "{m:?} {p:?}"
+            );
+            assert_eq!(m[1], p[1]);
+        }
+        assert_eq!(moved.mouth, base.mouth);
+        assert_eq!(moved.gaze_combined, base.gaze_combined);
     }
 
     #[test]
@@ -1100,6 +1151,8 @@ mod tests {
         for bad_json in [
             b"{not json".to_vec(),
             json_with(|v| v["version"] = 2.into()),
+            json_with(|v| v["x_offset_iod"] = serde_json::json!(0.2)),
+            json_with(|v| v["x_offset_iod"] = serde_json::json!("0.01")),
             json_with(|v| v["level1"]["indices68"] = serde_json::json!([0, 1, 2])),
             json_with(|v| {
                 v["zones"]["mouth"]["gestures"] =
