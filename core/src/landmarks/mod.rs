@@ -7,8 +7,9 @@
 //! and give their zone's landmarks, gestures and gaze; the two are merged into the 68-point iBUG
 //! order (the face and nose zones' points averaged with level 1's, `level1_weight`, and the
 //! `mouth_fine` zone's with the mouth zone's, `prior_weight`; a zone running later replaces an
-//! earlier one's points). The preprocessing contract shared with the training scripts is
-//! `models/M3_IO.md`.
+//! earlier one's points), and the merged points carry the annotations' x offset (`x_offset_iod`,
+//! which training on mirrored faces hides from the nets). The preprocessing contract shared with
+//! the training scripts is `models/M3_IO.md`.
 //!
 //! [`M3`] holds the seven networks (embedded with `include_bytes!`, optimised once by tract when it
 //! is built) and every buffer one face needs, so [`M3::estimate`] allocates nothing after its first
