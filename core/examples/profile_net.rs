@@ -10,6 +10,8 @@
 //! Prints the mean µs per run of every node taking at least 0.5 µs (500 runs after 20 warm-up
 //! runs) and the total over all nodes.
 
+mod common;
+
 use std::time::Instant;
 use tract_onnx::prelude::*;
 use tract_onnx::tract_core::plan::eval;
@@ -27,22 +29,8 @@ fn main() -> TractResult<()> {
         .iter()
         .map(|s| s.split('x').map(|v| v.parse::<usize>()).collect())
         .collect::<Result<_, _>>()?;
-    let mut model = tract_onnx::onnx().model_for_path(path)?;
-    for (i, s) in shapes.iter().enumerate() {
-        model = model.with_input_fact(i, f32::fact(s.as_slice()).into())?;
-    }
-    let plan = model.into_optimized()?.into_runnable()?;
-    // Values like a real patch (0..1, varied), as time_nets uses.
-    let inputs: TVec<TValue> = shapes
-        .iter()
-        .map(|s| {
-            let n: usize = s.iter().product();
-            let v: Vec<f32> = (0..n).map(|i| ((i * 7919) % 251) as f32 / 255.0).collect();
-            tract_ndarray::ArrayD::from_shape_vec(s.clone(), v)
-                .map(|a| TValue::from(Tensor::from(a)))
-                .map_err(TractError::from)
-        })
-        .collect::<TractResult<_>>()?;
+    let plan = common::load_plan(path, &shapes)?;
+    let inputs = common::patch_like_inputs(&shapes)?;
     let mut state = plan.spawn()?;
     let mut seconds = vec![0f64; plan.model().nodes().len()];
     for run in 0..WARM_UP + RUNS {

@@ -14,6 +14,8 @@
 //! network pixels), 213×160 and 267×200 (min face 24 px at 8 or 10), 320×240 and 400×300 (min
 //! face 16 px at 8 or 10) and the 128×96 second pass.
 
+mod common;
+
 use std::time::Instant;
 use tract_onnx::prelude::*;
 
@@ -95,22 +97,8 @@ fn main() -> TractResult<()> {
         }
     }
     for (name, file, shapes) in jobs {
-        let mut model = tract_onnx::onnx().model_for_path(format!("{dir}/{file}.onnx"))?;
-        for (i, s) in shapes.iter().enumerate() {
-            model = model.with_input_fact(i, f32::fact(s.as_slice()).into())?;
-        }
-        let plan = model.into_optimized()?.into_runnable()?;
-        // Values like a real patch (0..1, varied): zeros could take faster paths than data.
-        let inputs: TVec<TValue> = shapes
-            .iter()
-            .map(|s| {
-                let n: usize = s.iter().product();
-                let v: Vec<f32> = (0..n).map(|i| ((i * 7919) % 251) as f32 / 255.0).collect();
-                tract_ndarray::ArrayD::from_shape_vec(s.to_vec(), v)
-                    .map(|a| TValue::from(Tensor::from(a)))
-                    .map_err(TractError::from)
-            })
-            .collect::<TractResult<_>>()?;
+        let plan = common::load_plan(&format!("{dir}/{file}.onnx"), &shapes)?;
+        let inputs = common::patch_like_inputs(&shapes)?;
         for _ in 0..20 {
             plan.run(inputs.clone())?;
         }

@@ -23,23 +23,12 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import m3data as D  # noqa: E402
+import eval_m3 as E  # noqa: E402
 import m3_reference as R  # noqa: E402
 
-# Box jitter as eval_m3.py's (centre +-5 %, side +-10 %), with a seed of its own: training faces.
+# The evaluation's box jitter (centre +-5 %, side +-10 %) with a seed of its own: training faces.
 JITTER_SEED = 11
 DECIMALS = 4
-
-
-def jittered_boxes(faces, seed):
-    rng = np.random.default_rng(seed)
-    boxes = []
-    for f in faces:
-        x, y, w, h = D.box_of(f["pts"])
-        s = max(w, h)
-        cx, cy = x + w / 2 + rng.uniform(-0.05, 0.05) * s, y + h / 2 + rng.uniform(-0.05, 0.05) * s
-        k = np.exp(rng.uniform(np.log(0.9), np.log(1.1)))
-        boxes.append([cx - k * w / 2, cy - k * h / 2, k * w, k * h])
-    return boxes
 
 
 def estimate(model_dir):
@@ -49,7 +38,7 @@ def estimate(model_dir):
     m3.cfg["x_offset_iod"] = 0.0
     paths, faces = D.load_faces68("train")
     ratios = []
-    for f, b in zip(faces, jittered_boxes(faces, JITTER_SEED)):
+    for f, b in zip(faces, E.jittered_boxes(faces, JITTER_SEED)):
         p = m3.run(D.load_gray(paths[f["image"]]), np.array(b, float))["landmarks68"]
         ratios.append((f["pts"][:, 0] - p[:, 0]).mean() / np.linalg.norm(p[36] - p[45]))
     return float(np.mean(ratios)), len(ratios)

@@ -30,9 +30,14 @@ def to_f16(path):
             keep.append(init)
     if not casts:
         return
+    save_graph(m, keep, casts + list(g.node), path)
+
+
+def save_graph(m, initializers, nodes, path):
+    """Replaces model `m`'s initializers and nodes, checks it and saves it to `path`."""
+    g = m.graph
     del g.initializer[:]
-    g.initializer.extend(keep)
-    nodes = casts + list(g.node)
+    g.initializer.extend(initializers)
     del g.node[:]
     g.node.extend(nodes)
     onnx.checker.check_model(m)

@@ -20,6 +20,8 @@ import numpy as np
 import onnx
 from onnx import helper, numpy_helper, TensorProto
 
+from onnx_f16 import save_graph
+
 MIN_ELEMENTS = 64
 # DequantizeLinear's per-axis form needs opset 13.
 MIN_OPSET = 13
@@ -99,12 +101,7 @@ def to_q8(path):
     drop_inits -= used
     keep = [i for i in g.initializer if i.name not in drop_inits] + done
     nodes = new_nodes + [n for n in g.node if not (n.op_type == "Cast" and n.output[0] in drop_casts)]
-    del g.initializer[:]
-    g.initializer.extend(keep)
-    del g.node[:]
-    g.node.extend(nodes)
-    onnx.checker.check_model(m)
-    onnx.save(m, path)
+    save_graph(m, keep, nodes, path)
 
 
 if __name__ == "__main__":
