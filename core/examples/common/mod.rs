@@ -5,7 +5,10 @@ use tract_onnx::prelude::*;
 
 /// The ONNX network at `path` with fixed input `shapes` (in the graph's input order), optimised
 /// and made runnable as `core::landmarks` does (one thread).
-pub fn load_plan(path: &str, shapes: &[Vec<usize>]) -> TractResult<std::sync::Arc<TypedRunnableModel>> {
+pub fn load_plan(
+    path: &str,
+    shapes: &[Vec<usize>],
+) -> TractResult<std::sync::Arc<TypedRunnableModel>> {
     let mut model = tract_onnx::onnx().model_for_path(path)?;
     for (i, s) in shapes.iter().enumerate() {
         model = model.with_input_fact(i, f32::fact(s.as_slice()).into())?;
