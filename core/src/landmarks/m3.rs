@@ -7,6 +7,7 @@ use super::warp::{Affine, sample};
 use super::{BROW_GESTURES, FaceLandmarks, MOUTH_GESTURES, N_POINTS, YAW_CLASSES_DEG};
 use crate::error::{Error, Result};
 use crate::image::{GrayImage, Rect};
+use crate::metrics::{LEFT_OUTER_EYE, RIGHT_OUTER_EYE};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 
@@ -868,7 +869,8 @@ impl M3 {
                 ZoneKind::Eye | ZoneKind::Plain => {}
             }
         }
-        let dx = self.cfg.x_offset_iod * distance(self.pts[36], self.pts[45]);
+        let dx =
+            self.cfg.x_offset_iod * distance(self.pts[RIGHT_OUTER_EYE], self.pts[LEFT_OUTER_EYE]);
         for (o, p) in out.points.iter_mut().zip(&self.pts) {
             *o = [(p[0] + dx) as f32, p[1] as f32];
         }
