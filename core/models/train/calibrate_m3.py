@@ -40,7 +40,7 @@ def estimate(model_dir):
     ratios = []
     for f, b in zip(faces, E.jittered_boxes(faces, JITTER_SEED)):
         p = m3.run(D.load_gray(paths[f["image"]]), np.array(b, float))["landmarks68"]
-        ratios.append((f["pts"][:, 0] - p[:, 0]).mean() / np.linalg.norm(p[36] - p[45]))
+        ratios.append((f["pts"][:, 0] - p[:, 0]).mean() / D.outer_eye_distance(p))
     return float(np.mean(ratios)), len(ratios)
 
 

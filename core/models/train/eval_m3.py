@@ -35,7 +35,7 @@ JITTER_SEED = 7
 
 
 def nme_parts(pred, gt):
-    iod = np.linalg.norm(gt[36] - gt[45])
+    iod = D.outer_eye_distance(gt)
     e = np.linalg.norm(pred - gt, axis=1) / iod
     out = {"all": float(e.mean())}
     for k, r in ZONES.items():

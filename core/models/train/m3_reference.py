@@ -107,6 +107,6 @@ class M3:
         # distance of the merged points.
         off = self.cfg.get("x_offset_iod", 0.0)
         if off:
-            out68[:, 0] += off * np.linalg.norm(out68[36] - out68[45])
+            out68[:, 0] += off * D.outer_eye_distance(out68)
         res["landmarks68"] = out68
         return res

@@ -96,6 +96,12 @@ LEVEL1 = {"input_size": 64, "crop_scale": 1.3}
 assert sorted(set(LEVEL1_INDICES) | {i for z in ZONES.values() for i in z["indices68"] + z.get("mirror_indices68", [])}) == list(range(68))
 
 
+def outer_eye_distance(pts):
+    """Distance between the outer eye corners (points 36 and 45): NME's normaliser and the unit of
+    m3.json's x_offset_iod (M3_IO.md)."""
+    return np.linalg.norm(pts[36] - pts[45])
+
+
 def luma(rgb):
     """BT.601 full-range luma, rounded (M3_IO.md)."""
     y = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]

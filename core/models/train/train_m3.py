@@ -209,7 +209,7 @@ def soft_yaw(cls, rng):
 def zone_sample(zone, img, pts, rng, ref_noise=0.045, aug=True):
     """Patch of a zone from jittered reference points (level-1 errors are a few % of the
     inter-ocular distance, so the refs move by that much in training)."""
-    iod = np.linalg.norm(pts[36] - pts[45])
+    iod = D.outer_eye_distance(pts)
     r0, r1 = pts[zone["ref68"][0]].astype(float), pts[zone["ref68"][1]].astype(float)
     if aug:
         r0 = r0 + rng.normal(0, ref_noise * iod, 2)

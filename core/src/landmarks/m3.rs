@@ -7,7 +7,7 @@ use super::warp::{Affine, sample};
 use super::{BROW_GESTURES, FaceLandmarks, MOUTH_GESTURES, N_POINTS, YAW_CLASSES_DEG};
 use crate::error::{Error, Result};
 use crate::image::{GrayImage, Rect};
-use crate::metrics::{LEFT_OUTER_EYE, RIGHT_OUTER_EYE};
+use crate::metrics::outer_eye_distance;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 
@@ -629,11 +629,6 @@ fn blend_pairs(indices: &[usize], weights: Option<&[f64]>) -> Vec<(usize, f64)> 
         .collect()
 }
 
-/// Euclidean distance between two points.
-fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
-}
-
 /// `(1 − w) · a + w · b`.
 fn lerp(a: [f64; 2], b: [f64; 2], w: f64) -> [f64; 2] {
     [(1.0 - w) * a[0] + w * b[0], (1.0 - w) * a[1] + w * b[1]]
@@ -869,8 +864,7 @@ impl M3 {
                 ZoneKind::Eye | ZoneKind::Plain => {}
             }
         }
-        let dx =
-            self.cfg.x_offset_iod * distance(self.pts[RIGHT_OUTER_EYE], self.pts[LEFT_OUTER_EYE]);
+        let dx = self.cfg.x_offset_iod * outer_eye_distance(&self.pts);
         for (o, p) in out.points.iter_mut().zip(&self.pts) {
             *o = [(p[0] + dx) as f32, p[1] as f32];
         }
@@ -965,31 +959,25 @@ mod tests {
 
     #[test]
     fn level1_weight_blends_the_face_zone_with_level_1() {
-        let img = image();
-        let face = Rect::new(40.0, 20.0, 70.0, 80.0);
         let run = |weight: Option<f64>| {
-            let json = json_with(|v| {
-                // Without the nose zone, which would replace the face zone's nose points, and
-                // without the label offset, which level 1's own points do not carry.
+            estimate_with(&|v| {
+                // Without the nose zone, which would replace the face zone's nose points.
                 v["zones"].as_object_mut().unwrap().remove("nose");
-                v["x_offset_iod"] = serde_json::json!(0.0);
                 let n = v["zones"]["face"]["indices68"].as_array().unwrap().len();
                 v["zones"]["face"]["level1_weight"] = match weight {
                     Some(w) => serde_json::json!(vec![w; n]),
                     None => Value::Null,
                 };
-            });
-            let mut m3 = M3::from_bytes(&json, EMBEDDED_FILES).unwrap();
-            let mut out = FaceLandmarks::default();
-            m3.estimate(&img, &face, &mut out).unwrap();
-            let mut l1 = FaceLandmarks::default();
-            m3.level1(&img, &face, &mut l1).unwrap();
-            (m3.config().zones["face"].indices68.clone(), out, l1)
+            })
         };
-        let (idx, zone, l1) = run(Some(0.0));
-        let (_, half, _) = run(Some(0.5));
-        let (_, full, _) = run(Some(1.0));
-        let (_, none, _) = run(None);
+        let idx = M3Config::from_json(embedded("m3.json")).unwrap().zones["face"]
+            .indices68
+            .clone();
+        let l1 = level1_of_test_face();
+        let zone = run(Some(0.0));
+        let half = run(Some(0.5));
+        let full = run(Some(1.0));
+        let none = run(None);
         assert_eq!(none.points, zone.points);
         for i in 0..N_POINTS {
             let (z, h, f) = (zone.points[i], half.points[i], full.points[i]);
@@ -1004,9 +992,14 @@ mod tests {
         }
     }
 
-    /// The test face's landmarks with the shipped weights and `m3.json` edited by `edit`.
-    /// Runs the shipped nets with an edited `m3.json` whose label offset is 0 unless the edit sets
-    /// it, so that points compare with level 1's and the zones' own.
+    /// The face box the blend tests run on.
+    fn test_face() -> Rect {
+        Rect::new(40.0, 20.0, 70.0, 80.0)
+    }
+
+    /// The test face's landmarks with the shipped weights and `m3.json` edited by `edit`, its
+    /// label offset 0 unless the edit sets it, so that points compare with level 1's and the
+    /// zones' own.
     fn estimate_with(edit: &dyn Fn(&mut Value)) -> FaceLandmarks {
         let json = json_with(|v| {
             v["x_offset_iod"] = serde_json::json!(0.0);
@@ -1014,9 +1007,18 @@ mod tests {
         });
         let mut m3 = M3::from_bytes(&json, EMBEDDED_FILES).unwrap();
         let mut out = FaceLandmarks::default();
-        m3.estimate(&image(), &Rect::new(40.0, 20.0, 70.0, 80.0), &mut out)
-            .unwrap();
+        m3.estimate(&image(), &test_face(), &mut out).unwrap();
         out
+    }
+
+    /// Level 1 alone on the test face.
+    fn level1_of_test_face() -> FaceLandmarks {
+        let mut l1 = FaceLandmarks::default();
+        M3::new()
+            .unwrap()
+            .level1(&image(), &test_face(), &mut l1)
+            .unwrap();
+        l1
     }
 
     #[test]
@@ -1027,8 +1029,7 @@ mod tests {
         });
         assert_eq!(absent.points, base.points);
         let moved = estimate_with(&|v| v["x_offset_iod"] = serde_json::json!(0.04));
-        let [a, b] = [base.points[36], base.points[45]];
-        let iod = f64::from(a[0] - b[0]).hypot(f64::from(a[1] - b[1]));
+        let iod = outer_eye_distance(&base.points.map(|p| p.map(f64::from)));
         assert!(iod > 5.0, "{iod}");
         for (m, p) in moved.points.iter().zip(&base.points) {
             assert!(
@@ -1044,16 +1045,10 @@ mod tests {
     #[test]
     fn a_later_zone_replaces_an_earlier_zones_points() {
         let run = estimate_with;
-        let (img, face) = (image(), Rect::new(40.0, 20.0, 70.0, 80.0));
         let nose: Vec<usize> = (27..36).collect();
         let shipped = run(&|_| {});
         // The nose zone at full level-1 weight gives level 1's nose whatever the face zone says.
-        let l1 = {
-            let mut m3 = M3::new().unwrap();
-            let mut l1 = FaceLandmarks::default();
-            m3.level1(&img, &face, &mut l1).unwrap();
-            l1
-        };
+        let l1 = level1_of_test_face();
         let all_l1 =
             run(&|v| v["zones"]["nose"]["level1_weight"] = serde_json::json!(vec![1.0; 9]));
         let face_zero = run(&|v| {

@@ -20,6 +20,8 @@
 pub mod filter;
 mod m3;
 mod net;
+#[cfg(test)]
+pub(crate) use net::onnx_op_types;
 pub mod warp;
 
 pub use m3::{BilateralConfig, EMBEDDED_FILES, Level1Config, M3, M3Config, RefSource, ZoneConfig};

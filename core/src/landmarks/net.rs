@@ -125,24 +125,26 @@ impl Net {
     }
 }
 
+/// Op types of the nodes of an ONNX graph, as stored (for the tests that check how the shipped
+/// networks are written).
+#[cfg(test)]
+pub(crate) fn onnx_op_types(bytes: &[u8]) -> Vec<String> {
+    let proto = tract_onnx::onnx()
+        .proto_model_for_read(&mut &*bytes)
+        .unwrap();
+    proto
+        .graph
+        .unwrap()
+        .node
+        .into_iter()
+        .map(|n| n.op_type)
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
+    use super::onnx_op_types as op_types;
     use crate::landmarks::EMBEDDED_FILES;
-    use tract_onnx::prelude::*;
-
-    /// Op types of the nodes of an ONNX graph, as stored.
-    fn op_types(bytes: &[u8]) -> Vec<String> {
-        let proto = tract_onnx::onnx()
-            .proto_model_for_read(&mut &*bytes)
-            .unwrap();
-        proto
-            .graph
-            .unwrap()
-            .node
-            .into_iter()
-            .map(|n| n.op_type)
-            .collect()
-    }
 
     /// The export's storage passes (`models/train/train_m3.py`) ran on every shipped network: a
     /// re-export without them still loads and gives the same points, so only this catches it —
