@@ -46,6 +46,7 @@ class M3:
         l1 = self.cfg["level1"]
         self.l1 = Level1Runner(os.path.join(model_dir, l1["file"]), l1["input_size"], l1["crop_scale"])
         self.zones = {k: (z, _session(os.path.join(model_dir, z["file"]))) for k, z in self.cfg["zones"].items()}
+        self.shape_prior = D.load_shape_prior(model_dir, self.cfg)
 
     def _zone(self, z, sess, gray, r0, r1, yaw, mirror):
         W, H = z["width"], z["height"]
@@ -108,5 +109,8 @@ class M3:
         off = self.cfg.get("x_offset_iod", 0.0)
         if off:
             out68[:, 0] += off * D.outer_eye_distance(out68)
+        # M3_IO.md: the shape prior, on the offset points (it was fitted on them).
+        if self.shape_prior is not None:
+            out68 = D.apply_shape_prior(out68, *self.shape_prior)
         res["landmarks68"] = out68
         return res

@@ -414,3 +414,81 @@ def detector_false_positives(img_paths, faces):
             if all(det.iou(d, g) < 0.3 for g in gts[k]) and not det.ignored(d, unannotated.get(rels[k], [])):
                 out.append((k, np.array(d[:4], np.float64)))
     return out
+
+
+# The shape prior (M3_IO.md "Shape prior"): per zone, a ridge regression from the other zones'
+# points, in the frame that maps the outer eye corners to (-1, 0) and (1, 0).
+PRIOR_FRAME = (36, 45)
+
+
+def prior_frame(pts):
+    """(centre, half-vector) of the frame: the midpoint of points 36 and 45 and half their
+    difference."""
+    a, b = pts[PRIOR_FRAME[0]], pts[PRIOR_FRAME[1]]
+    return (a + b) / 2, (b - a) / 2
+
+
+def to_prior_frame(pts, frame):
+    c, v = frame
+    q = (pts - c) / (v @ v)
+    return np.stack([q[..., 0] * v[0] + q[..., 1] * v[1], -q[..., 0] * v[1] + q[..., 1] * v[0]], -1)
+
+
+def from_prior_frame(q, frame):
+    c, v = frame
+    return np.stack([q[..., 0] * v[0] - q[..., 1] * v[1], q[..., 0] * v[1] + q[..., 1] * v[0]], -1) + c
+
+
+def prior_inputs(indices):
+    """The points a zone's regression reads: every point not in the zone, ascending."""
+    zone = set(indices)
+    return [i for i in range(68) if i not in zone]
+
+
+def prior_features(pts, indices):
+    """A zone's regression input: the other points in the frame, (x, y) each, then 1."""
+    q = to_prior_frame(pts[prior_inputs(indices)], prior_frame(pts))
+    return np.append(q.reshape(-1), 1.0)
+
+
+def contour_tangents(p):
+    """Unit tangents of an open contour (central differences inside, one-sided at the ends, as
+    numpy.gradient); a zero tangent stays zero."""
+    t = np.gradient(p, axis=0)
+    n = np.linalg.norm(t, axis=1, keepdims=True)
+    return np.where(n > 0, t / np.where(n > 0, n, 1), 0.0)
+
+
+def apply_shape_prior(pts, zones, matrices):
+    """pts (68, 2) moved towards each zone's regression (M3_IO.md): all zones read the same input
+    points; `weight` along the zone (the whole move when there is no `normal_weight`),
+    `normal_weight` across it."""
+    out = pts.copy()
+    for z, m in zip(zones, matrices):
+        idx = z["indices68"]
+        r = from_prior_frame((prior_features(pts, idx) @ m).reshape(-1, 2), prior_frame(pts))
+        d = r - pts[idx]
+        if "normal_weight" in z:
+            t = contour_tangents(pts[idx])
+            along = (d * t).sum(1, keepdims=True) * t
+            out[idx] = pts[idx] + z["weight"] * along + z["normal_weight"] * (d - along)
+        else:
+            out[idx] = pts[idx] + z["weight"] * d
+    return out
+
+
+def load_shape_prior(model_dir, cfg):
+    """(zones, matrices) of m3.json's `shape_prior`, or None: float32 little-endian, zone after
+    zone, each (2 * (68 - n) + 1) x 2n row-major."""
+    sp = cfg.get("shape_prior")
+    if not sp:
+        return None
+    flat = np.fromfile(os.path.join(model_dir, sp["file"]), dtype="<f4").astype(np.float64)
+    mats, k = [], 0
+    for z in sp["zones"]:
+        n = len(z["indices68"])
+        rows, cols = 2 * (68 - n) + 1, 2 * n
+        mats.append(flat[k:k + rows * cols].reshape(rows, cols))
+        k += rows * cols
+    assert k == flat.size, f"{sp['file']}: {flat.size} numbers, zones need {k}"
+    return sp["zones"], mats

@@ -3,6 +3,7 @@
 
 use super::filter::{Bilateral, equalize_hist};
 use super::net::Net;
+use super::prior::{ShapePrior, ShapePriorConfig};
 use super::warp::{Affine, sample};
 use super::{BROW_GESTURES, FaceLandmarks, MOUTH_GESTURES, N_POINTS, YAW_CLASSES_DEG};
 use crate::error::{Error, Result};
@@ -24,6 +25,10 @@ pub const EMBEDDED_FILES: &[(&str, &[u8])] = &[
     (
         "mouth_fine.onnx",
         include_bytes!("../../models/m3/mouth_fine.onnx"),
+    ),
+    (
+        "shape_prior.bin",
+        include_bytes!("../../models/m3/shape_prior.bin"),
     ),
 ];
 
@@ -139,6 +144,10 @@ pub struct M3Config {
     /// the nets cannot learn from mirrored training faces (`models/M3_IO.md`).
     #[serde(default)]
     pub x_offset_iod: f64,
+    /// The per-zone regressions from the other points that the merged points move towards, after
+    /// the offset; none when absent (`models/M3_IO.md`).
+    #[serde(default)]
+    pub shape_prior: Option<ShapePriorConfig>,
 }
 
 /// Largest `x_offset_iod` accepted from `m3.json` (the shipped value is below 0.01): a larger one
@@ -382,6 +391,9 @@ impl M3Config {
         }
         if let Some(i) = given.merged.iter().position(|c| !c) {
             return Err(bad(format!("landmark {i} is produced by no network")));
+        }
+        if let Some(p) = &self.shape_prior {
+            p.validate()?;
         }
         Ok(())
     }
@@ -649,6 +661,8 @@ pub struct M3 {
     level1_pts: [[f64; 2]; N_POINTS],
     /// The merged points before the running zone (for `prior_weight`).
     prior_pts: [[f64; 2]; N_POINTS],
+    /// `shape_prior` of `m3.json`.
+    prior: Option<ShapePrior>,
 }
 
 /// What level 1 gives besides its points.
@@ -701,8 +715,14 @@ impl M3 {
             .run_order()
             .map(|(name, z)| Zone::new(name, z, file(&z.file)?))
             .collect::<Result<Vec<_>>>()?;
+        let prior = cfg
+            .shape_prior
+            .as_ref()
+            .map(|p| ShapePrior::new(p, file(&p.file)?))
+            .transpose()?;
         Ok(Self {
             crop: Vec::with_capacity(s * s),
+            prior,
             cfg,
             level1,
             zones,
@@ -865,8 +885,15 @@ impl M3 {
             }
         }
         let dx = self.cfg.x_offset_iod * outer_eye_distance(&self.pts);
+        for p in &mut self.pts {
+            p[0] += dx;
+        }
+        // After the offset: the regressions were fitted on points that carry it.
+        if let Some(prior) = &mut self.prior {
+            prior.apply(&mut self.pts);
+        }
         for (o, p) in out.points.iter_mut().zip(&self.pts) {
-            *o = [(p[0] + dx) as f32, p[1] as f32];
+            *o = [p[0] as f32, p[1] as f32];
         }
         Ok(())
     }
@@ -998,11 +1025,12 @@ mod tests {
     }
 
     /// The test face's landmarks with the shipped weights and `m3.json` edited by `edit`, its
-    /// label offset 0 unless the edit sets it, so that points compare with level 1's and the
-    /// zones' own.
+    /// label offset 0 and its shape prior off unless the edit sets them, so that points compare
+    /// with level 1's and the zones' own.
     fn estimate_with(edit: &dyn Fn(&mut Value)) -> FaceLandmarks {
         let json = json_with(|v| {
             v["x_offset_iod"] = serde_json::json!(0.0);
+            v.as_object_mut().unwrap().remove("shape_prior");
             edit(v);
         });
         let mut m3 = M3::from_bytes(&json, EMBEDDED_FILES).unwrap();
@@ -1040,6 +1068,54 @@ mod tests {
         }
         assert_eq!(moved.mouth, base.mouth);
         assert_eq!(moved.gaze_combined, base.gaze_combined);
+    }
+
+    #[test]
+    fn the_shape_prior_moves_the_points_of_its_zones_and_nothing_else() {
+        let off = estimate_with(&|_| {});
+        let shipped = M3Config::from_json(embedded("m3.json"))
+            .unwrap()
+            .shape_prior
+            .expect("the shipped m3.json has a shape prior");
+        let raw: Value = serde_json::from_slice(embedded("m3.json")).unwrap();
+        let with = |weight: Option<f64>| {
+            let mut sp = raw["shape_prior"].clone();
+            if let Some(w) = weight {
+                for z in sp["zones"].as_array_mut().unwrap() {
+                    z["weight"] = serde_json::json!(w);
+                    if z.get("normal_weight").is_some() {
+                        z["normal_weight"] = serde_json::json!(w);
+                    }
+                }
+            }
+            estimate_with(&|v| v["shape_prior"] = sp.clone())
+        };
+        assert_eq!(with(Some(0.0)).points, off.points);
+        let on = with(None);
+        let zoned: Vec<usize> = shipped
+            .zones
+            .iter()
+            .flat_map(|z| z.indices68.clone())
+            .collect();
+        let moved = (0..N_POINTS)
+            .filter(|&i| on.points[i] != off.points[i])
+            .count();
+        for i in (0..N_POINTS).filter(|i| !zoned.contains(i)) {
+            assert_eq!(on.points[i], off.points[i], "{i}");
+        }
+        assert!(moved > N_POINTS / 2, "{moved} points moved");
+        // Small moves: a correction, not a replacement (under a tenth of the eye-corner distance).
+        let iod = outer_eye_distance(&off.points.map(|p| p.map(f64::from)));
+        for (a, b) in on.points.iter().zip(&off.points) {
+            assert!(
+                f64::from((a[0] - b[0]).hypot(a[1] - b[1])) < 0.1 * iod,
+                "{a:?} {b:?}"
+            );
+        }
+        assert_eq!(
+            (on.mouth, on.brows, on.gaze_combined),
+            (off.mouth, off.brows, off.gaze_combined)
+        );
     }
 
     #[test]
@@ -1184,6 +1260,9 @@ mod tests {
                 v["zones"]["face"]["prior_weight"] = serde_json::json!(vec![0.5; 26]);
             }),
             json_with(|v| v["zones"]["mouth_fine"]["refs"] = "everything".into()),
+            json_with(|v| v["shape_prior"]["zones"][0]["weight"] = serde_json::json!(2.0)),
+            json_with(|v| v["shape_prior"]["zones"][1]["indices68"][0] = 0.into()),
+            json_with(|v| v["shape_prior"]["file"] = "missing.bin".into()),
             // References must exist when the zone runs: the eye reads level 1's corners; a
             // level-1 zone cannot reference a zone's point; a merged zone not a later zone's.
             json_with(|v| v["zones"]["eye"]["refs"] = "merged".into()),

@@ -20,11 +20,13 @@
 pub mod filter;
 mod m3;
 mod net;
+mod prior;
 #[cfg(test)]
 pub(crate) use net::onnx_op_types;
 pub mod warp;
 
 pub use m3::{BilateralConfig, EMBEDDED_FILES, Level1Config, M3, M3Config, RefSource, ZoneConfig};
+pub use prior::{PriorZoneConfig, ShapePriorConfig};
 
 /// Number of landmarks in the merged output (iBUG 68).
 pub const N_POINTS: usize = 68;

@@ -81,7 +81,7 @@ def main():
                 "gaze": {k: np.round(v, 6).tolist() for k, v in r["gaze"].items()},
             })
     sha = {f: hashlib.sha256(open(os.path.join(MODELS, f), "rb").read()).hexdigest()
-           for f in sorted(os.listdir(MODELS)) if f.endswith((".onnx", ".json"))}
+           for f in sorted(os.listdir(MODELS)) if f.endswith((".onnx", ".json", ".bin"))}
     json.dump({"model_sha256": sha, "cases": cases},
               open(os.path.join(HERE, "expected.json"), "w"), indent=0)
     print(f"{len(cases)} cases written")
