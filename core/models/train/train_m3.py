@@ -5,7 +5,7 @@
 
 Seeds are fixed (numpy, torch, python; each net seeds itself); one CPU thread per process by default
 (MONOTRACK_TRAIN_THREADS); level 1 first, then the zone nets in up to --jobs processes at once, then
-m3.json's label-convention offset from the training split (calibrate_m3.py) once every net exists.
+m3.json's label-convention offset and shape prior from the training split (calibrate_m3.py) once every net exists.
 Writes next to the weights: train_log.txt (losses per step window) and the validation metrics
 (metrics.json, by eval_m3.py). Data: ../shared/data (faces68, its MediaPipe teacher, GENKI-4K);
 the split rule and the preprocessing are core/models/M3_IO.md's.
@@ -475,11 +475,11 @@ def main():
         outs = ["landmarks"] + (["gaze"] if z.get("gaze") else ["gesture_logits"] if z.get("gestures") else [])
         export(m, os.path.join(OUT, f"{name}.onnx"), ["patch", "yaw"], [(1, 1, z["height"], z["width"]), (1, 5)], outs)
     write_config()
-    # The label-convention offset (calibrate_m3.py) depends on every net: estimated once they all exist.
+    # The label-convention offset and shape prior (calibrate_m3.py) depend on every net: fitted once they all exist.
     if not a.no_calibrate and all(os.path.exists(os.path.join(OUT, f))
                                   for f in ["level1.onnx"] + [f"{n}.onnx" for n in D.ZONES]):
         value, n = calibrate_m3.write(OUT)
-        log(fh, f"x_offset_iod = {value} (calibrate_m3.py, {n} training faces)")
+        log(fh, f"x_offset_iod = {value}, shape prior fitted (calibrate_m3.py, {n} training faces)")
     log(fh, f"done {only}")
 
 
