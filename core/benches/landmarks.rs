@@ -7,7 +7,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::filter::Bilateral;
 use monotrack_core::landmarks::warp::{Affine, sample};
-use monotrack_core::landmarks::{FaceLandmarks, M3};
+use monotrack_core::landmarks::{EMBEDDED_FILES, FaceLandmarks, M3};
 use std::hint::black_box;
 
 fn image() -> GrayImage {
@@ -30,6 +30,25 @@ fn bench(c: &mut Criterion) {
     c.bench_function("m3_per_face", |b| {
         b.iter(|| {
             m3.estimate(black_box(&img), black_box(&face), &mut out)
+                .unwrap()
+        })
+    });
+    // The same without the shape prior: its cost is the difference (within one run, so the
+    // machine's state is shared).
+    let json = EMBEDDED_FILES
+        .iter()
+        .find(|(n, _)| *n == "m3.json")
+        .map(|(_, b)| *b)
+        .expect("m3.json embedded");
+    let mut cfg: serde_json::Value = serde_json::from_slice(json).expect("valid m3.json");
+    cfg.as_object_mut()
+        .expect("an object")
+        .remove("shape_prior");
+    let mut no_prior = M3::from_bytes(&serde_json::to_vec(&cfg).unwrap(), EMBEDDED_FILES).unwrap();
+    c.bench_function("m3_per_face_without_shape_prior", |b| {
+        b.iter(|| {
+            no_prior
+                .estimate(black_box(&img), black_box(&face), &mut out)
                 .unwrap()
         })
     });
