@@ -71,6 +71,8 @@ fn bench(c: &mut Criterion) {
     c.bench_function("warp_sample_rotated_64x32", |b| {
         b.iter(|| sample(black_box(&img), black_box(&brows), 64, 32, &mut patch).unwrap())
     });
+    // Filled here too: a filtered run (`--bench bilateral`) skips the sampling bench above.
+    sample(&img, &brows, 64, 32, &mut patch).unwrap();
     let mut bilateral = Bilateral::new(5, 20.0, 3.0);
     let mut filtered = vec![0; 64 * 32];
     c.bench_function("bilateral_64x32_d5", |b| {
