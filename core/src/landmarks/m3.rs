@@ -1073,45 +1073,65 @@ mod tests {
     #[test]
     fn the_shape_prior_moves_the_points_of_its_zones_and_nothing_else() {
         let off = estimate_with(&|_| {});
-        let shipped = M3Config::from_json(embedded("m3.json"))
-            .unwrap()
-            .shape_prior
-            .expect("the shipped m3.json has a shape prior");
         let raw: Value = serde_json::from_slice(embedded("m3.json")).unwrap();
-        let with = |weight: Option<f64>| {
+        // The shipped prior with its first `keep` zones (their matrices lead the file), all
+        // weights set to `weight` (`None`: as shipped).
+        let with = |keep: usize, weight: Option<f64>| {
             let mut sp = raw["shape_prior"].clone();
-            if let Some(w) = weight {
-                for z in sp["zones"].as_array_mut().unwrap() {
+            let zones = sp["zones"].as_array_mut().unwrap();
+            zones.truncate(keep);
+            let mut floats = 0;
+            for z in zones.iter_mut() {
+                let n = z["indices68"].as_array().unwrap().len();
+                floats += (2 * (N_POINTS - n) + 1) * 2 * n;
+                if let Some(w) = weight {
                     z["weight"] = serde_json::json!(w);
                     if z.get("normal_weight").is_some() {
                         z["normal_weight"] = serde_json::json!(w);
                     }
                 }
             }
-            estimate_with(&|v| v["shape_prior"] = sp.clone())
+            let json = json_with(|v| {
+                v["x_offset_iod"] = serde_json::json!(0.0);
+                v["shape_prior"] = sp.clone();
+            });
+            let bin = &embedded("shape_prior.bin")[..4 * floats];
+            let files: Vec<(&str, &[u8])> = EMBEDDED_FILES
+                .iter()
+                .map(|&(n, b)| (n, if n == "shape_prior.bin" { bin } else { b }))
+                .collect();
+            let mut m3 = M3::from_bytes(&json, &files).unwrap();
+            let mut out = FaceLandmarks::default();
+            m3.estimate(&image(), &test_face(), &mut out).unwrap();
+            out
         };
-        assert_eq!(with(Some(0.0)).points, off.points);
-        let on = with(None);
-        let zoned: Vec<usize> = shipped
-            .zones
-            .iter()
-            .flat_map(|z| z.indices68.clone())
-            .collect();
+        let all = raw["shape_prior"]["zones"].as_array().unwrap().len();
+        assert_eq!(with(all, Some(0.0)).points, off.points);
+        let iod = outer_eye_distance(&off.points.map(|p| p.map(f64::from)));
+        // The first zone alone (the jaw, 0–16) moves its points and no other.
+        assert_eq!(
+            raw["shape_prior"]["zones"][0]["indices68"],
+            serde_json::json!((0..17).collect::<Vec<_>>())
+        );
+        let jaw = with(1, None);
+        for i in 0..N_POINTS {
+            let (a, b) = (jaw.points[i], off.points[i]);
+            if i < 17 {
+                assert_ne!(a, b, "{i}");
+                // A correction, not a replacement: under a tenth of the eye-corner distance.
+                assert!(
+                    f64::from((a[0] - b[0]).hypot(a[1] - b[1])) < 0.1 * iod,
+                    "{i}"
+                );
+            } else {
+                assert_eq!(a, b, "{i}");
+            }
+        }
+        let on = with(all, None);
         let moved = (0..N_POINTS)
             .filter(|&i| on.points[i] != off.points[i])
             .count();
-        for i in (0..N_POINTS).filter(|i| !zoned.contains(i)) {
-            assert_eq!(on.points[i], off.points[i], "{i}");
-        }
         assert!(moved > N_POINTS / 2, "{moved} points moved");
-        // Small moves: a correction, not a replacement (under a tenth of the eye-corner distance).
-        let iod = outer_eye_distance(&off.points.map(|p| p.map(f64::from)));
-        for (a, b) in on.points.iter().zip(&off.points) {
-            assert!(
-                f64::from((a[0] - b[0]).hypot(a[1] - b[1])) < 0.1 * iod,
-                "{a:?} {b:?}"
-            );
-        }
         assert_eq!(
             (on.mouth, on.brows, on.gaze_combined),
             (off.mouth, off.brows, off.gaze_combined)
