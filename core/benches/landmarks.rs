@@ -7,7 +7,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::filter::Bilateral;
 use monotrack_core::landmarks::warp::{Affine, sample};
-use monotrack_core::landmarks::{EMBEDDED_FILES, FaceLandmarks, M3};
+use monotrack_core::landmarks::{EMBEDDED_FILES, FaceLandmarks, M3, embedded_file};
 use std::hint::black_box;
 
 fn image() -> GrayImage {
@@ -35,11 +35,7 @@ fn bench(c: &mut Criterion) {
     });
     // The same without the shape prior: its cost is the difference (within one run, so the
     // machine's state is shared).
-    let json = EMBEDDED_FILES
-        .iter()
-        .find(|(n, _)| *n == "m3.json")
-        .map(|(_, b)| *b)
-        .expect("m3.json embedded");
+    let json = embedded_file("m3.json").expect("m3.json embedded");
     let mut cfg: serde_json::Value = serde_json::from_slice(json).expect("valid m3.json");
     cfg.as_object_mut()
         .expect("an object")

@@ -32,6 +32,14 @@ pub const EMBEDDED_FILES: &[(&str, &[u8])] = &[
     ),
 ];
 
+/// The embedded file called `name` ([`EMBEDDED_FILES`]), if there is one.
+pub fn embedded_file(name: &str) -> Option<&'static [u8]> {
+    EMBEDDED_FILES
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, b)| *b)
+}
+
 /// Number of level-1 landmarks (`M3_IO.md`).
 const N_LEVEL1: usize = 32;
 /// Largest crop or patch side accepted from `m3.json`: far above any sensible network input, it
@@ -677,10 +685,7 @@ impl M3 {
     /// # Errors
     /// [`Error::ModelLoad`] if the embedded models cannot be loaded (a build defect).
     pub fn new() -> Result<Self> {
-        let json = EMBEDDED_FILES
-            .iter()
-            .find(|(n, _)| *n == "m3.json")
-            .map(|(_, b)| *b)
+        let json = embedded_file("m3.json")
             .ok_or_else(|| Error::ModelLoad("m3.json not embedded".into()))?;
         Self::from_bytes(json, EMBEDDED_FILES)
     }
@@ -935,7 +940,7 @@ mod tests {
     use serde_json::Value;
 
     fn embedded(name: &str) -> &'static [u8] {
-        EMBEDDED_FILES.iter().find(|(n, _)| *n == name).unwrap().1
+        embedded_file(name).unwrap()
     }
 
     fn json_with(edit: impl FnOnce(&mut Value)) -> Vec<u8> {

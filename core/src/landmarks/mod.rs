@@ -25,7 +25,10 @@ mod prior;
 pub(crate) use net::onnx_op_types;
 pub mod warp;
 
-pub use m3::{BilateralConfig, EMBEDDED_FILES, Level1Config, M3, M3Config, RefSource, ZoneConfig};
+pub use m3::{
+    BilateralConfig, EMBEDDED_FILES, Level1Config, M3, M3Config, RefSource, ZoneConfig,
+    embedded_file,
+};
 pub use prior::{PriorZoneConfig, ShapePriorConfig};
 
 /// Number of landmarks in the merged output (iBUG 68).
