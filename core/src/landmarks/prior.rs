@@ -7,11 +7,13 @@
 //! (1, 0) — translation, rotation and scale removed. Every zone reads the same input points.
 
 use super::N_POINTS;
+use super::warp::Affine;
 use crate::error::{Error, Result};
 use serde::Deserialize;
 
-/// The frame's reference points: the outer eye corners.
+/// The frame's reference points: the outer eye corners, and where the frame puts them.
 const FRAME: [usize; 2] = [36, 45];
+const FRAME_AT: [[f64; 2]; 2] = [[-1.0, 0.0], [1.0, 0.0]];
 
 /// `shape_prior` of `m3.json`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -152,7 +154,16 @@ impl ShapePrior {
     /// (no frame) or that are not finite are left as they are.
     pub(super) fn apply(&mut self, pts: &mut [[f64; 2]; N_POINTS]) {
         let input = *pts;
-        let Some(frame) = Frame::of(&input) else {
+        if !input.iter().flatten().all(|v| v.is_finite()) {
+            return;
+        }
+        // Image → frame and frame → image: the similarities between the eye corners and
+        // (−1, 0), (1, 0); none when the corners coincide.
+        let (a, b) = (input[FRAME[0]], input[FRAME[1]]);
+        let (Some(to_frame), Some(to_image)) = (
+            Affine::similarity(FRAME_AT[0], FRAME_AT[1], a, b),
+            Affine::similarity(a, b, FRAME_AT[0], FRAME_AT[1]),
+        ) else {
             return;
         };
         for z in &self.zones {
@@ -160,7 +171,7 @@ impl ShapePrior {
             let cols = 2 * z.indices.len();
             let features = &mut self.features[..rows];
             for (f, &i) in features.chunks_exact_mut(2).zip(&z.inputs) {
-                f.copy_from_slice(&frame.to(input[i]));
+                f.copy_from_slice(&to_frame.apply(input[i]));
             }
             features[rows - 1] = 1.0;
             let output = &mut self.output[..cols];
@@ -170,14 +181,13 @@ impl ShapePrior {
                     *o += f * f64::from(m);
                 }
             }
-            let n = z.indices.len();
             for (k, &i) in z.indices.iter().enumerate() {
-                let r = frame.from([output[2 * k], output[2 * k + 1]]);
+                let r = to_image.apply([output[2 * k], output[2 * k + 1]]);
                 let d = [r[0] - input[i][0], r[1] - input[i][1]];
                 let step = match z.normal_weight {
                     None => [z.weight * d[0], z.weight * d[1]],
                     Some(wn) => {
-                        let t = tangent(&input, &z.indices, k, n);
+                        let t = tangent(&input, &z.indices, k);
                         let along = d[0] * t[0] + d[1] * t[1];
                         let (a, c) = (
                             [along * t[0], along * t[1]],
@@ -194,7 +204,8 @@ impl ShapePrior {
 
 /// Unit tangent of the open contour `indices` at its `k`-th point (central difference inside,
 /// one-sided at the ends, as `numpy.gradient`); zero where the neighbours coincide.
-fn tangent(pts: &[[f64; 2]; N_POINTS], indices: &[usize], k: usize, n: usize) -> [f64; 2] {
+fn tangent(pts: &[[f64; 2]; N_POINTS], indices: &[usize], k: usize) -> [f64; 2] {
+    let n = indices.len();
     let (a, b) = match k {
         0 => (indices[0], indices[1]),
         _ if k == n - 1 => (indices[n - 2], indices[n - 1]),
@@ -206,44 +217,6 @@ fn tangent(pts: &[[f64; 2]; N_POINTS], indices: &[usize], k: usize, n: usize) ->
         [t[0] / len, t[1] / len]
     } else {
         [0.0, 0.0]
-    }
-}
-
-/// The similarity that takes the outer eye corners to (−1, 0) and (1, 0).
-struct Frame {
-    centre: [f64; 2],
-    half: [f64; 2],
-    half_sq: f64,
-}
-
-impl Frame {
-    fn of(pts: &[[f64; 2]; N_POINTS]) -> Option<Self> {
-        let (a, b) = (pts[FRAME[0]], pts[FRAME[1]]);
-        let half = [(b[0] - a[0]) / 2.0, (b[1] - a[1]) / 2.0];
-        let half_sq = half[0] * half[0] + half[1] * half[1];
-        let finite = pts.iter().flatten().all(|v| v.is_finite());
-        (finite && half_sq > 0.0).then_some(Self {
-            centre: [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0],
-            half,
-            half_sq,
-        })
-    }
-
-    fn to(&self, p: [f64; 2]) -> [f64; 2] {
-        let q = [
-            (p[0] - self.centre[0]) / self.half_sq,
-            (p[1] - self.centre[1]) / self.half_sq,
-        ];
-        let v = self.half;
-        [q[0] * v[0] + q[1] * v[1], -q[0] * v[1] + q[1] * v[0]]
-    }
-
-    fn from(&self, q: [f64; 2]) -> [f64; 2] {
-        let v = self.half;
-        [
-            q[0] * v[0] - q[1] * v[1] + self.centre[0],
-            q[0] * v[1] + q[1] * v[0] + self.centre[1],
-        ]
     }
 }
 
@@ -338,7 +311,7 @@ mod tests {
             prior.apply(&mut moved);
             let r = [100.0 - 0.5 * 30.0, 230.0];
             for (k, &i) in idx.iter().enumerate() {
-                let t = tangent(&pts, &idx, k, idx.len());
+                let t = tangent(&pts, &idx, k);
                 let d = [r[0] - pts[i][0], r[1] - pts[i][1]];
                 let step = [moved[i][0] - pts[i][0], moved[i][1] - pts[i][1]];
                 let (along, across) = (
