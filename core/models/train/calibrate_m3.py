@@ -80,7 +80,7 @@ def fit_prior(pred, truth, indices):
 def write(model_dir):
     pred, truth = predict(model_dir)
     value = round(estimate_offset(pred, truth), DECIMALS)
-    pred[:, :, 0] += value * np.linalg.norm(pred[:, 36] - pred[:, 45], axis=1)[:, None]
+    pred = np.array([D.with_x_offset(p, value) for p in pred])
     zones, mats = [], []
     for name, idx, w, wn in PRIOR_ZONES:
         mats.append(fit_prior(pred, truth, idx).astype("<f4"))

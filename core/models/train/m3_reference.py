@@ -106,9 +106,7 @@ class M3:
                     res[name] = dict(zip(z["gestures"], softmax(g).tolist()))
         # M3_IO.md: the label-convention offset, along image x in units of the outer-eye-corner
         # distance of the merged points.
-        off = self.cfg.get("x_offset_iod", 0.0)
-        if off:
-            out68[:, 0] += off * D.outer_eye_distance(out68)
+        out68 = D.with_x_offset(out68, self.cfg.get("x_offset_iod", 0.0))
         # M3_IO.md: the shape prior, on the offset points (it was fitted on them).
         if self.shape_prior is not None:
             out68 = D.apply_shape_prior(out68, *self.shape_prior)

@@ -102,6 +102,14 @@ def outer_eye_distance(pts):
     return np.linalg.norm(pts[36] - pts[45])
 
 
+def with_x_offset(pts, x_offset_iod):
+    """pts moved along x by x_offset_iod times their own outer-eye-corner distance (m3.json's label
+    offset, M3_IO.md)."""
+    out = np.array(pts, dtype=float)
+    out[:, 0] += x_offset_iod * outer_eye_distance(out)
+    return out
+
+
 def luma(rgb):
     """BT.601 full-range luma, rounded (M3_IO.md)."""
     y = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]
