@@ -14,7 +14,7 @@
 pub mod bench;
 pub mod body;
 pub mod camera;
-mod cpu;
+pub mod cpu;
 pub mod detect;
 pub mod error;
 pub mod fit;

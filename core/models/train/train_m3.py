@@ -64,6 +64,9 @@ ZONE_TRUNK = {"eye": "8s-16s-16c-32s", "face": "16s-32s-48s-48c-96s", "mouth_fin
 STEPS = {"level1": 15000, "brows": 10000, "eye": 10000, "mouth": 12500, "face": 15000, "nose": 10000,
          "mouth_fine": 10000}
 ZONE_SEED = {"brows": 2, "eye": 3, "mouth": 4, "face": 5, "nose": 6, "mouth_fine": 7}
+# Standard deviation of the Gaussian jitter of a zone's two reference points in training, in units of
+# the outer-eye-corner distance (zone_sample): the size of the reference errors the net must absorb.
+REF_NOISE = {"default": 0.045}
 DEVICE = torch.device("cpu")
 
 
@@ -248,7 +251,8 @@ def zone_batch(name, data, rng, weights, genki=None):
             YAW[k] = soft_yaw(2, rng)
             continue
         f = data.faces[i]
-        patch, tgt, A = zone_sample(zone, data.image(f), f["pts"], rng)
+        patch, tgt, A = zone_sample(zone, data.image(f), f["pts"], rng,
+                                    ref_noise=REF_NOISE.get(name, REF_NOISE["default"]))
         X[k, 0] = patch / 255.0
         Y[k] = tgt.reshape(-1)
         YAW[k] = soft_yaw(f["yaw_class"], rng)
@@ -414,6 +418,10 @@ def main():
     # Nets that learn from the teacher-labelled GENKI-4K faces too (default PSEUDO_NETS), e.g. face,mouth
     ap.add_argument("--pseudo-nets", default=None)
     ap.add_argument("--pseudo-share", type=float, default=None)
+    # e.g. --ref-noise face=0.025,nose=0.025 (default REF_NOISE)
+    ap.add_argument("--ref-noise", default=None)
+    # Another seed for a run-to-run spread check (the shipped weights use SEED)
+    ap.add_argument("--seed", type=int, default=None)
     # Results differ from the CPU run's in the last bits (GPU kernels); the shipped weights are CPU's.
     ap.add_argument("--device", default="cpu")
     # Zone nets train in this many processes at once after level 1 (each net seeds itself, so the
@@ -422,7 +430,13 @@ def main():
     # Set for the zone processes run_zones_in_processes starts: their parent calibrates at the end.
     ap.add_argument("--no-calibrate", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
-    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE
+    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE, SEED
+    if a.seed is not None:
+        SEED = a.seed
+    if a.ref_noise:
+        for item in a.ref_noise.split(","):
+            k, v = item.split("=")
+            REF_NOISE[k] = float(v)
     DEVICE = torch.device(a.device)
     if a.pseudo_nets is not None:
         PSEUDO_NETS = tuple(n for n in a.pseudo_nets.split(",") if n)
@@ -449,7 +463,7 @@ def main():
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
-            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} device={DEVICE}")
+            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} ref_noise={REF_NOISE} device={DEVICE}")
     pseudo = None
     if any(n in only for n in PSEUDO_NETS):
         pseudo = os.environ.get("MONOTRACK_PSEUDO") or pseudo_genki.default_path()
@@ -488,7 +502,8 @@ def run_zones_in_processes(zones, a, fh):
             "--device", a.device, "--zone-trunk", ",".join(f"{k}={v}" for k, v in ZONE_TRUNK.items())]
     if a.zone_size:
         base += ["--zone-size", a.zone_size]
-    base += ["--pseudo-nets", ",".join(PSEUDO_NETS), "--pseudo-share", str(PSEUDO_SHARE)]
+    base += ["--pseudo-nets", ",".join(PSEUDO_NETS), "--pseudo-share", str(PSEUDO_SHARE), "--seed", str(SEED),
+             "--ref-noise", ",".join(f"{k}={v}" for k, v in REF_NOISE.items())]
     pending, running = list(zones), []
     while pending or running:
         while pending and len(running) < a.jobs:

@@ -205,6 +205,7 @@ impl FaceDetector {
         let desc: ModelDesc = serde_json::from_str(MODEL_JSON)
             .map_err(|e| Error::ModelLoad(format!("detector.json: {e}")))?;
         let window_head = check_desc(&desc)?;
+        crate::cpu::select_tract_kernels();
         let model = tract_onnx::onnx()
             .model_for_read(&mut std::io::Cursor::new(MODEL_ONNX))
             .map_err(|e| Error::ModelLoad(format!("detector.onnx: {e}")))?;

@@ -31,6 +31,7 @@ impl Net {
         inputs: &[(&str, &[usize])],
         outputs: &[&str],
     ) -> Result<Self> {
+        crate::cpu::select_tract_kernels();
         let mut model = tract_onnx::onnx()
             .model_for_read(&mut &*bytes)
             .map_err(load_err(what))?;
