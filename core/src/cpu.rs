@@ -76,6 +76,14 @@ mod x86 {
     }
 }
 
+/// Whether the CPU has AVX2 and FMA: the hot pixel kernels then run a copy of themselves compiled
+/// for them (the library is otherwise built for baseline x86-64).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+pub(crate) fn has_avx2_fma() -> bool {
+    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+}
+
 /// Clears the upper halves of the vector registers (`vzeroupper`) when the CPU has AVX; nothing
 /// elsewhere (no other architecture has the penalty).
 #[inline]
