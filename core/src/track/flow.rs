@@ -106,6 +106,27 @@ impl Pyramid {
     /// Rebuilds from `image` with up to `levels` levels (fewer when a level would get smaller than
     /// [`MIN_LEVEL_SIDE`]), reusing the buffers.
     pub fn build(&mut self, image: &GrayImage, levels: usize) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::cpu::has_avx2_fma() {
+            #[allow(unsafe_code)]
+            // SAFETY: the CPU has AVX2 and FMA, the features the function is compiled for.
+            unsafe {
+                self.build_avx2(image, levels)
+            };
+            return;
+        }
+        self.build_body(image, levels);
+    }
+
+    /// [`Self::build_body`] compiled for AVX2 (the same operations, so the same levels).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn build_avx2(&mut self, image: &GrayImage, levels: usize) {
+        self.build_body(image, levels);
+    }
+
+    #[inline(always)]
+    fn build_body(&mut self, image: &GrayImage, levels: usize) {
         let levels = levels.max(1);
         while self.levels.len() < levels {
             self.levels.push(GrayImage::default());
@@ -170,6 +191,7 @@ impl Pyramid {
 
 /// Samples a `size × size` patch whose top-left sample sits at pixel-index position (x, y)
 /// (bilinear; positions outside the image clamp to the border).
+#[inline(always)]
 fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, out: &mut [f32]) {
     let (w, h) = (img.width(), img.height());
     let ix = x.floor();
@@ -283,15 +305,53 @@ impl PyramidalLk {
                 next.len()
             )));
         }
+        #[cfg(target_arch = "x86_64")]
+        if crate::cpu::has_avx2_fma() {
+            #[allow(unsafe_code)]
+            // SAFETY: the CPU has AVX2 and FMA, the features the function is compiled for.
+            unsafe {
+                self.track_points_avx2(prev, next, from, to, status, error)
+            };
+            return Ok(());
+        }
+        self.track_points(prev, next, from, to, status, error);
+        Ok(())
+    }
+
+    /// [`Self::track_points`] compiled for AVX2 (the same operations, so the same points).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn track_points_avx2(
+        &mut self,
+        prev: &Pyramid,
+        next: &Pyramid,
+        from: &[[f32; 2]],
+        to: &mut [[f32; 2]],
+        status: &mut [bool],
+        error: &mut [f32],
+    ) {
+        self.track_points(prev, next, from, to, status, error);
+    }
+
+    #[inline(always)]
+    fn track_points(
+        &mut self,
+        prev: &Pyramid,
+        next: &Pyramid,
+        from: &[[f32; 2]],
+        to: &mut [[f32; 2]],
+        status: &mut [bool],
+        error: &mut [f32],
+    ) {
         for i in 0..from.len() {
             let (p, ok, e) = self.track_point(prev, next, from[i]);
             to[i] = if ok { p } else { from[i] };
             status[i] = ok;
             error[i] = e;
         }
-        Ok(())
     }
 
+    #[inline(always)]
     fn track_point(
         &mut self,
         prev: &Pyramid,
@@ -502,6 +562,66 @@ mod tests {
             }
         }
         img
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_avx2_copies_give_the_same_pyramid_and_points() {
+        if !crate::cpu::has_avx2_fma() {
+            eprintln!("SKIPPED: this CPU has no AVX2 + FMA");
+            return;
+        }
+        let id = [[1.0, 0.0], [0.0, 1.0]];
+        let (img0, img1) = (
+            warped(id, [0.0, 0.0]),
+            warped([[1.02, 0.03], [-0.02, 0.99]], [3.3, -2.1]),
+        );
+        let mut pyramids = Vec::new();
+        for img in [&img0, &img1] {
+            let (mut base, mut avx2) = (Pyramid::new(), Pyramid::new());
+            base.build_body(img, 3);
+            #[allow(unsafe_code)]
+            // SAFETY: the CPU has AVX2 and FMA (checked above).
+            unsafe {
+                avx2.build_avx2(img, 3)
+            };
+            assert_eq!(base.len(), avx2.len());
+            for (a, b) in base.levels().iter().zip(avx2.levels()) {
+                assert_eq!(a.data(), b.data());
+            }
+            pyramids.push(base);
+        }
+        // Grid points plus some near the border (the clamped sampling path).
+        let mut from = grid();
+        from.extend([[1.5, 2.5], [637.2, 477.9], [-3.0, 240.0]]);
+        let n = from.len();
+        let mut lk = PyramidalLk::new(LkConfig::default()).unwrap();
+        let (mut to_a, mut st_a, mut err_a) = (vec![[0.0; 2]; n], vec![false; n], vec![0.0; n]);
+        let (mut to_b, mut st_b, mut err_b) = (vec![[9.0; 2]; n], vec![true; n], vec![9.0; n]);
+        lk.track_points(
+            &pyramids[0],
+            &pyramids[1],
+            &from,
+            &mut to_a,
+            &mut st_a,
+            &mut err_a,
+        );
+        #[allow(unsafe_code)]
+        // SAFETY: the CPU has AVX2 and FMA (checked above).
+        unsafe {
+            lk.track_points_avx2(
+                &pyramids[0],
+                &pyramids[1],
+                &from,
+                &mut to_b,
+                &mut st_b,
+                &mut err_b,
+            )
+        };
+        assert_eq!(to_a, to_b);
+        assert_eq!(st_a, st_b);
+        assert_eq!(err_a, err_b);
+        assert!(st_a.iter().filter(|&&s| s).count() > 40, "{st_a:?}");
     }
 
     fn grid() -> Vec<[f32; 2]> {
