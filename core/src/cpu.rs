@@ -15,7 +15,7 @@
 //!   while that state is dirty pays for it on every vector instruction: on the development machine
 //!   the M3 per-face time fell from 905 to 569 µs once the state was cleared after each network
 //!   run, with the patch sampling and bilateral filter 2–3× faster than in a loop of their own.
-//!   Every tract run is therefore followed by [`clear_upper_vector_state`].
+//!   Every tract run is therefore followed by `clear_upper_vector_state`.
 
 use std::sync::Once;
 
@@ -83,6 +83,58 @@ mod x86 {
 pub(crate) fn has_avx2_fma() -> bool {
     std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
 }
+
+/// Defines a method that runs `$body` — an `#[inline(always)]` method of the same signature —
+/// either as compiled for baseline x86-64 or, where the CPU has AVX2 and FMA, through `$avx2`: a
+/// copy of it compiled for those features, which the macro also defines. Rust never contracts
+/// `a * b + c` into a fused multiply-add on its own, so the copy does the same operations on wider
+/// vectors and gives the same results. Off x86-64 the method runs `$body`.
+///
+/// ```ignore
+/// with_avx2_copy! {
+///     /// Docs of the method.
+///     pub fn apply / apply_avx2 (&mut self, src: &[u8], dst: &mut [u8]) => apply_body
+/// }
+/// ```
+macro_rules! with_avx2_copy {
+    (
+        $(#[$attr:meta])*
+        $vis:vis fn $name:ident / $avx2:ident (&$s:ident $(, $arg:ident: $ty:ty)* $(,)?) $(-> $ret:ty)?
+            => $body:ident
+    ) => {
+        $crate::cpu::with_avx2_copy!(@emit [$(#[$attr])*] $vis $name $avx2 $s [&$s]
+            [$($arg: $ty),*] [$($ret)?] $body);
+    };
+    (
+        $(#[$attr:meta])*
+        $vis:vis fn $name:ident / $avx2:ident (&mut $s:ident $(, $arg:ident: $ty:ty)* $(,)?) $(-> $ret:ty)?
+            => $body:ident
+    ) => {
+        $crate::cpu::with_avx2_copy!(@emit [$(#[$attr])*] $vis $name $avx2 $s [&mut $s]
+            [$($arg: $ty),*] [$($ret)?] $body);
+    };
+    (@emit [$($attr:tt)*] $vis:vis $name:ident $avx2:ident $s:ident [$($recv:tt)+]
+        [$($arg:ident: $ty:ty),*] [$($ret:ty)?] $body:ident) => {
+        $($attr)*
+        $vis fn $name($($recv)+ $(, $arg: $ty)*) $(-> $ret)? {
+            #[cfg(target_arch = "x86_64")]
+            if $crate::cpu::has_avx2_fma() {
+                #[allow(unsafe_code)]
+                // SAFETY: the CPU has AVX2 and FMA, the features the copy is compiled for.
+                return unsafe { $s.$avx2($($arg),*) };
+            }
+            $s.$body($($arg),*)
+        }
+
+        /// The body compiled for AVX2 + FMA (`cpu::with_avx2_copy`).
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma")]
+        fn $avx2($($recv)+ $(, $arg: $ty)*) $(-> $ret)? {
+            $s.$body($($arg),*)
+        }
+    };
+}
+pub(crate) use with_avx2_copy;
 
 /// Clears the upper halves of the vector registers (`vzeroupper`) when the CPU has AVX; nothing
 /// elsewhere (no other architecture has the penalty).

@@ -75,26 +75,11 @@ impl Bilateral {
         }
     }
 
-    /// Filters the `width`×`height` image `src` into `dst` (both row-major, `width·height` long).
-    /// Panics if the slices are shorter than `width·height` (callers own both sizes).
-    pub fn apply(&mut self, src: &[u8], width: usize, height: usize, dst: &mut [u8]) {
-        #[cfg(target_arch = "x86_64")]
-        if crate::cpu::has_avx2_fma() {
-            #[allow(unsafe_code)]
-            // SAFETY: the CPU has AVX2 and FMA, the features the function is compiled for.
-            unsafe {
-                self.apply_avx2(src, width, height, dst)
-            };
-            return;
-        }
-        self.apply_body(src, width, height, dst);
-    }
-
-    /// [`Self::apply_body`] compiled for AVX2 (the same operations, so the same bytes).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn apply_avx2(&mut self, src: &[u8], width: usize, height: usize, dst: &mut [u8]) {
-        self.apply_body(src, width, height, dst);
+    crate::cpu::with_avx2_copy! {
+        /// Filters the `width`×`height` image `src` into `dst` (both row-major, `width·height`
+        /// long). Panics if the slices are shorter than `width·height` (callers own both sizes).
+        pub fn apply / apply_avx2 (&mut self, src: &[u8], width: usize, height: usize,
+            dst: &mut [u8]) => apply_body
     }
 
     #[inline(always)]

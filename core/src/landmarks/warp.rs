@@ -204,25 +204,9 @@ impl<'a> InteriorMap<'a> {
         inside.then_some(Self { m })
     }
 
-    fn sample(&self, data: &[u8], iw: usize, ih: usize, width: usize, out: &mut [u8]) {
-        #[cfg(target_arch = "x86_64")]
-        if crate::cpu::has_avx2_fma() {
-            #[allow(unsafe_code)]
-            // SAFETY: the CPU has AVX2 and FMA, the features the function is compiled for.
-            unsafe {
-                self.sample_avx2(data, iw, ih, width, out)
-            };
-            return;
-        }
-        self.sample_body(data, iw, ih, width, out);
-    }
-
-    /// [`Self::sample_body`] compiled for AVX2 (8-lane vectors, VEX encodings; the same
-    /// operations, so the same bytes).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn sample_avx2(&self, data: &[u8], iw: usize, ih: usize, width: usize, out: &mut [u8]) {
-        self.sample_body(data, iw, ih, width, out);
+    crate::cpu::with_avx2_copy! {
+        fn sample / sample_avx2 (&self, data: &[u8], iw: usize, ih: usize, width: usize,
+            out: &mut [u8]) => sample_body
     }
 
     #[inline(always)]

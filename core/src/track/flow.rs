@@ -103,26 +103,10 @@ impl Pyramid {
         Self::default()
     }
 
-    /// Rebuilds from `image` with up to `levels` levels (fewer when a level would get smaller than
-    /// [`MIN_LEVEL_SIDE`]), reusing the buffers.
-    pub fn build(&mut self, image: &GrayImage, levels: usize) {
-        #[cfg(target_arch = "x86_64")]
-        if crate::cpu::has_avx2_fma() {
-            #[allow(unsafe_code)]
-            // SAFETY: the CPU has AVX2 and FMA, the features the function is compiled for.
-            unsafe {
-                self.build_avx2(image, levels)
-            };
-            return;
-        }
-        self.build_body(image, levels);
-    }
-
-    /// [`Self::build_body`] compiled for AVX2 (the same operations, so the same levels).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn build_avx2(&mut self, image: &GrayImage, levels: usize) {
-        self.build_body(image, levels);
+    crate::cpu::with_avx2_copy! {
+        /// Rebuilds from `image` with up to `levels` levels (fewer when a level would get smaller
+        /// than [`MIN_LEVEL_SIDE`]), reusing the buffers.
+        pub fn build / build_avx2 (&mut self, image: &GrayImage, levels: usize) => build_body
     }
 
     #[inline(always)]
@@ -305,36 +289,18 @@ impl PyramidalLk {
                 next.len()
             )));
         }
-        #[cfg(target_arch = "x86_64")]
-        if crate::cpu::has_avx2_fma() {
-            #[allow(unsafe_code)]
-            // SAFETY: the CPU has AVX2 and FMA, the features the function is compiled for.
-            unsafe {
-                self.track_points_avx2(prev, next, from, to, status, error)
-            };
-            return Ok(());
-        }
         self.track_points(prev, next, from, to, status, error);
         Ok(())
     }
 
-    /// [`Self::track_points`] compiled for AVX2 (the same operations, so the same points).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn track_points_avx2(
-        &mut self,
-        prev: &Pyramid,
-        next: &Pyramid,
-        from: &[[f32; 2]],
-        to: &mut [[f32; 2]],
-        status: &mut [bool],
-        error: &mut [f32],
-    ) {
-        self.track_points(prev, next, from, to, status, error);
+    crate::cpu::with_avx2_copy! {
+        fn track_points / track_points_avx2 (&mut self, prev: &Pyramid, next: &Pyramid,
+            from: &[[f32; 2]], to: &mut [[f32; 2]], status: &mut [bool], error: &mut [f32])
+            => track_points_body
     }
 
     #[inline(always)]
-    fn track_points(
+    fn track_points_body(
         &mut self,
         prev: &Pyramid,
         next: &Pyramid,
@@ -598,7 +564,7 @@ mod tests {
         let mut lk = PyramidalLk::new(LkConfig::default()).unwrap();
         let (mut to_a, mut st_a, mut err_a) = (vec![[0.0; 2]; n], vec![false; n], vec![0.0; n]);
         let (mut to_b, mut st_b, mut err_b) = (vec![[9.0; 2]; n], vec![true; n], vec![9.0; n]);
-        lk.track_points(
+        lk.track_points_body(
             &pyramids[0],
             &pyramids[1],
             &from,
