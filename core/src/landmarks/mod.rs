@@ -14,13 +14,15 @@
 //! [`M3`] holds the seven networks (embedded with `include_bytes!`, optimised once by tract when it
 //! is built) and every buffer one face needs, so [`M3::estimate`] allocates nothing after its first
 //! call beyond the per-run output tensors tract itself creates. Preprocessing lives in [`warp`]
-//! (affine crop/patch sampling) and [`filter`] (bilateral filter, histogram equalisation).
+//! (affine crop/patch sampling) and [`filter`] (bilateral filter, histogram equalisation); each
+//! network's one-channel first layer runs outside tract (`stem.rs`, found in the graph at load).
 //! One face = one call; run one `M3` per thread (it is `Send`).
 
 pub mod filter;
 mod m3;
 mod net;
 mod prior;
+mod stem;
 #[cfg(test)]
 pub(crate) use net::onnx_op_types;
 pub mod warp;
