@@ -22,6 +22,7 @@ pub mod image;
 pub mod landmarks;
 pub mod metrics;
 pub mod model;
+mod stem;
 pub mod track;
 
 pub use error::{Error, Result};

@@ -19,6 +19,7 @@
 mod resample;
 
 use crate::image::{GrayImage, Rect};
+use crate::stem::{Stem, StemLayer, StemWeights};
 use crate::{Error, Result};
 use resample::AreaResampler;
 use serde::{Deserialize, Serialize};
@@ -155,14 +156,37 @@ struct ShapePlan {
     h: usize,
     w: usize,
     state: State,
+    /// The network's first layer (`crate::stem`); `input` is then its output.
+    stem: Option<Stem>,
     input: Arc<Tensor>,
     last_used: u64,
+}
+
+impl ShapePlan {
+    /// Runs the network on the `h × w` input `fill` writes.
+    fn run(&mut self, fill: impl FnOnce(&mut [f32])) -> Result<TVec<TValue>> {
+        let t = Arc::make_mut(&mut self.input);
+        let mut view = t.try_as_plain_ram_mut().map_err(internal)?;
+        let buf = view.as_slice_mut::<f32>().map_err(internal)?;
+        match &mut self.stem {
+            Some(stem) => {
+                fill(stem.input_mut());
+                stem.run(buf);
+            }
+            None => fill(buf),
+        }
+        let outputs = self.state.run(tvec![self.input.clone().into_tvalue()]);
+        crate::cpu::clear_upper_vector_state();
+        outputs.map_err(internal)
+    }
 }
 
 /// The face detector. Not `Clone`: it owns tract plans; create one per thread.
 pub struct FaceDetector {
     config: DetectorConfig,
+    /// The network without its first layer when that runs as a [`Stem`].
     model: InferenceModel,
+    stem: Option<StemWeights>,
     /// Strides of the network's heads, in network pixels, in the order of its outputs.
     strides: Vec<usize>,
     /// Index of the [`WINDOW_STRIDE`] head among the outputs.
@@ -206,12 +230,26 @@ impl FaceDetector {
             .map_err(|e| Error::ModelLoad(format!("detector.json: {e}")))?;
         let window_head = check_desc(&desc)?;
         crate::cpu::select_tract_kernels();
-        let model = tract_onnx::onnx()
-            .model_for_read(&mut std::io::Cursor::new(MODEL_ONNX))
-            .map_err(|e| Error::ModelLoad(format!("detector.onnx: {e}")))?;
+        let load = |e: TractError| Error::ModelLoad(format!("detector.onnx: {e:#}"));
+        let onnx = tract_onnx::onnx();
+        let mut proto = onnx
+            .proto_model_for_read(&mut std::io::Cursor::new(MODEL_ONNX))
+            .map_err(load)?;
+        // The first layer does not depend on the frame size: any shape finds and computes it.
+        let nominal = [vec![1, 1, WINDOW_INPUT, WINDOW_INPUT]];
+        let stem = match StemLayer::find(&proto, &nominal) {
+            Some(layer) => {
+                let weights = layer.weights(&onnx, &proto, &nominal).map_err(load)?;
+                layer.cut(&mut proto);
+                Some(weights)
+            }
+            None => None,
+        };
+        let model = onnx.model_for_proto_model(&proto).map_err(load)?;
         Ok(Self {
             config,
             model,
+            stem,
             strides: desc.strides,
             window_head,
             plans: Vec::with_capacity(MAX_PLANS),
@@ -243,21 +281,28 @@ impl FaceDetector {
             self.plans[i].last_used = self.tick;
             return Ok(i);
         }
+        let stem = self
+            .stem
+            .as_ref()
+            .map(|weights| Stem::new(1, h, w, weights));
+        let shape = stem.as_ref().map_or([1, 1, h, w], Stem::output_shape);
         let typed = self
             .model
             .clone()
-            .with_input_fact(0, f32::fact([1, 1, h, w]).into())
+            .with_input_fact(0, f32::fact(shape).into())
             .and_then(|m| m.into_optimized())
             .map_err(|e| Error::ModelLoad(format!("detector plan {w}x{h}: {e}")))?;
         let plan: Plan = typed
             .into_runnable()
             .map_err(|e| Error::ModelLoad(format!("detector plan {w}x{h}: {e}")))?;
         let state = plan.spawn().map_err(internal)?;
-        let input = Arc::new(Tensor::zero::<f32>(&[1, 1, h, w]).map_err(internal)?);
+        // Zeros: with a stem, the border is the second layer's padding and stays zero.
+        let input = Arc::new(Tensor::zero::<f32>(&shape).map_err(internal)?);
         let entry = ShapePlan {
             h,
             w,
             state,
+            stem,
             input,
             last_used: self.tick,
         };
@@ -318,18 +363,8 @@ impl FaceDetector {
         self.resampler.xs.build(w, 0.0, rx, cw);
         self.resampler.ys.build(h, 0.0, ry, ch);
         let idx = self.plan_for(ch, cw)?;
-        let outputs = {
-            let plan = &mut self.plans[idx];
-            {
-                let t = Arc::make_mut(&mut plan.input);
-                let mut view = t.try_as_plain_ram_mut().map_err(internal)?;
-                let buf = view.as_slice_mut::<f32>().map_err(internal)?;
-                self.resampler.run(image, buf, cw, ch, cw);
-            }
-            let outputs = plan.state.run(tvec![plan.input.clone().into_tvalue()]);
-            crate::cpu::clear_upper_vector_state();
-            outputs.map_err(internal)?
-        };
+        let resampler = &mut self.resampler;
+        let outputs = self.plans[idx].run(|buf| resampler.run(image, buf, cw, ch, cw))?;
         let logit_thr = logit(self.config.score_threshold);
         for (k, &stride) in self.strides.iter().enumerate() {
             let t = outputs
@@ -385,16 +420,8 @@ impl FaceDetector {
         self.resampler.xs.build(w, cx - half, ratio, n);
         self.resampler.ys.build(h, cy - half, ratio, n);
         let idx = self.plan_for(n, n)?;
-        let plan = &mut self.plans[idx];
-        {
-            let t = Arc::make_mut(&mut plan.input);
-            let mut view = t.try_as_plain_ram_mut().map_err(internal)?;
-            let buf = view.as_slice_mut::<f32>().map_err(internal)?;
-            self.resampler.run(image, buf, n, n, n);
-        }
-        let outputs = plan.state.run(tvec![plan.input.clone().into_tvalue()]);
-        crate::cpu::clear_upper_vector_state();
-        let outputs = outputs.map_err(internal)?;
+        let resampler = &mut self.resampler;
+        let outputs = self.plans[idx].run(|buf| resampler.run(image, buf, n, n, n))?;
         // Stride-16 head: the patch centre (32, 32) lies between cells 1 and 2 on each axis.
         let t = outputs
             .get(self.window_head)
@@ -652,6 +679,45 @@ mod tests {
     fn logit_inverts_sigmoid() {
         for p in [0.1f32, 0.5, 0.73] {
             assert!((sigmoid(logit(p)) - p).abs() < 1e-6);
+        }
+    }
+
+    /// The shipped network's first layer runs as a [`Stem`], with the heads tract gives for the
+    /// whole graph to float rounding (odd and even sizes).
+    #[test]
+    fn first_layer_runs_as_a_stem_with_the_whole_graphs_outputs() {
+        let mut det = FaceDetector::new().unwrap();
+        assert!(det.stem.is_some(), "first layer not taken as a stem");
+        let whole = tract_onnx::onnx()
+            .model_for_read(&mut std::io::Cursor::new(MODEL_ONNX))
+            .unwrap();
+        for (h, w) in [(96, 128), (75, 101)] {
+            let input: Vec<f32> = (0..h * w)
+                .map(|i| ((i * 7919) % 251) as f32 / 250.0)
+                .collect();
+            let idx = det.plan_for(h, w).unwrap();
+            let ours = det.plans[idx]
+                .run(|buf| buf.copy_from_slice(&input))
+                .unwrap();
+            let plan = whole
+                .clone()
+                .with_input_fact(0, f32::fact([1, 1, h, w]).into())
+                .and_then(|m| m.into_optimized())
+                .and_then(|m| m.into_runnable())
+                .unwrap();
+            let t = Tensor::from_shape(&[1, 1, h, w], &input).unwrap();
+            let theirs = plan.run(tvec![t.into_tvalue()]).unwrap();
+            assert_eq!(ours.len(), theirs.len());
+            for (a, b) in ours.iter().zip(&theirs) {
+                assert_eq!(a.shape(), b.shape());
+                let a = a.try_as_plain_ram().unwrap();
+                let b = b.try_as_plain_ram().unwrap();
+                let (a, b) = (a.as_slice::<f32>().unwrap(), b.as_slice::<f32>().unwrap());
+                let scale = b.iter().fold(1f32, |m, v| m.max(v.abs()));
+                for (x, y) in a.iter().zip(b) {
+                    assert!((x - y).abs() <= 1e-4 * scale, "{h}x{w}: {x} vs {y}");
+                }
+            }
         }
     }
 

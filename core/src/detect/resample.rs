@@ -75,15 +75,20 @@ impl AxisTaps {
 pub(crate) struct AreaResampler {
     pub(crate) xs: AxisTaps,
     pub(crate) ys: AxisTaps,
-    /// Horizontally filtered rows: `src rows needed × out width`, indexed by source row.
+    /// Vertically filtered rows: `out_h × source width`.
     tmp: Vec<f32>,
-    row_of: Vec<u32>,
 }
 
 impl AreaResampler {
     /// Resamples into `out` (row-major, `out_w × out_h` region of a tensor with row length
     /// `out_stride`), writing `value / 255` (the network's input scaling). The taps must have been
     /// built with `n_out` = `out_w` (x) and `out_h` (y) for `img`.
+    ///
+    /// The vertical pass runs first: it reads whole source rows, so it vectorises, and it leaves
+    /// the tap-by-tap horizontal pass (scalar: each output's taps are a short run of its own) only
+    /// the `out_h` output rows instead of every source row used (`detect_640x480` 3.28 / 3.32 →
+    /// 2.90 / 2.95 ms in alternating runs). The sums are those of the horizontal-first order up to
+    /// float rounding.
     pub(crate) fn run(
         &mut self,
         img: &GrayImage,
@@ -92,48 +97,26 @@ impl AreaResampler {
         out_h: usize,
         out_stride: usize,
     ) {
-        // Source rows actually used (taps clamp to the image), filtered horizontally once each.
-        let h = img.height();
-        self.row_of.clear();
-        self.row_of.resize(h, u32::MAX);
-        let mut n_rows = 0usize;
-        for o in 0..out_h {
-            let (idx, _) = self.ys.taps(o);
-            for &k in idx {
-                if self.row_of[k as usize] == u32::MAX {
-                    self.row_of[k as usize] = n_rows as u32;
-                    n_rows += 1;
+        let w = img.width();
+        self.tmp.resize(out_h * w, 0.0);
+        for (o, dst) in self.tmp.chunks_exact_mut(w).enumerate() {
+            let (idx, wts) = self.ys.taps(o);
+            dst.fill(0.0);
+            for (&k, &wk) in idx.iter().zip(wts) {
+                for (d, &s) in dst.iter_mut().zip(img.row(k as usize)) {
+                    *d += f32::from(s) * wk;
                 }
-            }
-        }
-        self.tmp.resize(n_rows * out_w, 0.0);
-        for (y, &slot) in self.row_of.iter().enumerate() {
-            if slot == u32::MAX {
-                continue;
-            }
-            let src = img.row(y);
-            let dst = &mut self.tmp[slot as usize * out_w..(slot as usize + 1) * out_w];
-            for (o, d) in dst.iter_mut().enumerate() {
-                let (idx, w) = self.xs.taps(o);
-                let mut acc = 0.0f32;
-                for (&k, &wk) in idx.iter().zip(w) {
-                    acc += src[k as usize] as f32 * wk;
-                }
-                *d = acc;
             }
         }
         const INV_255: f32 = 1.0 / 255.0;
-        for o in 0..out_h {
-            let (idx, w) = self.ys.taps(o);
-            let dst = &mut out[o * out_stride..o * out_stride + out_w];
-            dst.fill(0.0);
-            for (&k, &wk) in idx.iter().zip(w) {
-                let slot = self.row_of[k as usize] as usize;
-                let src = &self.tmp[slot * out_w..(slot + 1) * out_w];
-                let wk = wk * INV_255;
-                for (d, &s) in dst.iter_mut().zip(src) {
-                    *d += s * wk;
+        for (src, dst) in self.tmp.chunks_exact(w).zip(out.chunks_mut(out_stride)) {
+            for (x, d) in dst[..out_w].iter_mut().enumerate() {
+                let (idx, wts) = self.xs.taps(x);
+                let mut acc = 0.0f32;
+                for (&k, &wk) in idx.iter().zip(wts) {
+                    acc += src[k as usize] * wk;
                 }
+                *d = acc * INV_255;
             }
         }
     }

@@ -4,10 +4,9 @@
 //! tract runs single-threaded unless its `multithread-mm` feature is enabled and an executor is
 //! installed; the core enables neither, so each network runs on the calling thread.
 
-use super::stem::Stem;
 use crate::error::{Error, Result};
+use crate::stem::{Stem, StemLayer};
 use std::sync::Arc;
-use tract_onnx::pb::{AttributeProto, ModelProto, NodeProto};
 use tract_onnx::prelude::*;
 
 /// A loaded network with named outputs and reusable inputs.
@@ -58,12 +57,11 @@ impl Net {
         let layer = use_stem.then(|| StemLayer::find(&proto, &shapes)).flatten();
         let stem = match layer {
             Some(layer) => {
-                let (kernel, bias) = layer
+                let weights = layer
                     .weights(&onnx, &proto, &shapes)
                     .map_err(load_err(what))?;
                 layer.cut(&mut proto);
-                let [batch, _, h, w] = [shapes[0][0], 1, shapes[0][2], shapes[0][3]];
-                let stem = Stem::new(batch, h, w, &kernel, &bias, layer.next_pad);
+                let stem = Stem::new(shapes[0][0], shapes[0][2], shapes[0][3], &weights);
                 shapes[0] = stem.output_shape().to_vec();
                 Some(stem)
             }
@@ -174,147 +172,6 @@ impl Net {
         t.try_as_plain_ram()
             .and_then(|v| v.as_slice::<f32>())
             .map_err(|e| Error::Internal(format!("network output: {e:#}")))
-    }
-}
-
-/// A first layer [`Stem`] can compute, as found in an ONNX graph: the graph's first input
-/// (`batch × 1 × h × w`) feeds only a 3×3, stride-2, padding-1 `Conv` with a bias, whose output
-/// feeds only a ReLU (`Relu`, or `LeakyRelu` with α = 0), whose output feeds only a `Conv` with the
-/// same padding `next_pad` on every side.
-#[derive(Debug)]
-struct StemLayer {
-    conv: usize,
-    relu: usize,
-    next: usize,
-    next_pad: usize,
-}
-
-fn attr<'a>(node: &'a NodeProto, name: &str) -> Option<&'a AttributeProto> {
-    node.attribute.iter().find(|a| a.name == name)
-}
-
-fn ints_or<'a>(node: &'a NodeProto, name: &str, default: &'a [i64]) -> &'a [i64] {
-    attr(node, name).map_or(default, |a| &a.ints)
-}
-
-/// Whether `node` is a `Conv` with explicit (not automatic) padding, group 1 and dilation 1.
-fn plain_conv(node: &NodeProto) -> bool {
-    node.op_type == "Conv"
-        && attr(node, "auto_pad").is_none_or(|a| a.s.is_empty() || a.s == b"NOTSET")
-        && attr(node, "group").is_none_or(|a| a.i == 1)
-        && ints_or(node, "dilations", &[1, 1]) == [1, 1]
-}
-
-impl StemLayer {
-    fn find(proto: &ModelProto, shapes: &[Vec<usize>]) -> Option<Self> {
-        let graph = proto.graph.as_ref()?;
-        if graph.input.len() != shapes.len() {
-            return None;
-        }
-        let input = &graph.input.first()?.name;
-        if !matches!(shapes.first()?.as_slice(), [_, 1, h, w] if *h > 0 && *w > 0) {
-            return None;
-        }
-        let is_output = |name: &str| graph.output.iter().any(|o| o.name == name);
-        // The one node reading `name` (and `name` no graph output).
-        let only_reader = |name: &str| {
-            let mut readers = graph
-                .node
-                .iter()
-                .enumerate()
-                .filter(|(_, n)| n.input.iter().any(|i| i == name));
-            let first = readers.next();
-            if readers.next().is_some() || is_output(name) {
-                None
-            } else {
-                first
-            }
-        };
-        let (conv, c) = only_reader(input)?;
-        if !(plain_conv(c)
-            && c.input.len() == 3
-            && c.input[0] == *input
-            && ints_or(c, "kernel_shape", &[]) == [3, 3]
-            && ints_or(c, "strides", &[1, 1]) == [2, 2]
-            && ints_or(c, "pads", &[0; 4]) == [1, 1, 1, 1]
-            && c.output.len() == 1)
-        {
-            return None;
-        }
-        let (relu, r) = only_reader(&c.output[0])?;
-        let is_relu = r.op_type == "Relu"
-            || (r.op_type == "LeakyRelu" && attr(r, "alpha").is_some_and(|a| a.f == 0.0));
-        if !is_relu || r.output.len() != 1 {
-            return None;
-        }
-        let (next, n) = only_reader(&r.output[0])?;
-        let pads = ints_or(n, "pads", &[0; 4]);
-        if !(plain_conv(n) && n.input[0] == r.output[0] && pads.len() == 4) {
-            return None;
-        }
-        let next_pad = usize::try_from(pads[0]).ok()?;
-        pads.iter().all(|&p| p == pads[0]).then_some(Self {
-            conv,
-            relu,
-            next,
-            next_pad,
-        })
-    }
-
-    /// The layer's kernel (`channels × 9`) and bias, as tract computes them from the graph (so
-    /// any storage of the weights tract reads — int8 with `DequantizeLinear`, float16 with `Cast`
-    /// — works).
-    fn weights(
-        &self,
-        onnx: &tract_onnx::Onnx,
-        proto: &ModelProto,
-        shapes: &[Vec<usize>],
-    ) -> TractResult<(Vec<f32>, Vec<f32>)> {
-        let Some(graph) = proto.graph.as_ref() else {
-            tract_onnx::tract_core::internal::bail!("no graph");
-        };
-        let conv = &graph.node[self.conv];
-        let mut model = onnx.model_for_proto_model(proto)?;
-        for (i, shape) in shapes.iter().enumerate() {
-            model.set_input_fact(i, f32::fact(shape).into())?;
-        }
-        model.select_outputs_by_name([&conv.input[1], &conv.input[2]])?;
-        let plan = model.into_optimized()?.into_runnable()?;
-        let zeros = shapes
-            .iter()
-            .map(|s| Tensor::zero::<f32>(s).map(TValue::from))
-            .collect::<TractResult<TVec<_>>>()?;
-        let out = plan.run(zeros)?;
-        let (kernel, bias) = (&out[0], &out[1]);
-        let channels = bias.len();
-        if kernel.shape() != [channels, 1, 3, 3] || bias.rank() != 1 {
-            tract_onnx::tract_core::internal::bail!(
-                "first layer: kernel {:?} and bias {:?}",
-                kernel.shape(),
-                bias.shape()
-            );
-        }
-        let values = |t: &TValue| -> TractResult<Vec<f32>> {
-            Ok(t.try_as_plain_ram()?.as_slice::<f32>()?.to_vec())
-        };
-        Ok((values(kernel)?, values(bias)?))
-    }
-
-    /// Removes the layer from the graph: the next convolution reads the graph input, which will
-    /// hold the stem's output with its padding, so the convolution pads nothing.
-    fn cut(&self, proto: &mut ModelProto) {
-        let Some(graph) = proto.graph.as_mut() else {
-            return;
-        };
-        let input = graph.input[0].name.clone();
-        let next = &mut graph.node[self.next];
-        next.input[0] = input;
-        for a in next.attribute.iter_mut().filter(|a| a.name == "pads") {
-            a.ints.iter_mut().for_each(|p| *p = 0);
-        }
-        let (hi, lo) = (self.conv.max(self.relu), self.conv.min(self.relu));
-        graph.node.remove(hi);
-        graph.node.remove(lo);
     }
 }
 

@@ -1,0 +1,475 @@
+//! A network's first layer — an optional scalar affine of the one-channel input (`Sub`, `Mul`,
+//! `Add`, `Div` by constants), a 3×3, stride-2, zero-padded convolution and a ReLU — computed here
+//! instead of by tract: [`StemLayer`] finds the layer in the ONNX graph, takes its weights from it
+//! and cuts it out, and [`Stem`] computes it before tract runs the rest (`landmarks::net`, and
+//! `detect`). The ONNX files stay whole: training, the Python references and `M3_IO.md` see the
+//! same networks.
+//!
+//! Why: tract lowers every convolution to a matrix product over an im2col matrix; with one input
+//! channel that matrix has nine rows and gathering it, not the arithmetic, is the cost — 36 µs of M3
+//! level 1's 155 µs for 1.6 % of its multiply-adds (`core/examples/profile_net.rs`), and its explicit
+//! `Pad` passes (of the input, and of the first layer's output for the second layer: 368 µs of the
+//! detector's 2.66 ms at 267×200) cost more. Here the input rows are split into even and odd
+//! columns so every tap is a contiguous run, each output block keeps its nine taps in registers for
+//! all channels, and the output is written straight into the second layer's padded input (its
+//! border stays zero), so tract's second convolution pads nothing.
+
+use tract_onnx::pb::{AttributeProto, ModelProto, NodeProto, TensorProto};
+use tract_onnx::prelude::*;
+
+/// The first layer of one network and its buffers. Shapes: input `batch × in_h × in_w` (what the
+/// network's image input held), output `batch × channels × (out_h + 2·pad) × (out_w + 2·pad)`.
+#[derive(Debug, Clone)]
+pub(crate) struct Stem {
+    batch: usize,
+    channels: usize,
+    in_h: usize,
+    in_w: usize,
+    out_h: usize,
+    out_w: usize,
+    /// Border of zeros around each output plane: the second layer's padding.
+    pad: usize,
+    /// Per channel: the 3×3 kernel row by row, then the bias.
+    weights: Vec<[f32; 10]>,
+    /// The input affine `v · scale + shift`, applied before the zero padding.
+    scale: f32,
+    shift: f32,
+    /// The network input as the caller filled it.
+    input: Vec<f32>,
+    /// The zero-padded input's `in_h + 2` rows split into even and odd columns, each row
+    /// `out_w` rounded up to [`LANES`], plus one, long.
+    even: Vec<f32>,
+    odd: Vec<f32>,
+}
+
+impl Stem {
+    /// A stem for a `batch × 1 × in_h × in_w` input with `layer`'s weights, writing planes with
+    /// its zero border.
+    pub(crate) fn new(batch: usize, in_h: usize, in_w: usize, layer: &StemWeights) -> Self {
+        let (kernel, bias, pad) = (&layer.kernel, &layer.bias, layer.next_pad);
+        let channels = bias.len();
+        debug_assert_eq!(kernel.len(), 9 * channels);
+        // ONNX output size of a 3×3 kernel, stride 2, padding 1: ⌊(n + 2 − 3) / 2⌋ + 1.
+        let (out_h, out_w) = (in_h.div_ceil(2), in_w.div_ceil(2));
+        let weights = kernel
+            .chunks_exact(9)
+            .zip(bias)
+            .map(|(k, &b)| std::array::from_fn(|i| if i < 9 { k[i] } else { b }))
+            .collect();
+        Self {
+            batch,
+            channels,
+            in_h,
+            in_w,
+            out_h,
+            out_w,
+            pad,
+            weights,
+            scale: layer.scale,
+            shift: layer.shift,
+            input: vec![0.0; batch * in_h * in_w],
+            even: vec![0.0; (in_h + 2) * (out_w.next_multiple_of(LANES) + 1)],
+            odd: vec![0.0; (in_h + 2) * (out_w.next_multiple_of(LANES) + 1)],
+        }
+    }
+
+    /// The shape of the output: the second layer's input.
+    pub(crate) fn output_shape(&self) -> [usize; 4] {
+        let p = 2 * self.pad;
+        [self.batch, self.channels, self.out_h + p, self.out_w + p]
+    }
+
+    /// The network input, `batch × in_h × in_w`, for the caller to fill.
+    pub(crate) fn input_mut(&mut self) -> &mut [f32] {
+        &mut self.input
+    }
+
+    crate::cpu::with_avx2_copy! {
+        /// Computes the layer on the current input into the interior of `out` (of
+        /// [`Self::output_shape`]; its border is left as it is, zero).
+        pub(crate) fn run / run_avx2 (&mut self, out: &mut [f32]) => run_body
+    }
+
+    #[inline(always)]
+    fn run_body(&mut self, out: &mut [f32]) {
+        let (h, w, oh, ow, p) = (self.in_h, self.in_w, self.out_h, self.out_w, self.pad);
+        let (pw, plane) = (ow + 2 * p, (oh + 2 * p) * (ow + 2 * p));
+        let ew = ow.next_multiple_of(LANES) + 1;
+        let (even, odd) = (&mut self.even, &mut self.odd);
+        for (b, image) in self.input.chunks_exact(h * w).enumerate() {
+            // Padded row r (image row r − 1) into its even and odd columns: padded column 2j is
+            // image column 2j − 1, padded column 2j + 1 is image column 2j. Zeros elsewhere: the
+            // padding, and the lanes past the row's end.
+            even.fill(0.0);
+            odd.fill(0.0);
+            for (r, src) in image.chunks_exact(w).enumerate() {
+                let (e, o) = (
+                    &mut even[(r + 1) * ew..][..ew],
+                    &mut odd[(r + 1) * ew..][..ew],
+                );
+                let (a, c) = (self.scale, self.shift);
+                for (d, &v) in e[1..].iter_mut().zip(src.iter().skip(1).step_by(2)) {
+                    *d = v * a + c;
+                }
+                for (d, &v) in o.iter_mut().zip(src.iter().step_by(2)) {
+                    *d = v * a + c;
+                }
+            }
+            let out_b = &mut out[b * self.channels * plane..][..self.channels * plane];
+            for y in 0..oh {
+                for x0 in (0..ow).step_by(LANES) {
+                    // The nine taps of LANES outputs, loaded once for every channel.
+                    let taps: [[f32; LANES]; 9] = std::array::from_fn(|k| {
+                        let (dy, dx) = (k / 3, k % 3);
+                        let row = (2 * y + dy) * ew;
+                        let (src, at) = match dx {
+                            0 => (&*even, row + x0),
+                            1 => (&*odd, row + x0),
+                            _ => (&*even, row + x0 + 1),
+                        };
+                        std::array::from_fn(|l| src[at + l])
+                    });
+                    let n = LANES.min(ow - x0);
+                    for (wt, dst) in self.weights.iter().zip(out_b.chunks_exact_mut(plane)) {
+                        let mut acc = [wt[9]; LANES];
+                        for (k, tap) in taps.iter().enumerate() {
+                            for (a, &t) in acc.iter_mut().zip(tap) {
+                                *a += wt[k] * t;
+                            }
+                        }
+                        let row = &mut dst[(y + p) * pw + p + x0..][..n];
+                        for (d, &a) in row.iter_mut().zip(&acc) {
+                            *d = a.max(0.0);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Outputs computed together: one AVX2 register of f32.
+const LANES: usize = 8;
+
+/// The weights of a first layer as [`Stem`] runs them.
+#[derive(Debug, Clone)]
+pub(crate) struct StemWeights {
+    /// `channels × 9`, each kernel row by row.
+    pub(crate) kernel: Vec<f32>,
+    pub(crate) bias: Vec<f32>,
+    /// The input affine before the convolution: `v · scale + shift`.
+    pub(crate) scale: f32,
+    pub(crate) shift: f32,
+    /// The second convolution's padding, now the border of the stem's output.
+    pub(crate) next_pad: usize,
+}
+
+/// A first layer [`Stem`] can compute, as found in an ONNX graph: the graph's first input
+/// (`batch × 1 × h × w`) feeds only a chain of `Sub` / `Mul` / `Add` / `Div` by scalar constants
+/// (possibly empty), which feeds only a 3×3, stride-2, padding-1 `Conv` with a bias, whose output
+/// feeds only a ReLU (`Relu`, or `LeakyRelu` with α = 0), whose output feeds only a `Conv` with the
+/// same padding on every side.
+#[derive(Debug)]
+pub(crate) struct StemLayer {
+    /// Indices of the affine nodes, the convolution and the ReLU (the nodes cut).
+    cut: Vec<usize>,
+    conv: usize,
+    next: usize,
+    next_pad: usize,
+    scale: f32,
+    shift: f32,
+}
+
+fn attr<'a>(node: &'a NodeProto, name: &str) -> Option<&'a AttributeProto> {
+    node.attribute.iter().find(|a| a.name == name)
+}
+
+fn ints_or<'a>(node: &'a NodeProto, name: &str, default: &'a [i64]) -> &'a [i64] {
+    attr(node, name).map_or(default, |a| &a.ints)
+}
+
+/// Whether `node` is a `Conv` with explicit (not automatic) padding, group 1 and dilation 1.
+fn plain_conv(node: &NodeProto) -> bool {
+    node.op_type == "Conv"
+        && attr(node, "auto_pad").is_none_or(|a| a.s.is_empty() || a.s == b"NOTSET")
+        && attr(node, "group").is_none_or(|a| a.i == 1)
+        && ints_or(node, "dilations", &[1, 1]) == [1, 1]
+}
+
+/// The value of a one-element float32 tensor.
+fn scalar(t: &TensorProto) -> Option<f32> {
+    const FLOAT: i32 = 1;
+    if t.data_type != FLOAT || t.dims.iter().product::<i64>() != 1 {
+        return None;
+    }
+    match (t.float_data.as_slice(), t.raw_data.as_slice()) {
+        ([v], _) => Some(*v),
+        ([], raw) => Some(f32::from_le_bytes(raw.try_into().ok()?)),
+        _ => None,
+    }
+}
+
+impl StemLayer {
+    /// The first layer of `proto` if it has the stem's form, for inputs of `shapes` (the graph's
+    /// inputs, in order; the first `batch × 1 × h × w`).
+    pub(crate) fn find(proto: &ModelProto, shapes: &[Vec<usize>]) -> Option<Self> {
+        let graph = proto.graph.as_ref()?;
+        if graph.input.len() != shapes.len() {
+            return None;
+        }
+        if !matches!(shapes.first()?.as_slice(), [_, 1, h, w] if *h > 0 && *w > 0) {
+            return None;
+        }
+        let is_output = |name: &str| graph.output.iter().any(|o| o.name == name);
+        // The one node reading `name` (and `name` no graph output).
+        let only_reader = |name: &str| {
+            let mut readers = graph
+                .node
+                .iter()
+                .enumerate()
+                .filter(|(_, n)| n.input.iter().any(|i| i == name));
+            let first = readers.next();
+            if readers.next().is_some() || is_output(name) {
+                None
+            } else {
+                first
+            }
+        };
+        // A scalar constant by name: an initializer or a `Constant` node's value.
+        let constant = |name: &str| {
+            if let Some(t) = graph.initializer.iter().find(|t| t.name == name) {
+                return scalar(t);
+            }
+            let node = graph
+                .node
+                .iter()
+                .find(|n| n.op_type == "Constant" && n.output.iter().any(|o| o == name))?;
+            match (attr(node, "value"), attr(node, "value_float")) {
+                (Some(a), _) => scalar(a.t.as_ref()?),
+                (None, Some(a)) => Some(a.f),
+                _ => None,
+            }
+        };
+        let (mut scale, mut shift) = (1f32, 0f32);
+        let mut cut = Vec::new();
+        let mut value = graph.input.first()?.name.as_str();
+        let (conv, c) = loop {
+            let (i, n) = only_reader(value)?;
+            if n.op_type == "Conv" {
+                break (i, n);
+            }
+            if n.input.len() != 2 || n.input[0] != value || n.output.len() != 1 {
+                return None;
+            }
+            let k = constant(&n.input[1])?;
+            match n.op_type.as_str() {
+                "Sub" => shift -= k,
+                "Add" => shift += k,
+                "Mul" => (scale, shift) = (scale * k, shift * k),
+                "Div" => (scale, shift) = (scale / k, shift / k),
+                _ => return None,
+            }
+            cut.push(i);
+            value = &n.output[0];
+        };
+        if !(plain_conv(c)
+            && c.input.len() == 3
+            && c.input[0] == value
+            && ints_or(c, "kernel_shape", &[]) == [3, 3]
+            && ints_or(c, "strides", &[1, 1]) == [2, 2]
+            && ints_or(c, "pads", &[0; 4]) == [1, 1, 1, 1]
+            && c.output.len() == 1)
+        {
+            return None;
+        }
+        let (relu, r) = only_reader(&c.output[0])?;
+        let is_relu = r.op_type == "Relu"
+            || (r.op_type == "LeakyRelu" && attr(r, "alpha").is_some_and(|a| a.f == 0.0));
+        if !is_relu || r.output.len() != 1 {
+            return None;
+        }
+        let (next, n) = only_reader(&r.output[0])?;
+        let pads = ints_or(n, "pads", &[0; 4]);
+        if !(plain_conv(n) && n.input[0] == r.output[0] && pads.len() == 4) {
+            return None;
+        }
+        let next_pad = usize::try_from(pads[0]).ok()?;
+        cut.extend([conv, relu]);
+        (pads.iter().all(|&p| p == pads[0]) && scale.is_finite() && shift.is_finite()).then_some(
+            Self {
+                cut,
+                conv,
+                next,
+                next_pad,
+                scale,
+                shift,
+            },
+        )
+    }
+
+    /// The layer's weights, the kernel and bias as tract computes them from the graph (so any
+    /// storage of them tract reads — int8 with `DequantizeLinear`, float16 with `Cast` — works).
+    pub(crate) fn weights(
+        &self,
+        onnx: &tract_onnx::Onnx,
+        proto: &ModelProto,
+        shapes: &[Vec<usize>],
+    ) -> TractResult<StemWeights> {
+        let Some(graph) = proto.graph.as_ref() else {
+            tract_onnx::tract_core::internal::bail!("no graph");
+        };
+        let conv = &graph.node[self.conv];
+        let mut model = onnx.model_for_proto_model(proto)?;
+        for (i, shape) in shapes.iter().enumerate() {
+            model.set_input_fact(i, f32::fact(shape).into())?;
+        }
+        model.select_outputs_by_name([&conv.input[1], &conv.input[2]])?;
+        let plan = model.into_optimized()?.into_runnable()?;
+        let zeros = shapes
+            .iter()
+            .map(|s| Tensor::zero::<f32>(s).map(TValue::from))
+            .collect::<TractResult<TVec<_>>>()?;
+        let out = plan.run(zeros)?;
+        let (kernel, bias) = (&out[0], &out[1]);
+        let channels = bias.len();
+        if kernel.shape() != [channels, 1, 3, 3] || bias.rank() != 1 {
+            tract_onnx::tract_core::internal::bail!(
+                "first layer: kernel {:?} and bias {:?}",
+                kernel.shape(),
+                bias.shape()
+            );
+        }
+        let values = |t: &TValue| -> TractResult<Vec<f32>> {
+            Ok(t.try_as_plain_ram()?.as_slice::<f32>()?.to_vec())
+        };
+        Ok(StemWeights {
+            kernel: values(kernel)?,
+            bias: values(bias)?,
+            scale: self.scale,
+            shift: self.shift,
+            next_pad: self.next_pad,
+        })
+    }
+
+    /// Removes the layer from the graph: the next convolution reads the graph input, which will
+    /// hold the stem's output with its padding, so the convolution pads nothing.
+    pub(crate) fn cut(&self, proto: &mut ModelProto) {
+        let Some(graph) = proto.graph.as_mut() else {
+            return;
+        };
+        let input = graph.input[0].name.clone();
+        let next = &mut graph.node[self.next];
+        next.input[0] = input;
+        for a in next.attribute.iter_mut().filter(|a| a.name == "pads") {
+            a.ints.iter_mut().for_each(|p| *p = 0);
+        }
+        let mut cut = self.cut.clone();
+        cut.sort_unstable();
+        for &i in cut.iter().rev() {
+            graph.node.remove(i);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The layer by its definition: zero padding 1, stride 2, bias, ReLU.
+    fn direct(
+        input: &[f32],
+        h: usize,
+        w: usize,
+        kernel: &[f32],
+        bias: &[f32],
+    ) -> Vec<Vec<Vec<f32>>> {
+        let (oh, ow) = (h.div_ceil(2), w.div_ceil(2));
+        let at = |y: isize, x: isize| {
+            if y < 0 || x < 0 || y >= h as isize || x >= w as isize {
+                0.0
+            } else {
+                f64::from(input[y as usize * w + x as usize])
+            }
+        };
+        (0..bias.len())
+            .map(|c| {
+                (0..oh)
+                    .map(|y| {
+                        (0..ow)
+                            .map(|x| {
+                                let mut s = f64::from(bias[c]);
+                                for dy in 0..3 {
+                                    for dx in 0..3 {
+                                        s += f64::from(kernel[9 * c + 3 * dy + dx])
+                                            * at(
+                                                2 * y as isize + dy as isize - 1,
+                                                2 * x as isize + dx as isize - 1,
+                                            );
+                                    }
+                                }
+                                s.max(0.0) as f32
+                            })
+                            .collect()
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn matches_the_definition_with_a_zero_border() {
+        // Even and odd sides, one and two batch slots, border 0 and 1.
+        for &(batch, h, w, pad) in &[(1, 8, 10, 1), (2, 7, 5, 1), (1, 6, 6, 0), (2, 3, 4, 2)] {
+            let channels = 3;
+            let kernel: Vec<f32> = (0..9 * channels)
+                .map(|i| ((i * 37 % 17) as f32 - 8.0) / 10.0)
+                .collect();
+            let bias = [0.1, -0.3, 0.0];
+            let weights = StemWeights {
+                kernel: kernel.clone(),
+                bias: bias.to_vec(),
+                scale: 2.0,
+                shift: -0.5,
+                next_pad: pad,
+            };
+            let mut stem = Stem::new(batch, h, w, &weights);
+            let images: Vec<f32> = (0..batch * h * w)
+                .map(|i| (i * 53 % 29) as f32 / 29.0)
+                .collect();
+            stem.input_mut().copy_from_slice(&images);
+            let [nb, nc, ph, pw] = stem.output_shape();
+            assert_eq!([nb, nc], [batch, channels]);
+            // A sentinel border shows any write outside the interior.
+            let mut out = vec![7.0; nb * nc * ph * pw];
+            stem.run(&mut out);
+            let (oh, ow) = (ph - 2 * pad, pw - 2 * pad);
+            for b in 0..batch {
+                // The affine applies to the pixels, before the zero padding.
+                let affine: Vec<f32> = images[b * h * w..][..h * w]
+                    .iter()
+                    .map(|v| v * 2.0 - 0.5)
+                    .collect();
+                let want = direct(&affine, h, w, &kernel, &bias);
+                for c in 0..channels {
+                    let plane = &out[(b * nc + c) * ph * pw..][..ph * pw];
+                    for y in 0..ph {
+                        for x in 0..pw {
+                            let got = plane[y * pw + x];
+                            let inside =
+                                (pad..pad + oh).contains(&y) && (pad..pad + ow).contains(&x);
+                            if inside {
+                                let v = want[c][y - pad][x - pad];
+                                assert!(
+                                    (got - v).abs() < 1e-5,
+                                    "b{b} c{c} ({y},{x}): {got} vs {v}"
+                                );
+                            } else {
+                                assert_eq!(got, 7.0, "border written at b{b} c{c} ({y},{x})");
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
