@@ -124,30 +124,13 @@ impl Net {
             fill(stem.input_mut());
             return Ok(());
         }
-        // The plan state drops its references to the inputs after each run, so the tensor is
-        // unique again here and `make_mut` does not copy it.
-        let t = Arc::make_mut(&mut self.inputs[i]);
-        let mut view = t
-            .try_as_plain_ram_mut()
-            .map_err(|e| Error::Internal(format!("input tensor: {e:#}")))?;
-        let s = view
-            .as_slice_mut::<f32>()
-            .map_err(|e| Error::Internal(format!("input tensor: {e:#}")))?;
-        fill(s);
-        Ok(())
+        with_input_slice(&mut self.inputs[i], fill)
     }
 
     /// Runs the network on the current inputs.
     pub(crate) fn run(&mut self) -> Result<()> {
         if let Some(stem) = &mut self.stem {
-            let t = Arc::make_mut(&mut self.inputs[0]);
-            let mut view = t
-                .try_as_plain_ram_mut()
-                .map_err(|e| Error::Internal(format!("input tensor: {e:#}")))?;
-            let s = view
-                .as_slice_mut::<f32>()
-                .map_err(|e| Error::Internal(format!("input tensor: {e:#}")))?;
-            stem.run(s);
+            with_input_slice(&mut self.inputs[0], |s| stem.run(s))?;
         }
         let inputs: TVec<TValue> = self
             .inputs
@@ -173,6 +156,20 @@ impl Net {
             .and_then(|v| v.as_slice::<f32>())
             .map_err(|e| Error::Internal(format!("network output: {e:#}")))
     }
+}
+
+/// Calls `f` with the values of the input tensor `t`. The plan state drops its references to the
+/// inputs after each run, so the tensor is unique again here and `make_mut` does not copy it.
+fn with_input_slice(t: &mut Arc<Tensor>, f: impl FnOnce(&mut [f32])) -> Result<()> {
+    let t = Arc::make_mut(t);
+    let mut view = t
+        .try_as_plain_ram_mut()
+        .map_err(|e| Error::Internal(format!("input tensor: {e:#}")))?;
+    let s = view
+        .as_slice_mut::<f32>()
+        .map_err(|e| Error::Internal(format!("input tensor: {e:#}")))?;
+    f(s);
+    Ok(())
 }
 
 /// Op types of the nodes of an ONNX graph, as stored (for the tests that check how the shipped
