@@ -290,7 +290,7 @@ impl StemLayer {
         }
         let (next, n) = only_reader(&r.output[0])?;
         let pads = ints_or(n, "pads", &[0; 4]);
-        if !(plain_conv(n) && n.input[0] == r.output[0] && pads.len() == 4) {
+        if !(plain_conv(n) && n.input.first() == Some(&r.output[0]) && pads.len() == 4) {
             return None;
         }
         let next_pad = usize::try_from(pads[0]).ok()?;
@@ -320,6 +320,14 @@ impl StemLayer {
         };
         let conv = &graph.node[self.conv];
         let mut model = onnx.model_for_proto_model(proto)?;
+        // tract's inputs leave out graph inputs that are initializers: check before indexing.
+        if model.input_outlets()?.len() != shapes.len() {
+            tract_onnx::tract_core::internal::bail!(
+                "{} inputs, expected {}",
+                model.input_outlets()?.len(),
+                shapes.len()
+            );
+        }
         for (i, shape) in shapes.iter().enumerate() {
             model.set_input_fact(i, f32::fact(shape).into())?;
         }

@@ -283,6 +283,27 @@ mod tests {
             a.ints = vec![1, 1];
         }
         assert!(StemLayer::find(&proto, &shapes).is_none());
+        // A malformed graph (the second conv without inputs): no stem, no panic.
+        let graph = proto.graph.as_mut().unwrap();
+        for a in graph.node.iter_mut().flat_map(|n| n.attribute.iter_mut()) {
+            if a.name == "strides" && a.ints == [1, 1] {
+                a.ints = vec![2, 2];
+            }
+        }
+        assert!(StemLayer::find(&proto, &shapes).is_some());
+        let graph = proto.graph.as_mut().unwrap();
+        let second = graph
+            .node
+            .iter()
+            .filter(|n| n.op_type == "Conv")
+            .nth(1)
+            .unwrap()
+            .name
+            .clone();
+        for n in graph.node.iter_mut().filter(|n| n.name == second) {
+            n.input.clear();
+        }
+        assert!(StemLayer::find(&proto, &shapes).is_none());
     }
 
     /// The export's storage passes (`models/train/train_m3.py`) ran on every shipped network: a
