@@ -255,14 +255,21 @@ impl PyramidalLk {
         &self.config
     }
 
-    /// Tracks `from` (points in `prev`'s level-0 pixels) into `next`, writing the new positions to
-    /// `to`, whether each point was tracked to `status` and its mean absolute grey difference over
-    /// the window to `error`. Lost points keep their old position in `to`.
-    ///
-    /// # Errors
-    /// [`Error::InvalidInput`] when the slices differ in length, the pyramids are empty or differ
-    /// in size or depth.
-    pub fn track(
+    crate::cpu::with_avx2_copy! {
+        /// Tracks `from` (points in `prev`'s level-0 pixels) into `next`, writing the new positions
+        /// to `to`, whether each point was tracked to `status` and its mean absolute grey
+        /// difference over the window to `error`. Lost points keep their old position in `to`.
+        ///
+        /// # Errors
+        /// [`Error::InvalidInput`] when the slices differ in length, the pyramids are empty or
+        /// differ in size or depth.
+        pub fn track / track_avx2 (&mut self, prev: &Pyramid, next: &Pyramid, from: &[[f32; 2]],
+            to: &mut [[f32; 2]], status: &mut [bool], error: &mut [f32]) -> Result<()>
+            => track_body
+    }
+
+    #[inline(always)]
+    fn track_body(
         &mut self,
         prev: &Pyramid,
         next: &Pyramid,
@@ -289,32 +296,13 @@ impl PyramidalLk {
                 next.len()
             )));
         }
-        self.track_points(prev, next, from, to, status, error);
-        Ok(())
-    }
-
-    crate::cpu::with_avx2_copy! {
-        fn track_points / track_points_avx2 (&mut self, prev: &Pyramid, next: &Pyramid,
-            from: &[[f32; 2]], to: &mut [[f32; 2]], status: &mut [bool], error: &mut [f32])
-            => track_points_body
-    }
-
-    #[inline(always)]
-    fn track_points_body(
-        &mut self,
-        prev: &Pyramid,
-        next: &Pyramid,
-        from: &[[f32; 2]],
-        to: &mut [[f32; 2]],
-        status: &mut [bool],
-        error: &mut [f32],
-    ) {
         for i in 0..from.len() {
             let (p, ok, e) = self.track_point(prev, next, from[i]);
             to[i] = if ok { p } else { from[i] };
             status[i] = ok;
             error[i] = e;
         }
+        Ok(())
     }
 
     #[inline(always)]
@@ -564,18 +552,19 @@ mod tests {
         let mut lk = PyramidalLk::new(LkConfig::default()).unwrap();
         let (mut to_a, mut st_a, mut err_a) = (vec![[0.0; 2]; n], vec![false; n], vec![0.0; n]);
         let (mut to_b, mut st_b, mut err_b) = (vec![[9.0; 2]; n], vec![true; n], vec![9.0; n]);
-        lk.track_points_body(
+        lk.track_body(
             &pyramids[0],
             &pyramids[1],
             &from,
             &mut to_a,
             &mut st_a,
             &mut err_a,
-        );
+        )
+        .unwrap();
         #[allow(unsafe_code)]
         // SAFETY: the CPU has AVX2 and FMA (checked above).
         unsafe {
-            lk.track_points_avx2(
+            lk.track_avx2(
                 &pyramids[0],
                 &pyramids[1],
                 &from,
@@ -583,7 +572,8 @@ mod tests {
                 &mut st_b,
                 &mut err_b,
             )
-        };
+        }
+        .unwrap();
         assert_eq!(to_a, to_b);
         assert_eq!(st_a, st_b);
         assert_eq!(err_a, err_b);
