@@ -164,6 +164,35 @@ pub(crate) struct StemWeights {
     pub(crate) next_pad: usize,
 }
 
+impl StemWeights {
+    /// Finds the first layer of `proto` ([`StemLayer::find`], inputs of `shapes`), takes its
+    /// weights and cuts it from the graph; `None` (and `proto` untouched) when the layer has
+    /// another form.
+    pub(crate) fn split_from(
+        onnx: &tract_onnx::Onnx,
+        proto: &mut ModelProto,
+        shapes: &[Vec<usize>],
+    ) -> TractResult<Option<Self>> {
+        let Some(layer) = StemLayer::find(proto, shapes) else {
+            return Ok(None);
+        };
+        let weights = layer.weights(onnx, proto, shapes)?;
+        layer.cut(proto);
+        Ok(Some(weights))
+    }
+}
+
+/// Calls `f` with the values of the f32 tensor `t`, which the caller holds alone between runs (a
+/// plan state drops its references to its inputs after each run), so `make_mut` copies nothing.
+pub(crate) fn with_f32_slice(
+    t: &mut std::sync::Arc<Tensor>,
+    f: impl FnOnce(&mut [f32]),
+) -> TractResult<()> {
+    let t = std::sync::Arc::make_mut(t);
+    f(t.try_as_plain_ram_mut()?.as_slice_mut::<f32>()?);
+    Ok(())
+}
+
 /// A first layer [`Stem`] can compute, as found in an ONNX graph: the graph's first input
 /// (`batch × 1 × h × w`) feeds only a chain of `Sub` / `Mul` / `Add` / `Div` by scalar constants
 /// (possibly empty), which feeds only a 3×3, stride-2, padding-1 `Conv` with a bias, whose output
@@ -309,7 +338,7 @@ impl StemLayer {
 
     /// The layer's weights, the kernel and bias as tract computes them from the graph (so any
     /// storage of them tract reads — int8 with `DequantizeLinear`, float16 with `Cast` — works).
-    pub(crate) fn weights(
+    fn weights(
         &self,
         onnx: &tract_onnx::Onnx,
         proto: &ModelProto,
@@ -361,7 +390,7 @@ impl StemLayer {
 
     /// Removes the layer from the graph: the next convolution reads the graph input, which will
     /// hold the stem's output with its padding, so the convolution pads nothing.
-    pub(crate) fn cut(&self, proto: &mut ModelProto) {
+    fn cut(&self, proto: &mut ModelProto) {
         let Some(graph) = proto.graph.as_mut() else {
             return;
         };

@@ -19,7 +19,7 @@
 mod resample;
 
 use crate::image::{GrayImage, Rect};
-use crate::stem::{Stem, StemLayer, StemWeights};
+use crate::stem::{Stem, StemWeights, with_f32_slice};
 use crate::{Error, Result};
 use resample::AreaResampler;
 use serde::{Deserialize, Serialize};
@@ -165,16 +165,14 @@ struct ShapePlan {
 impl ShapePlan {
     /// Runs the network on the `h × w` input `fill` writes.
     fn run(&mut self, fill: impl FnOnce(&mut [f32])) -> Result<TVec<TValue>> {
-        let t = Arc::make_mut(&mut self.input);
-        let mut view = t.try_as_plain_ram_mut().map_err(internal)?;
-        let buf = view.as_slice_mut::<f32>().map_err(internal)?;
         match &mut self.stem {
             Some(stem) => {
                 fill(stem.input_mut());
-                stem.run(buf);
+                with_f32_slice(&mut self.input, |buf| stem.run(buf))
             }
-            None => fill(buf),
+            None => with_f32_slice(&mut self.input, fill),
         }
+        .map_err(internal)?;
         let outputs = self.state.run(tvec![self.input.clone().into_tvalue()]);
         crate::cpu::clear_upper_vector_state();
         outputs.map_err(internal)
@@ -237,14 +235,7 @@ impl FaceDetector {
             .map_err(load)?;
         // The first layer does not depend on the frame size: any shape finds and computes it.
         let nominal = [vec![1, 1, WINDOW_INPUT, WINDOW_INPUT]];
-        let stem = match StemLayer::find(&proto, &nominal) {
-            Some(layer) => {
-                let weights = layer.weights(&onnx, &proto, &nominal).map_err(load)?;
-                layer.cut(&mut proto);
-                Some(weights)
-            }
-            None => None,
-        };
+        let stem = StemWeights::split_from(&onnx, &mut proto, &nominal).map_err(load)?;
         let model = onnx.model_for_proto_model(&proto).map_err(load)?;
         Ok(Self {
             config,

@@ -5,7 +5,7 @@
 //! installed; the core enables neither, so each network runs on the calling thread.
 
 use crate::error::{Error, Result};
-use crate::stem::{Stem, StemLayer};
+use crate::stem::{Stem, StemWeights, with_f32_slice};
 use std::sync::Arc;
 use tract_onnx::prelude::*;
 
@@ -29,7 +29,7 @@ impl Net {
     /// Loads `bytes` (ONNX) with inputs of the given names and shapes (in the graph's input
     /// order) and outputs looked up by name. `what` names the network in errors.
     ///
-    /// A first layer of the form [`Stem`] computes (found by [`StemLayer::find`]) runs outside
+    /// A first layer of the form [`Stem`] computes (`StemWeights::split_from`) runs outside
     /// tract; the caller sees the same inputs either way.
     pub(crate) fn load(
         what: &str,
@@ -54,19 +54,16 @@ impl Net {
             .proto_model_for_read(&mut &*bytes)
             .map_err(load_err(what))?;
         let mut shapes: Vec<Vec<usize>> = inputs.iter().map(|(_, s)| s.to_vec()).collect();
-        let layer = use_stem.then(|| StemLayer::find(&proto, &shapes)).flatten();
-        let stem = match layer {
-            Some(layer) => {
-                let weights = layer
-                    .weights(&onnx, &proto, &shapes)
-                    .map_err(load_err(what))?;
-                layer.cut(&mut proto);
-                let stem = Stem::new(shapes[0][0], shapes[0][2], shapes[0][3], &weights);
-                shapes[0] = stem.output_shape().to_vec();
-                Some(stem)
-            }
-            None => None,
+        let weights = if use_stem {
+            StemWeights::split_from(&onnx, &mut proto, &shapes).map_err(load_err(what))?
+        } else {
+            None
         };
+        let stem = weights.map(|weights| {
+            let stem = Stem::new(shapes[0][0], shapes[0][2], shapes[0][3], &weights);
+            shapes[0] = stem.output_shape().to_vec();
+            stem
+        });
         let mut model = onnx.model_for_proto_model(&proto).map_err(load_err(what))?;
         let names: Vec<String> = model
             .input_outlets()
@@ -158,18 +155,9 @@ impl Net {
     }
 }
 
-/// Calls `f` with the values of the input tensor `t`. The plan state drops its references to the
-/// inputs after each run, so the tensor is unique again here and `make_mut` does not copy it.
+/// [`with_f32_slice`] on an input tensor.
 fn with_input_slice(t: &mut Arc<Tensor>, f: impl FnOnce(&mut [f32])) -> Result<()> {
-    let t = Arc::make_mut(t);
-    let mut view = t
-        .try_as_plain_ram_mut()
-        .map_err(|e| Error::Internal(format!("input tensor: {e:#}")))?;
-    let s = view
-        .as_slice_mut::<f32>()
-        .map_err(|e| Error::Internal(format!("input tensor: {e:#}")))?;
-    f(s);
-    Ok(())
+    with_f32_slice(t, f).map_err(|e| Error::Internal(format!("input tensor: {e:#}")))
 }
 
 /// Op types of the nodes of an ONNX graph, as stored (for the tests that check how the shipped
@@ -193,6 +181,7 @@ mod tests {
     use super::onnx_op_types as op_types;
     use super::*;
     use crate::landmarks::EMBEDDED_FILES;
+    use crate::stem::StemLayer;
 
     /// Input shapes of the shipped networks as `M3` runs them (the eye zone: both eyes at once).
     fn shipped_inputs(name: &str) -> Vec<(&'static str, Vec<usize>)> {
