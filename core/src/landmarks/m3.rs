@@ -455,16 +455,15 @@ impl Zone {
             outputs.push("gaze");
             sizes.push(3);
         }
-        // Both eyes go through one run (batch 2). Measured: no difference beyond the run-to-run
-        // spread of `m3_per_face`; one run per face for the eye zone, like the other zones.
-        let batch = if kind == ZoneKind::Eye { 2 } else { 1 };
+        // One patch per run, the eyes too: tract gathers a batch of one lazily inside its matrix
+        // products but a batch of two into an im2col buffer first, which measured slower (stop
+        // 24, `profile_net` on the eye net: 77.8 µs for a batch of two, 36.6 µs for one).
         let mut net = Net::load(
             name,
             bytes,
-            &[("patch", &[batch, 1, h, w]), ("yaw", &[batch, 5])],
+            &[("patch", &[1, 1, h, w]), ("yaw", &[1, 5])],
             &outputs,
         )?;
-        let sizes: Vec<usize> = sizes.iter().map(|n| n * batch).collect();
         check_outputs(name, &mut net, &sizes)?;
         Ok(Self {
             kind,
@@ -504,8 +503,8 @@ impl Zone {
         Ok(if mirror { map.mirrored_x(w) } else { map })
     }
 
-    /// Samples and filters the patch of `map` into batch slot `slot` of the network input.
-    fn prepare(&mut self, image: &GrayImage, map: &Affine, slot: usize) -> Result<()> {
+    /// Samples and filters the patch of `map` into the network input.
+    fn prepare(&mut self, image: &GrayImage, map: &Affine) -> Result<()> {
         let (w, h) = (self.width, self.height);
         sample(image, map, w, h, &mut self.patch)?;
         if let Some(b) = &mut self.bilateral {
@@ -517,25 +516,20 @@ impl Zone {
             equalize_hist(&mut self.patch);
         }
         let src = &self.patch;
-        self.net.fill_input(0, |x| {
-            to_unit(src, &mut x[slot * w * h..(slot + 1) * w * h])
-        })
+        self.net.fill_input(0, |x| to_unit(src, x))
     }
 
-    /// Runs the network on the prepared slots with `yaw` in every slot.
+    /// Runs the network on the prepared patch with `yaw`.
     fn run(&mut self, yaw: &[f32; 5]) -> Result<()> {
-        self.net.fill_input(1, |x| {
-            x.chunks_exact_mut(5).for_each(|c| c.copy_from_slice(yaw))
-        })?;
+        self.net.fill_input(1, |x| x.copy_from_slice(yaw))?;
         self.net.run()
     }
 
-    /// Writes slot `slot`'s points of the last run through `map` into `pts[indices]` (the
-    /// mirrored eye's indices when `mirrored`).
+    /// Writes the points of the last run through `map` into `pts[indices]` (the mirrored eye's
+    /// indices when `mirrored`).
     fn write_points(
         &self,
         map: &Affine,
-        slot: usize,
         mirrored: bool,
         pts: &mut [[f64; 2]; N_POINTS],
     ) -> Result<()> {
@@ -544,7 +538,7 @@ impl Zone {
             _ => &self.indices68,
         };
         let n = 2 * idx.len();
-        let lm = &self.net.output(0)?[slot * n..(slot + 1) * n];
+        let lm = &self.net.output(0)?[..n];
         let (wf, hf) = (self.width as f64, self.height as f64);
         for (k, &i) in idx.iter().enumerate() {
             pts[i] = map.apply([f64::from(lm[2 * k]) * wf, f64::from(lm[2 * k + 1]) * hf]);
@@ -561,13 +555,13 @@ impl Zone {
         yaw: &[f32; 5],
         pts: &mut [[f64; 2]; N_POINTS],
     ) -> Result<()> {
-        self.prepare(image, map, 0)?;
+        self.prepare(image, map)?;
         self.run(yaw)?;
-        self.write_points(map, 0, false, pts)
+        self.write_points(map, false, pts)
     }
 
-    /// Both eyes in one run (slot 0 the right eye, slot 1 the left eye mirrored); returns their
-    /// unit gaze vectors in the camera frame, right then left.
+    /// Both eyes, the right eye then the left eye mirrored, one run each; returns their unit gaze
+    /// vectors in the camera frame, right then left.
     fn run_eyes(
         &mut self,
         image: &GrayImage,
@@ -583,14 +577,12 @@ impl Zone {
             self.map(refs[self.ref68[0]], refs[self.ref68[1]], false)?,
             self.map(refs[mirror_ref[0]], refs[mirror_ref[1]], true)?,
         ];
-        for (slot, map) in maps.iter().enumerate() {
-            self.prepare(image, map, slot)?;
-        }
-        self.run(yaw)?;
         let mut gaze = [[0.0; 3]; 2];
         for (slot, map) in maps.iter().enumerate() {
-            self.write_points(map, slot, slot == 1, pts)?;
-            let g = &self.net.output(1)?[3 * slot..3 * slot + 3];
+            self.prepare(image, map)?;
+            self.run(yaw)?;
+            self.write_points(map, slot == 1, pts)?;
+            let g = &self.net.output(1)?[..3];
             // Patch frame → camera frame: the patch axes as image unit vectors. For the mirrored
             // eye the u axis points the other way, which is M3_IO.md's "gaze x negated".
             let xy = map.rotate_unit([f64::from(g[0]), f64::from(g[1])]);
