@@ -220,18 +220,26 @@ impl Bilateral {
                 x += 8;
             }
             for (x, d) in out.iter_mut().enumerate().skip(x) {
-                let c = c0 + x;
-                let v0 = self.padded[c];
-                let (mut sum, mut wsum) = (0f32, 0f32);
-                for (&o, &sw) in self.offsets.iter().zip(&self.space_weight) {
-                    let v = self.padded[(c as isize + o) as usize];
-                    let w = sw * self.color_weight[usize::from(v.abs_diff(v0))];
-                    wsum += w;
-                    sum += f32::from(v) * w;
-                }
-                *d = quantize(sum, wsum);
+                *d = self.pixel(c0 + x);
             }
         }
+    }
+}
+
+impl Bilateral {
+    /// One output pixel, centred at `c` in `padded`, in OpenCV's loop order: the definition the
+    /// vectorised paths reproduce to the bit (unit test), and the AVX2 path's row tail.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    fn pixel(&self, c: usize) -> u8 {
+        let v0 = self.padded[c];
+        let (mut sum, mut wsum) = (0f32, 0f32);
+        for (&o, &sw) in self.offsets.iter().zip(&self.space_weight) {
+            let v = self.padded[(c as isize + o) as usize];
+            let w = sw * self.color_weight[usize::from(v.abs_diff(v0))];
+            wsum += w;
+            sum += f32::from(v) * w;
+        }
+        quantize(sum, wsum)
     }
 }
 
@@ -323,7 +331,8 @@ mod tests {
         }
     }
 
-    /// The filter written pixel by pixel (OpenCV's loop order), for the exactness check below.
+    /// The filter pixel by pixel ([`Bilateral::pixel`], OpenCV's loop order), for the exactness
+    /// check below.
     fn bilateral_per_pixel(f: &mut Bilateral, src: &[u8], width: usize, height: usize) -> Vec<u8> {
         let mut scratch = vec![0u8; width * height];
         f.apply(src, width, height, &mut scratch); // fills f.padded / f.offsets for this size
@@ -331,16 +340,7 @@ mod tests {
         let mut dst = vec![0u8; width * height];
         for y in 0..height {
             for x in 0..width {
-                let c = (y + r) * pw + x + r;
-                let v0 = f.padded[c];
-                let (mut sum, mut wsum) = (0f32, 0f32);
-                for (&o, &sw) in f.offsets.iter().zip(&f.space_weight) {
-                    let v = f.padded[(c as isize + o) as usize];
-                    let w = sw * f.color_weight[usize::from(v.abs_diff(v0))];
-                    wsum += w;
-                    sum += f32::from(v) * w;
-                }
-                dst[y * width + x] = (sum / wsum).clamp(0.0, 255.0) as u8;
+                dst[y * width + x] = f.pixel((y + r) * pw + x + r);
             }
         }
         dst
