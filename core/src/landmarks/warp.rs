@@ -222,8 +222,10 @@ impl<'a> InteriorMap<'a> {
     /// the image's last two rows (the same bytes as [`InteriorMap::sample_body`]: unit test),
     /// else through the body.
     fn sample(&self, data: &[u8], iw: usize, ih: usize, width: usize, out: &mut [u8]) {
+        // The gathers' bounds rest on `data` being the whole iw × ih image: checked here, not
+        // assumed, since a violation would be a read out of bounds rather than a panic.
         #[cfg(target_arch = "x86_64")]
-        if self.gather_fits && crate::cpu::has_avx2_fma() {
+        if self.gather_fits && data.len() == iw * ih && crate::cpu::has_avx2_fma() {
             #[allow(unsafe_code)]
             // SAFETY: the CPU has AVX2 and FMA, the features the function is compiled for.
             unsafe {
@@ -257,7 +259,7 @@ impl<'a> InteriorMap<'a> {
             _mm256_setzero_ps, _mm256_srli_epi32, _mm256_sub_ps,
         };
         const N: usize = InteriorMap::CHUNK;
-        debug_assert!(self.gather_fits && iw >= 2 && ih >= 3 && data.len() == iw * ih);
+        assert!(self.gather_fits && iw >= 2 && ih >= 3 && data.len() == iw * ih);
         let m = self.m;
         let (dx, dy) = (_mm256_set1_ps(m[0] as f32), _mm256_set1_ps(m[3] as f32));
         let ramps = [
