@@ -488,11 +488,12 @@ mod tests {
     fn matches_the_definition_with_a_zero_border() {
         // Even and odd sides, one and two batch slots, border 0 and 1.
         for &(batch, h, w, pad) in &[(1, 8, 10, 1), (2, 7, 5, 1), (1, 6, 6, 0), (2, 3, 4, 2)] {
-            let channels = 3;
+            // Six channels: one block of GROUP = 4 and two single ones.
+            let channels = 6;
             let kernel: Vec<f32> = (0..9 * channels)
                 .map(|i| ((i * 37 % 17) as f32 - 8.0) / 10.0)
                 .collect();
-            let bias = [0.1, -0.3, 0.0];
+            let bias = [0.1, -0.3, 0.0, 0.2, -0.1, 0.05];
             let weights = StemWeights {
                 kernel: kernel.clone(),
                 bias: bias.to_vec(),
