@@ -183,7 +183,7 @@ mod tests {
     use crate::landmarks::EMBEDDED_FILES;
     use crate::stem::StemLayer;
 
-    /// Input shapes of the shipped networks as `M3` runs them (the eye zone: both eyes at once).
+    /// Input shapes of the shipped networks as `M3` runs them (one patch per run, the eyes too).
     fn shipped_inputs(name: &str) -> Vec<(&'static str, Vec<usize>)> {
         let patch = |b, h, w| vec![("patch", vec![b, 1, h, w]), ("yaw", vec![b, 5])];
         match name {
@@ -191,7 +191,7 @@ mod tests {
             "face.onnx" | "mouth.onnx" => patch(1, 48, 48),
             "mouth_fine.onnx" => patch(1, 40, 48),
             "brows.onnx" => patch(1, 32, 64),
-            "eye.onnx" => patch(2, 24, 40),
+            "eye.onnx" => patch(1, 24, 40),
             "nose.onnx" => patch(1, 32, 32),
             _ => panic!("unknown network {name}"),
         }
