@@ -439,6 +439,18 @@ impl StemLayer {
     }
 }
 
+/// Asserts that `got` equals `want` (a network's output as tract computes it for the whole graph)
+/// to float rounding: within 1e-4 of the largest |value| of `want` (at least 1). For the tests
+/// that hold networks run with a [`Stem`] to their whole-graph outputs.
+#[cfg(test)]
+pub(crate) fn assert_close_to_whole_graph(what: &str, got: &[f32], want: &[f32]) {
+    assert_eq!(got.len(), want.len(), "{what}: lengths");
+    let scale = want.iter().fold(1f32, |m, v| m.max(v.abs()));
+    for (x, y) in got.iter().zip(want) {
+        assert!((x - y).abs() <= 1e-4 * scale, "{what}: {x} vs {y}");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

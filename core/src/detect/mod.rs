@@ -704,10 +704,7 @@ mod tests {
                 let a = a.try_as_plain_ram().unwrap();
                 let b = b.try_as_plain_ram().unwrap();
                 let (a, b) = (a.as_slice::<f32>().unwrap(), b.as_slice::<f32>().unwrap());
-                let scale = b.iter().fold(1f32, |m, v| m.max(v.abs()));
-                for (x, y) in a.iter().zip(b) {
-                    assert!((x - y).abs() <= 1e-4 * scale, "{h}x{w}: {x} vs {y}");
-                }
+                crate::stem::assert_close_to_whole_graph(&format!("{h}x{w}"), a, b);
             }
         }
     }

@@ -181,7 +181,7 @@ mod tests {
     use super::onnx_op_types as op_types;
     use super::*;
     use crate::landmarks::EMBEDDED_FILES;
-    use crate::stem::StemLayer;
+    use crate::stem::{StemLayer, assert_close_to_whole_graph};
 
     /// Input shapes of the shipped networks as `M3` runs them (one patch per run, the eyes too).
     fn shipped_inputs(name: &str) -> Vec<(&'static str, Vec<usize>)> {
@@ -245,11 +245,7 @@ mod tests {
                         .unwrap()
                         .to_vec(),
                 );
-                assert_eq!(a.len(), b.len());
-                let scale = b.iter().fold(1f32, |m, v| m.max(v.abs()));
-                for (x, y) in a.iter().zip(&b) {
-                    assert!((x - y).abs() <= 1e-4 * scale, "{name}: {x} vs {y}");
-                }
+                assert_close_to_whole_graph(name, &a, &b);
             }
         }
     }
