@@ -174,9 +174,10 @@ impl Pyramid {
 }
 
 /// Samples a `size × size` patch whose top-left sample sits at pixel-index position (x, y)
-/// (bilinear; positions outside the image clamp to the border).
+/// (bilinear; positions outside the image clamp to the border) into rows `stride ≥ size` apart;
+/// the cells past `size` in each row are left as they are.
 #[inline(always)]
-fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, out: &mut [f32]) {
+fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, stride: usize, out: &mut [f32]) {
     let (w, h) = (img.width(), img.height());
     let ix = x.floor();
     let iy = y.floor();
@@ -193,7 +194,7 @@ fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, out: &mut [f32]) {
         for r in 0..size {
             let a = &d[(iy + r) * w + ix..(iy + r) * w + ix + size + 1];
             let b = &d[(iy + r + 1) * w + ix..(iy + r + 1) * w + ix + size + 1];
-            let o = &mut out[r * size..(r + 1) * size];
+            let o = &mut out[r * stride..r * stride + size];
             for c in 0..size {
                 o[c] = w00 * f32::from(a[c])
                     + w10 * f32::from(a[c + 1])
@@ -212,7 +213,7 @@ fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, out: &mut [f32]) {
         let py = iy + r as i64;
         for c in 0..size {
             let px = ix + c as i64;
-            out[r * size + c] = w00 * at(px, py)
+            out[r * stride + c] = w00 * at(px, py)
                 + w10 * at(px + 1, py)
                 + w01 * at(px, py + 1)
                 + w11 * at(px + 1, py + 1);
@@ -224,13 +225,25 @@ fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, out: &mut [f32]) {
 #[derive(Debug, Clone)]
 pub struct PyramidalLk {
     config: LkConfig,
-    /// Previous-image patch with a 1-pixel border (for central-difference gradients).
+    /// Previous-image patch with a 1-pixel border (for central-difference gradients), rows
+    /// `bstride = stride + LANES` cells apart so whole lane groups of the gradients read inside it.
     bordered: Vec<f32>,
+    bstride: usize,
+    /// The window's rows, `stride` cells apart (a multiple of [`LANES`]); the cells past the
+    /// window's width stay zero in all four, so whole rows of lanes can be summed.
     patch: Vec<f32>,
     gx: Vec<f32>,
     gy: Vec<f32>,
     moving: Vec<f32>,
+    stride: usize,
+    /// Whether the CPU has AVX2 and FMA: the window sampling and sums then run as AVX2 code.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    avx2: bool,
 }
+
+/// Lanes of the window sums: eight f32 sums kept apart (one AVX2 register), added in a fixed
+/// order at the end ([`hsum`]).
+const LANES: usize = 8;
 
 impl PyramidalLk {
     /// A tracker with `config`.
@@ -240,13 +253,21 @@ impl PyramidalLk {
     pub fn new(config: LkConfig) -> Result<Self> {
         config.validate()?;
         let n = 2 * config.half_window + 1;
+        let stride = n.next_multiple_of(LANES);
+        #[cfg(target_arch = "x86_64")]
+        let avx2 = crate::cpu::has_avx2_fma();
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx2 = false;
         Ok(Self {
             config,
-            bordered: vec![0.0; (n + 2) * (n + 2)],
-            patch: vec![0.0; n * n],
-            gx: vec![0.0; n * n],
-            gy: vec![0.0; n * n],
-            moving: vec![0.0; n * n],
+            bordered: vec![0.0; (n + 2) * (stride + LANES)],
+            bstride: stride + LANES,
+            patch: vec![0.0; n * stride],
+            gx: vec![0.0; n * stride],
+            gy: vec![0.0; n * stride],
+            moving: vec![0.0; n * stride],
+            stride,
+            avx2,
         })
     }
 
@@ -327,29 +348,8 @@ impl PyramidalLk {
             // Window centre in pixel-index coordinates (corner convention → subtract 0.5).
             let cx = p[0] * scale - 0.5;
             let cy = p[1] * scale - 0.5;
-            sample_patch(
-                pi,
-                cx - hw as f32 - 1.0,
-                cy - hw as f32 - 1.0,
-                n + 2,
-                &mut self.bordered,
-            );
-            let (mut gxx, mut gxy, mut gyy) = (0.0f32, 0.0f32, 0.0f32);
-            let bw = n + 2;
-            for r in 0..n {
-                for c in 0..n {
-                    let k = r * n + c;
-                    let b = (r + 1) * bw + c + 1;
-                    self.patch[k] = self.bordered[b];
-                    let gx = 0.5 * (self.bordered[b + 1] - self.bordered[b - 1]);
-                    let gy = 0.5 * (self.bordered[b + bw] - self.bordered[b - bw]);
-                    self.gx[k] = gx;
-                    self.gy[k] = gy;
-                    gxx += gx * gx;
-                    gxy += gx * gy;
-                    gyy += gy * gy;
-                }
-            }
+            self.sample(pi, cx - hw as f32 - 1.0, cy - hw as f32 - 1.0, n + 2, true);
+            let [gxx, gxy, gyy] = self.gradients(n);
             let det = gxx * gyy - gxy * gxy;
             let min_eig = 0.5 * (gxx + gyy - ((gxx - gyy).powi(2) + 4.0 * gxy * gxy).sqrt());
             if min_eig / area < cfg.min_eigenvalue || det.abs() < f32::EPSILON {
@@ -358,19 +358,11 @@ impl PyramidalLk {
             let inv_det = 1.0 / det;
             d = [0.0, 0.0];
             for _ in 0..cfg.max_iterations {
-                sample_patch(
+                let [bx, by] = self.mismatch(
                     ni,
                     cx + g[0] + d[0] - hw as f32,
                     cy + g[1] + d[1] - hw as f32,
-                    n,
-                    &mut self.moving,
                 );
-                let (mut bx, mut by) = (0.0f32, 0.0f32);
-                for k in 0..n * n {
-                    let diff = self.patch[k] - self.moving[k];
-                    bx += diff * self.gx[k];
-                    by += diff * self.gy[k];
-                }
                 let ux = (gyy * bx - gxy * by) * inv_det;
                 let uy = (gxx * by - gxy * bx) * inv_det;
                 d[0] += ux;
@@ -394,7 +386,8 @@ impl PyramidalLk {
         {
             return (p, false, f32::INFINITY);
         }
-        // Error at full resolution, where `patch` and `moving` hold level 0 after the loop.
+        // Error at full resolution, where `patch` and `moving` hold level 0 after the loop (both
+        // zero past the window's width).
         let err = self
             .patch
             .iter()
@@ -404,6 +397,283 @@ impl PyramidalLk {
             / area;
         (out, true, err)
     }
+}
+
+impl PyramidalLk {
+    /// Samples a `size × size` window with its top-left sample at (x, y) into `bordered` (with
+    /// its border: `size = n + 2`) or `moving` (`size = n`).
+    #[inline(always)]
+    fn sample(&mut self, img: &GrayImage, x: f32, y: f32, size: usize, bordered: bool) {
+        let (out, stride) = if bordered {
+            (&mut self.bordered, self.bstride)
+        } else {
+            (&mut self.moving, self.stride)
+        };
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is set only where the CPU has AVX2 and FMA.
+            #[allow(unsafe_code)]
+            if unsafe { sample_avx2(img, x, y, size, stride, out) } {
+                return;
+            }
+        }
+        sample_patch(img, x, y, size, stride, out);
+    }
+
+    /// The window's patch and gradients from `bordered` (zero past the window's width) and the
+    /// gradient matrix's sums [Σ gx², Σ gx·gy, Σ gy²], in [`LANES`] sums.
+    #[inline(always)]
+    fn gradients(&mut self, n: usize) -> [f32; 3] {
+        let (bw, st) = (self.bstride, self.stride);
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is set only where the CPU has AVX2 and FMA.
+            #[allow(unsafe_code)]
+            return unsafe {
+                gradients_avx2(
+                    &self.bordered,
+                    bw,
+                    n,
+                    [&mut self.patch, &mut self.gx, &mut self.gy],
+                )
+            };
+        }
+        let (mut sxx, mut sxy, mut syy) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        for r in 0..n {
+            let up = &self.bordered[r * bw..(r + 1) * bw];
+            let mid = &self.bordered[(r + 1) * bw..(r + 2) * bw];
+            let down = &self.bordered[(r + 2) * bw..(r + 3) * bw];
+            for c0 in (0..st).step_by(LANES) {
+                let k0 = r * st + c0;
+                let patch: &mut [f32; LANES] =
+                    (&mut self.patch[k0..k0 + LANES]).try_into().unwrap();
+                let gxs: &mut [f32; LANES] = (&mut self.gx[k0..k0 + LANES]).try_into().unwrap();
+                let gys: &mut [f32; LANES] = (&mut self.gy[k0..k0 + LANES]).try_into().unwrap();
+                let m: &[f32; LANES + 2] = mid[c0..c0 + LANES + 2].try_into().unwrap();
+                let u: &[f32; LANES] = up[c0 + 1..c0 + 1 + LANES].try_into().unwrap();
+                let dn: &[f32; LANES] = down[c0 + 1..c0 + 1 + LANES].try_into().unwrap();
+                for k in 0..LANES {
+                    let inside = c0 + k < n;
+                    let gx = if inside { 0.5 * (m[k + 2] - m[k]) } else { 0.0 };
+                    let gy = if inside { 0.5 * (dn[k] - u[k]) } else { 0.0 };
+                    patch[k] = if inside { m[k + 1] } else { 0.0 };
+                    gxs[k] = gx;
+                    gys[k] = gy;
+                    sxx[k] += gx * gx;
+                    sxy[k] += gx * gy;
+                    syy[k] += gy * gy;
+                }
+            }
+        }
+        [hsum(&sxx), hsum(&sxy), hsum(&syy)]
+    }
+
+    /// Samples the next image's window with its top-left sample at (x, y) into `moving` and
+    /// returns the mismatch vector Σ (patch − moving) · (gx, gy), in [`LANES`] sums.
+    #[inline(always)]
+    fn mismatch(&mut self, img: &GrayImage, x: f32, y: f32) -> [f32; 2] {
+        let n = 2 * self.config.half_window + 1;
+        self.sample(img, x, y, n, false);
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is set only where the CPU has AVX2 and FMA.
+            #[allow(unsafe_code)]
+            return unsafe { mismatch_avx2([&self.patch, &self.moving, &self.gx, &self.gy]) };
+        }
+        let (mut sx, mut sy) = ([0.0f32; LANES], [0.0f32; LANES]);
+        let chunks = self
+            .patch
+            .chunks_exact(LANES)
+            .zip(self.moving.chunks_exact(LANES))
+            .zip(self.gx.chunks_exact(LANES).zip(self.gy.chunks_exact(LANES)));
+        for ((p, m), (gx, gy)) in chunks {
+            for k in 0..LANES {
+                let diff = p[k] - m[k];
+                sx[k] += diff * gx[k];
+                sy[k] += diff * gy[k];
+            }
+        }
+        [hsum(&sx), hsum(&sy)]
+    }
+}
+
+/// The lanes' sums added in lane order.
+#[inline(always)]
+fn hsum(v: &[f32; LANES]) -> f32 {
+    v.iter().fold(0.0, |a, &b| a + b)
+}
+
+/// [`sample_patch`] for windows whose rows of whole lane groups lie inside the image (`false`
+/// otherwise, nothing written: the portable path clamps at the border): eight pixels per step with
+/// the portable path's operations in its order, so the same bits, and the lanes past `size` set to
+/// zero, which the portable path leaves as they are (zero: never written there). The compiled
+/// portable loop ran the 11- and 13-pixel rows one pixel at a time.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn sample_avx2(
+    img: &GrayImage,
+    x: f32,
+    y: f32,
+    size: usize,
+    stride: usize,
+    out: &mut [f32],
+) -> bool {
+    use std::arch::x86_64::{
+        __m256, _mm_loadl_epi64, _mm256_add_ps, _mm256_and_ps, _mm256_castsi256_ps,
+        _mm256_cmpgt_epi32, _mm256_cvtepi32_ps, _mm256_cvtepu8_epi32, _mm256_mul_ps,
+        _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_epi32, _mm256_storeu_ps,
+    };
+    let groups = size.div_ceil(LANES);
+    let (w, h) = (img.width(), img.height());
+    let (fx0, fy0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - fx0, y - fy0);
+    let (ix, iy) = (fx0 as i64, fy0 as i64);
+    // Each row reads bytes ix ..= ix + 8·groups (the last group's right taps) of rows
+    // iy ..= iy + size.
+    let span = (groups * LANES) as i64;
+    if !(ix >= 0 && iy >= 0 && ix + span < w as i64 && iy + (size as i64) < h as i64) {
+        return false;
+    }
+    assert!(stride >= groups * LANES && out.len() >= (size - 1) * stride + groups * LANES);
+    let (ix, iy) = (ix as usize, iy as usize);
+    let d = img.data();
+    let w00 = _mm256_set1_ps((1.0 - fx) * (1.0 - fy));
+    let w10 = _mm256_set1_ps(fx * (1.0 - fy));
+    let w01 = _mm256_set1_ps((1.0 - fx) * fy);
+    let w11 = _mm256_set1_ps(fx * fy);
+    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let load8 = |row: &[u8], at: usize| -> __m256 {
+        let bytes: &[u8; 8] = row[at..at + 8].try_into().expect("eight bytes");
+        // SAFETY: `bytes` is eight readable bytes, the width of the unaligned 64-bit load.
+        #[allow(unsafe_code)]
+        let v = unsafe { _mm_loadl_epi64(bytes.as_ptr().cast()) };
+        _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(v))
+    };
+    let span = groups * LANES;
+    for r in 0..size {
+        let a = &d[(iy + r) * w + ix..(iy + r) * w + ix + span + 1];
+        let b = &d[(iy + r + 1) * w + ix..(iy + r + 1) * w + ix + span + 1];
+        for c in (0..span).step_by(LANES) {
+            let mut v = _mm256_add_ps(
+                _mm256_mul_ps(w00, load8(a, c)),
+                _mm256_mul_ps(w10, load8(a, c + 1)),
+            );
+            v = _mm256_add_ps(v, _mm256_mul_ps(w01, load8(b, c)));
+            v = _mm256_add_ps(v, _mm256_mul_ps(w11, load8(b, c + 1)));
+            let inside = _mm256_cmpgt_epi32(_mm256_set1_epi32((size - c) as i32), lane);
+            v = _mm256_and_ps(v, _mm256_castsi256_ps(inside));
+            let k = r * stride + c;
+            let lanes: &mut [f32; LANES] = (&mut out[k..k + LANES]).try_into().expect("lanes");
+            // SAFETY: `lanes` is eight writable f32, the width of the unaligned store.
+            #[allow(unsafe_code)]
+            unsafe {
+                _mm256_storeu_ps(lanes.as_mut_ptr(), v)
+            };
+        }
+    }
+    true
+}
+
+/// Eight f32 from `s[at..]` (unaligned).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn load_lanes(s: &[f32], at: usize) -> std::arch::x86_64::__m256 {
+    let lanes: &[f32; LANES] = s[at..at + LANES].try_into().expect("lanes");
+    // SAFETY: `lanes` is eight readable f32, the width of the unaligned load.
+    #[allow(unsafe_code)]
+    unsafe {
+        std::arch::x86_64::_mm256_loadu_ps(lanes.as_ptr())
+    }
+}
+
+/// Eight f32 into `s[at..]` (unaligned).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn store_lanes(s: &mut [f32], at: usize, v: std::arch::x86_64::__m256) {
+    let lanes: &mut [f32; LANES] = (&mut s[at..at + LANES]).try_into().expect("lanes");
+    // SAFETY: `lanes` is eight writable f32, the width of the unaligned store.
+    #[allow(unsafe_code)]
+    unsafe {
+        std::arch::x86_64::_mm256_storeu_ps(lanes.as_mut_ptr(), v)
+    }
+}
+
+/// The lanes of `v` added in lane order ([`hsum`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn hsum_lanes(v: std::arch::x86_64::__m256) -> f32 {
+    let mut lanes = [0.0f32; LANES];
+    store_lanes(&mut lanes, 0, v);
+    hsum(&lanes)
+}
+
+/// [`PyramidalLk::gradients`] on eight lanes per step, the same operations in the same order (the
+/// same bits); the compiled portable loop ran mostly on single lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn gradients_avx2(
+    bordered: &[f32],
+    bw: usize,
+    n: usize,
+    [patch, gx, gy]: [&mut [f32]; 3],
+) -> [f32; 3] {
+    use std::arch::x86_64::{
+        _mm256_add_ps, _mm256_and_ps, _mm256_castsi256_ps, _mm256_cmpgt_epi32, _mm256_mul_ps,
+        _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_epi32, _mm256_setzero_ps, _mm256_sub_ps,
+    };
+    let st = n.next_multiple_of(LANES);
+    assert!(bw >= st + 2 && bordered.len() >= (n + 2) * bw);
+    let half = _mm256_set1_ps(0.5);
+    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let (mut sxx, mut sxy, mut syy) = (
+        _mm256_setzero_ps(),
+        _mm256_setzero_ps(),
+        _mm256_setzero_ps(),
+    );
+    for r in 0..n {
+        let (up, mid, down) = (r * bw, (r + 1) * bw, (r + 2) * bw);
+        for c0 in (0..st).step_by(LANES) {
+            let inside =
+                _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32((n - c0) as i32), lane));
+            let m0 = load_lanes(bordered, mid + c0);
+            let m2 = load_lanes(bordered, mid + c0 + 2);
+            let u = load_lanes(bordered, up + c0 + 1);
+            let dn = load_lanes(bordered, down + c0 + 1);
+            let x = _mm256_and_ps(_mm256_mul_ps(half, _mm256_sub_ps(m2, m0)), inside);
+            let y = _mm256_and_ps(_mm256_mul_ps(half, _mm256_sub_ps(dn, u)), inside);
+            let k = r * st + c0;
+            store_lanes(
+                patch,
+                k,
+                _mm256_and_ps(load_lanes(bordered, mid + c0 + 1), inside),
+            );
+            store_lanes(gx, k, x);
+            store_lanes(gy, k, y);
+            sxx = _mm256_add_ps(sxx, _mm256_mul_ps(x, x));
+            sxy = _mm256_add_ps(sxy, _mm256_mul_ps(x, y));
+            syy = _mm256_add_ps(syy, _mm256_mul_ps(y, y));
+        }
+    }
+    [hsum_lanes(sxx), hsum_lanes(sxy), hsum_lanes(syy)]
+}
+
+/// The mismatch sums of [`PyramidalLk::mismatch`] on eight lanes per step (the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn mismatch_avx2([patch, moving, gx, gy]: [&[f32]; 4]) -> [f32; 2] {
+    use std::arch::x86_64::{_mm256_add_ps, _mm256_mul_ps, _mm256_setzero_ps, _mm256_sub_ps};
+    assert!(moving.len() == patch.len() && gx.len() == patch.len() && gy.len() == patch.len());
+    let (mut sx, mut sy) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+    for k in (0..patch.len() - patch.len() % LANES).step_by(LANES) {
+        let diff = _mm256_sub_ps(load_lanes(patch, k), load_lanes(moving, k));
+        sx = _mm256_add_ps(sx, _mm256_mul_ps(diff, load_lanes(gx, k)));
+        sy = _mm256_add_ps(sy, _mm256_mul_ps(diff, load_lanes(gy, k)));
+    }
+    [hsum_lanes(sx), hsum_lanes(sy)]
 }
 
 /// The optical-flow landmark filter (thesis Alg. 8), one per tracked face.
@@ -520,7 +790,7 @@ mod tests {
 
     #[cfg(target_arch = "x86_64")]
     #[test]
-    fn the_avx2_copies_give_the_same_pyramid_and_points() {
+    fn the_avx2_copies_and_kernels_give_the_same_pyramid_and_points() {
         if !crate::cpu::has_avx2_fma() {
             eprintln!("SKIPPED: this CPU has no AVX2 + FMA");
             return;
@@ -578,6 +848,23 @@ mod tests {
         assert_eq!(st_a, st_b);
         assert_eq!(err_a, err_b);
         assert!(st_a.iter().filter(|&&s| s).count() > 40, "{st_a:?}");
+        // The AVX2 window kernels against the portable ones, bit for bit.
+        let mut portable = PyramidalLk::new(LkConfig::default()).unwrap();
+        portable.avx2 = false;
+        portable
+            .track_body(
+                &pyramids[0],
+                &pyramids[1],
+                &from,
+                &mut to_b,
+                &mut st_b,
+                &mut err_b,
+            )
+            .unwrap();
+        assert!(lk.avx2);
+        assert_eq!(to_a, to_b);
+        assert_eq!(st_a, st_b);
+        assert_eq!(err_a, err_b);
     }
 
     fn grid() -> Vec<[f32; 2]> {
