@@ -6,8 +6,9 @@
 //! template's larger side is about [`NccMatcher::template_px`] pixels; the cost is then independent of
 //! the face size. Window sums and sums of squares come from integral images, so each candidate offset
 //! costs one dot product with the zero-mean template; those of all offsets are computed together,
-//! blocks of offsets at a time in vector registers (f32 sums). The peak is refined to sub-pixel by a parabola
-//! through its neighbours along x and y, and the shift is returned in full-resolution pixels.
+//! blocks of offsets at a time in vector registers (f32 sums). The peak is refined to sub-pixel by
+//! a parabola through its neighbours along x and y, and the shift is returned in full-resolution
+//! pixels.
 //!
 //! Pixel convention: see [`crate::camera`]; a region's (x, y) is the top-left corner.
 
