@@ -588,6 +588,53 @@ pub(crate) mod tests {
         }
     }
 
+    /// Block means through band column sums, in u16 and in u32 (the path for factors past 257),
+    /// against per-block sums, with and without padding of the rows.
+    #[test]
+    fn decimation_equals_block_means_in_both_sum_widths() {
+        let img = shifted([1.5, -2.0]);
+        for (f, pad) in [(2, 0), (3, 5), (5, 8), (7, 1)] {
+            let (x0, y0, cols, rows) = (13, 7, 40, 30);
+            let layout = Padded {
+                stride: cols + pad,
+                rows: rows + pad,
+            };
+            let (mut narrow, mut wide) = (Vec::new(), Vec::new());
+            let mut bands = Bands::default();
+            decimate(&img, x0, y0, cols, rows, f, layout, &mut bands, &mut narrow);
+            wide.resize(narrow.len(), 0.0);
+            decimate_bands::<u32>(
+                &img,
+                x0,
+                y0,
+                cols,
+                rows,
+                f,
+                cols + pad,
+                &mut bands.wide,
+                &mut wide,
+            );
+            assert_eq!(narrow, wide, "f {f}");
+            assert_eq!(narrow.len(), (cols + pad) * (rows + pad));
+            for r in 0..rows + pad {
+                for c in 0..cols + pad {
+                    let want = if r < rows && c < cols {
+                        let mut sum = 0u32;
+                        for dy in 0..f {
+                            for dx in 0..f {
+                                sum += u32::from(img.row(y0 + r * f + dy)[x0 + c * f + dx]);
+                            }
+                        }
+                        sum as f32 * (1.0 / (f * f) as f32)
+                    } else {
+                        0.0
+                    };
+                    assert_eq!(narrow[r * (cols + pad) + c], want, "f {f} ({c}, {r})");
+                }
+            }
+        }
+    }
+
     /// The window's row stride and the correlation's row length of the last search.
     fn layout(m: &NccMatcher) -> (usize, usize) {
         let [ww, _] = m.searched;
