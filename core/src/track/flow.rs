@@ -819,52 +819,32 @@ mod tests {
         let mut from = grid();
         from.extend([[1.5, 2.5], [637.2, 477.9], [-3.0, 240.0]]);
         let n = from.len();
+        let (prev, next) = (&pyramids[0], &pyramids[1]);
+        // Points, status and errors of one run: the body as compiled for baseline x86-64, or its
+        // AVX2 copy.
+        let run = |lk: &mut PyramidalLk, avx2_copy: bool| {
+            let (mut to, mut st, mut err) = (vec![[9.0; 2]; n], vec![true; n], vec![9.0; n]);
+            if avx2_copy {
+                #[allow(unsafe_code)]
+                // SAFETY: the CPU has AVX2 and FMA (checked above).
+                unsafe {
+                    lk.track_avx2(prev, next, &from, &mut to, &mut st, &mut err)
+                }
+            } else {
+                lk.track_body(prev, next, &from, &mut to, &mut st, &mut err)
+            }
+            .unwrap();
+            (to, st, err)
+        };
         let mut lk = PyramidalLk::new(LkConfig::default()).unwrap();
-        let (mut to_a, mut st_a, mut err_a) = (vec![[0.0; 2]; n], vec![false; n], vec![0.0; n]);
-        let (mut to_b, mut st_b, mut err_b) = (vec![[9.0; 2]; n], vec![true; n], vec![9.0; n]);
-        lk.track_body(
-            &pyramids[0],
-            &pyramids[1],
-            &from,
-            &mut to_a,
-            &mut st_a,
-            &mut err_a,
-        )
-        .unwrap();
-        #[allow(unsafe_code)]
-        // SAFETY: the CPU has AVX2 and FMA (checked above).
-        unsafe {
-            lk.track_avx2(
-                &pyramids[0],
-                &pyramids[1],
-                &from,
-                &mut to_b,
-                &mut st_b,
-                &mut err_b,
-            )
-        }
-        .unwrap();
-        assert_eq!(to_a, to_b);
-        assert_eq!(st_a, st_b);
-        assert_eq!(err_a, err_b);
-        assert!(st_a.iter().filter(|&&s| s).count() > 40, "{st_a:?}");
+        assert!(lk.avx2);
+        let body = run(&mut lk, false);
+        assert_eq!(body, run(&mut lk, true));
+        assert!(body.1.iter().filter(|&&s| s).count() > 40, "{:?}", body.1);
         // The AVX2 window kernels against the portable ones, bit for bit.
         let mut portable = PyramidalLk::new(LkConfig::default()).unwrap();
         portable.avx2 = false;
-        portable
-            .track_body(
-                &pyramids[0],
-                &pyramids[1],
-                &from,
-                &mut to_b,
-                &mut st_b,
-                &mut err_b,
-            )
-            .unwrap();
-        assert!(lk.avx2);
-        assert_eq!(to_a, to_b);
-        assert_eq!(st_a, st_b);
-        assert_eq!(err_a, err_b);
+        assert_eq!(body, run(&mut portable, false));
     }
 
     fn grid() -> Vec<[f32; 2]> {
