@@ -133,13 +133,16 @@ impl NccMatcher {
         if tw < MIN_TEMPLATE_CELLS || th < MIN_TEMPLATE_CELLS {
             return false;
         }
+        let cells = Cells {
+            x0: x0 as usize,
+            y0: y0 as usize,
+            cols: tw,
+            rows: th,
+            f: factor,
+        };
         decimate(
             image,
-            x0 as usize,
-            y0 as usize,
-            tw,
-            th,
-            factor,
+            cells,
             Padded::none(),
             &mut self.bands,
             &mut self.template,
@@ -192,13 +195,16 @@ impl NccMatcher {
         let blocks = nx.div_ceil(BLOCK);
         let ny_pad = ny.next_multiple_of(ROWS);
         let ws = ww + WINDOW_PAD;
+        let cells = Cells {
+            x0: wx0 as usize,
+            y0: wy0 as usize,
+            cols: ww,
+            rows: wh,
+            f,
+        };
         decimate(
             image,
-            wx0 as usize,
-            wy0 as usize,
-            ww,
-            wh,
-            f,
+            cells,
             Padded {
                 stride: ws,
                 rows: ny_pad + th - 1,
@@ -357,26 +363,26 @@ impl Padded {
     }
 }
 
-/// Means of `f × f` blocks: `cols × rows` cells starting at full-resolution pixel (x0, y0), which
-/// the caller keeps inside the image, laid out as `pad` says.
-#[allow(clippy::too_many_arguments)]
-fn decimate(
-    image: &GrayImage,
+/// The cells of a decimation: `cols × rows` means of `f × f` blocks starting at full-resolution
+/// pixel (x0, y0), which the caller keeps inside the image.
+#[derive(Debug, Clone, Copy)]
+struct Cells {
     x0: usize,
     y0: usize,
     cols: usize,
     rows: usize,
     f: usize,
-    pad: Padded,
-    bands: &mut Bands,
-    out: &mut Vec<f32>,
-) {
+}
+
+/// The block means of `cells`, laid out as `pad` says.
+fn decimate(image: &GrayImage, cells: Cells, pad: Padded, bands: &mut Bands, out: &mut Vec<f32>) {
+    let (cols, f) = (cells.cols, cells.f);
     let stride = pad.stride.max(cols);
     out.clear();
-    out.resize(stride * pad.rows.max(rows), 0.0);
+    out.resize(stride * pad.rows.max(cells.rows), 0.0);
     if f == 1 {
-        for r in 0..rows {
-            let src = &image.row(y0 + r)[x0..x0 + cols];
+        for r in 0..cells.rows {
+            let src = &image.row(cells.y0 + r)[cells.x0..cells.x0 + cols];
             for (o, &s) in out[r * stride..r * stride + cols].iter_mut().zip(src) {
                 *o = f32::from(s);
             }
@@ -387,27 +393,30 @@ fn decimate(
     // the `f`-wide groups of each band: summing `f`-pixel chunks row by row instead measured 2×
     // slower for the whole search. u16 holds a band's column sum while `f · 255` fits.
     if f * 255 <= usize::from(u16::MAX) {
-        decimate_bands(image, x0, y0, cols, rows, f, stride, &mut bands.narrow, out);
+        decimate_bands(image, cells, stride, &mut bands.narrow, out);
     } else {
-        decimate_bands(image, x0, y0, cols, rows, f, stride, &mut bands.wide, out);
+        decimate_bands(image, cells, stride, &mut bands.wide, out);
     }
 }
 
-/// [`decimate`] for `f > 1`, column sums of each band of rows in `T` (see there).
-#[allow(clippy::too_many_arguments)]
+/// [`decimate`] for `f > 1` (rows `stride` apart), column sums of each band of rows in `T` (see
+/// there).
 fn decimate_bands<T>(
     image: &GrayImage,
-    x0: usize,
-    y0: usize,
-    cols: usize,
-    rows: usize,
-    f: usize,
+    cells: Cells,
     stride: usize,
     band: &mut Vec<T>,
     out: &mut [f32],
 ) where
     T: Copy + Default + From<u8> + std::ops::AddAssign + Into<u32>,
 {
+    let Cells {
+        x0,
+        y0,
+        cols,
+        rows,
+        f,
+    } = cells;
     let inv = 1.0 / (f * f) as f32;
     band.clear();
     band.resize(cols * f, T::default());
@@ -601,19 +610,16 @@ pub(crate) mod tests {
             };
             let (mut narrow, mut wide) = (Vec::new(), Vec::new());
             let mut bands = Bands::default();
-            decimate(&img, x0, y0, cols, rows, f, layout, &mut bands, &mut narrow);
-            wide.resize(narrow.len(), 0.0);
-            decimate_bands::<u32>(
-                &img,
+            let cells = Cells {
                 x0,
                 y0,
                 cols,
                 rows,
                 f,
-                cols + pad,
-                &mut bands.wide,
-                &mut wide,
-            );
+            };
+            decimate(&img, cells, layout, &mut bands, &mut narrow);
+            wide.resize(narrow.len(), 0.0);
+            decimate_bands::<u32>(&img, cells, cols + pad, &mut bands.wide, &mut wide);
             assert_eq!(narrow, wide, "f {f}");
             assert_eq!(narrow.len(), (cols + pad) * (rows + pad));
             for r in 0..rows + pad {
