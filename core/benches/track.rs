@@ -1,6 +1,7 @@
 //! Measures the fast tracker's image stages on 640×480 frames: the NCC region search (template of a
 //! 180×200 face region decimated to ~32 px, ±50 % search window), the image pyramid, and pyramidal
-//! Lucas–Kanade on 68 points (11×11 window, 3 levels) — the optical-flow filter's cost per face.
+//! Lucas–Kanade on 68 points (11×11 window, 3 levels) — the optical-flow filter's cost per face;
+//! the pyramid also at 1280×720 (the shared video's frames).
 //! Frames: a smooth synthetic texture moved by (6.5, −4.25) px between the two frames.
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -10,7 +11,10 @@ use monotrack_core::track::ncc::NccMatcher;
 use std::hint::black_box;
 
 fn frame(shift: [f32; 2]) -> GrayImage {
-    let (w, h) = (640, 480);
+    frame_sized(640, 480, shift)
+}
+
+fn frame_sized(w: usize, h: usize, shift: [f32; 2]) -> GrayImage {
     let mut img = GrayImage::new(w, h);
     for y in 0..h {
         for x in 0..w {
@@ -60,6 +64,12 @@ fn bench(c: &mut Criterion) {
     p1.build(&next, 3);
     c.bench_function("pyramid_3_levels_640x480", |b| {
         b.iter(|| p1.build(black_box(&next), 3))
+    });
+    // The shared video's frame size.
+    let hd = frame_sized(1280, 720, [0.0, 0.0]);
+    let mut p_hd = Pyramid::new();
+    c.bench_function("pyramid_3_levels_1280x720", |b| {
+        b.iter(|| p_hd.build(black_box(&hd), 3))
     });
 
     let from = landmarks();
