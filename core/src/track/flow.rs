@@ -520,9 +520,8 @@ fn sample_avx2(
     out: &mut [f32],
 ) -> bool {
     use std::arch::x86_64::{
-        __m256, _mm_loadl_epi64, _mm256_add_ps, _mm256_and_ps, _mm256_castsi256_ps,
-        _mm256_cmpgt_epi32, _mm256_cvtepi32_ps, _mm256_cvtepu8_epi32, _mm256_mul_ps,
-        _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_epi32, _mm256_storeu_ps,
+        __m256, _mm_loadl_epi64, _mm256_add_ps, _mm256_and_ps, _mm256_cvtepi32_ps,
+        _mm256_cvtepu8_epi32, _mm256_mul_ps, _mm256_set1_ps,
     };
     let groups = size.div_ceil(LANES);
     let (w, h) = (img.width(), img.height());
@@ -542,7 +541,6 @@ fn sample_avx2(
     let w10 = _mm256_set1_ps(fx * (1.0 - fy));
     let w01 = _mm256_set1_ps((1.0 - fx) * fy);
     let w11 = _mm256_set1_ps(fx * fy);
-    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let load8 = |row: &[u8], at: usize| -> __m256 {
         let bytes: &[u8; 8] = row[at..at + 8].try_into().expect("eight bytes");
         // SAFETY: `bytes` is eight readable bytes, the width of the unaligned 64-bit load.
@@ -561,15 +559,7 @@ fn sample_avx2(
             );
             v = _mm256_add_ps(v, _mm256_mul_ps(w01, load8(b, c)));
             v = _mm256_add_ps(v, _mm256_mul_ps(w11, load8(b, c + 1)));
-            let inside = _mm256_cmpgt_epi32(_mm256_set1_epi32((size - c) as i32), lane);
-            v = _mm256_and_ps(v, _mm256_castsi256_ps(inside));
-            let k = r * stride + c;
-            let lanes: &mut [f32; LANES] = (&mut out[k..k + LANES]).try_into().expect("lanes");
-            // SAFETY: `lanes` is eight writable f32, the width of the unaligned store.
-            #[allow(unsafe_code)]
-            unsafe {
-                _mm256_storeu_ps(lanes.as_mut_ptr(), v)
-            };
+            store_lanes(out, r * stride + c, _mm256_and_ps(v, first_lanes(size - c)));
         }
     }
     true
@@ -611,6 +601,20 @@ fn hsum_lanes(v: std::arch::x86_64::__m256) -> f32 {
     hsum(&lanes)
 }
 
+/// A mask of the first `count` lanes (all bits set there, zero in the others; `count` may exceed
+/// [`LANES`]): AND-ing with it zeroes the lanes past a window's width.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn first_lanes(count: usize) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::{
+        _mm256_castsi256_ps, _mm256_cmpgt_epi32, _mm256_set1_epi32, _mm256_setr_epi32,
+    };
+    let count = count.min(LANES) as i32;
+    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(count), lane))
+}
+
 /// [`PyramidalLk::gradients`] on eight lanes per step, the same operations in the same order (the
 /// same bits); the compiled portable loop ran mostly on single lanes.
 #[cfg(target_arch = "x86_64")]
@@ -622,13 +626,12 @@ fn gradients_avx2(
     [patch, gx, gy]: [&mut [f32]; 3],
 ) -> [f32; 3] {
     use std::arch::x86_64::{
-        _mm256_add_ps, _mm256_and_ps, _mm256_castsi256_ps, _mm256_cmpgt_epi32, _mm256_mul_ps,
-        _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_epi32, _mm256_setzero_ps, _mm256_sub_ps,
+        _mm256_add_ps, _mm256_and_ps, _mm256_mul_ps, _mm256_set1_ps, _mm256_setzero_ps,
+        _mm256_sub_ps,
     };
     let st = n.next_multiple_of(LANES);
     assert!(bw >= st + 2 && bordered.len() >= (n + 2) * bw);
     let half = _mm256_set1_ps(0.5);
-    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let (mut sxx, mut sxy, mut syy) = (
         _mm256_setzero_ps(),
         _mm256_setzero_ps(),
@@ -637,8 +640,7 @@ fn gradients_avx2(
     for r in 0..n {
         let (up, mid, down) = (r * bw, (r + 1) * bw, (r + 2) * bw);
         for c0 in (0..st).step_by(LANES) {
-            let inside =
-                _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32((n - c0) as i32), lane));
+            let inside = first_lanes(n - c0);
             let m0 = load_lanes(bordered, mid + c0);
             let m2 = load_lanes(bordered, mid + c0 + 2);
             let u = load_lanes(bordered, up + c0 + 1);
