@@ -136,6 +136,42 @@ macro_rules! with_avx2_copy {
 }
 pub(crate) use with_avx2_copy;
 
+/// Byte loads and stores the hand-written AVX2 pixel kernels share (their unsafe pointer access in
+/// one place, behind slices whose length is checked).
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod avx2 {
+    use std::arch::x86_64::{
+        __m128i, __m256i, _mm_loadl_epi64, _mm_packus_epi16, _mm_packus_epi32, _mm_storel_epi64,
+        _mm256_castsi256_si128, _mm256_cvtepu8_epi32, _mm256_extracti128_si256,
+    };
+
+    /// The first eight bytes of `bytes`, zero-extended to eight i32 lanes.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(crate) fn load_u8x8(bytes: &[u8]) -> __m256i {
+        let bytes: &[u8; 8] = bytes[..8].try_into().expect("eight bytes");
+        #[allow(unsafe_code)]
+        // SAFETY: `bytes` holds the eight bytes read (unaligned loads are allowed).
+        _mm256_cvtepu8_epi32(unsafe { _mm_loadl_epi64(bytes.as_ptr().cast::<__m128i>()) })
+    }
+
+    /// Eight i32 lanes into the first eight bytes of `dst`, saturated to 0..=255.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(crate) fn store_u8x8(v: __m256i, dst: &mut [u8]) {
+        let dst: &mut [u8; 8] = (&mut dst[..8]).try_into().expect("eight bytes");
+        let words = _mm_packus_epi32(_mm256_castsi256_si128(v), _mm256_extracti128_si256::<1>(v));
+        #[allow(unsafe_code)]
+        // SAFETY: `dst` holds the eight bytes written (unaligned stores are allowed).
+        unsafe {
+            _mm_storel_epi64(
+                dst.as_mut_ptr().cast::<__m128i>(),
+                _mm_packus_epi16(words, words),
+            )
+        };
+    }
+}
+
 /// Clears the upper halves of the vector registers (`vzeroupper`) when the CPU has AVX; nothing
 /// elsewhere (no other architecture has the penalty).
 #[inline]

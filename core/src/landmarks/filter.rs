@@ -166,23 +166,16 @@ impl Bilateral {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn filter_avx2(&self, width: usize, height: usize, dst: &mut [u8]) {
+        use crate::cpu::avx2::{load_u8x8 as load8, store_u8x8};
         use std::arch::x86_64::{
-            __m128i, _mm_loadl_epi64, _mm_packus_epi16, _mm_packus_epi32, _mm_storel_epi64,
-            _mm256_abs_epi32, _mm256_add_ps, _mm256_castsi256_si128, _mm256_cvtepi32_ps,
-            _mm256_cvtepu8_epi32, _mm256_cvttps_epi32, _mm256_div_ps, _mm256_extracti128_si256,
-            _mm256_i32gather_ps, _mm256_max_ps, _mm256_min_ps, _mm256_mul_ps, _mm256_set1_ps,
-            _mm256_setzero_ps, _mm256_sub_epi32,
+            _mm256_abs_epi32, _mm256_add_ps, _mm256_cvtepi32_ps, _mm256_cvttps_epi32,
+            _mm256_div_ps, _mm256_i32gather_ps, _mm256_max_ps, _mm256_min_ps, _mm256_mul_ps,
+            _mm256_set1_ps, _mm256_setzero_ps, _mm256_sub_epi32,
         };
         let r = self.radius;
         let pw = width + 2 * r;
         let table = self.color_weight.as_ptr();
         let (zero, top) = (_mm256_setzero_ps(), _mm256_set1_ps(255.0));
-        let load8 = |bytes: &[u8]| {
-            let bytes = &bytes[..8];
-            #[allow(unsafe_code)]
-            // SAFETY: `bytes` holds the eight bytes read (unaligned loads are allowed).
-            _mm256_cvtepu8_epi32(unsafe { _mm_loadl_epi64(bytes.as_ptr().cast::<__m128i>()) })
-        };
         for y in 0..height {
             let c0 = (y + r) * pw + r;
             let out = &mut dst[y * width..(y + 1) * width];
@@ -203,20 +196,7 @@ impl Bilateral {
                 // `quantize`: the clamp, then truncation (≤ 255 after the clamp, so the packs
                 // do not saturate).
                 let q = _mm256_min_ps(_mm256_max_ps(_mm256_div_ps(sum, wsum), zero), top);
-                let qi = _mm256_cvttps_epi32(q);
-                let words = _mm_packus_epi32(
-                    _mm256_castsi256_si128(qi),
-                    _mm256_extracti128_si256::<1>(qi),
-                );
-                let bytes = &mut out[x..x + 8];
-                #[allow(unsafe_code)]
-                // SAFETY: `bytes` holds the eight bytes written (unaligned stores are allowed).
-                unsafe {
-                    _mm_storel_epi64(
-                        bytes.as_mut_ptr().cast::<__m128i>(),
-                        _mm_packus_epi16(words, words),
-                    )
-                };
+                store_u8x8(_mm256_cvttps_epi32(q), &mut out[x..x + 8]);
                 x += 8;
             }
             for (x, d) in out.iter_mut().enumerate().skip(x) {

@@ -250,12 +250,11 @@ impl<'a> InteriorMap<'a> {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn sample_gather_avx2(&self, data: &[u8], iw: usize, ih: usize, width: usize, out: &mut [u8]) {
+        use crate::cpu::avx2::store_u8x8;
         use std::arch::x86_64::{
-            __m128i, __m256, __m256i, _mm_packus_epi16, _mm_packus_epi32, _mm_storel_epi64,
-            _mm256_add_epi32, _mm256_add_ps, _mm256_and_si256, _mm256_castsi256_si128,
-            _mm256_cvtepi32_ps, _mm256_cvttps_epi32, _mm256_extracti128_si256,
-            _mm256_i32gather_epi32, _mm256_max_ps, _mm256_min_ps, _mm256_mul_ps,
-            _mm256_mullo_epi32, _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_ps,
+            __m256, __m256i, _mm256_add_epi32, _mm256_add_ps, _mm256_and_si256, _mm256_cvtepi32_ps,
+            _mm256_cvttps_epi32, _mm256_i32gather_epi32, _mm256_max_ps, _mm256_min_ps,
+            _mm256_mul_ps, _mm256_mullo_epi32, _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_ps,
             _mm256_setzero_ps, _mm256_srli_epi32, _mm256_sub_ps,
         };
         const N: usize = InteriorMap::CHUNK;
@@ -321,18 +320,8 @@ impl<'a> InteriorMap<'a> {
                     );
                     // val ≥ 0.5: truncation floors it, and the packs saturate at 255 as the
                     // body's cast does.
-                    let vi = _mm256_cvttps_epi32(val);
-                    let words = _mm_packus_epi32(
-                        _mm256_castsi256_si128(vi),
-                        _mm256_extracti128_si256::<1>(vi),
-                    );
-                    let packed = _mm_packus_epi16(words, words);
                     let dst = &mut bytes[half_chunk * 8..half_chunk * 8 + 8];
-                    #[allow(unsafe_code)]
-                    // SAFETY: `dst` holds the eight bytes the store writes (unaligned is allowed).
-                    unsafe {
-                        _mm_storel_epi64(dst.as_mut_ptr().cast::<__m128i>(), packed)
-                    };
+                    store_u8x8(_mm256_cvttps_epi32(val), dst);
                 }
                 chunk.copy_from_slice(&bytes[..chunk.len()]);
             }

@@ -519,9 +519,9 @@ fn sample_avx2(
     stride: usize,
     out: &mut [f32],
 ) -> bool {
+    use crate::cpu::avx2::load_u8x8;
     use std::arch::x86_64::{
-        __m256, _mm_loadl_epi64, _mm256_add_ps, _mm256_and_ps, _mm256_cvtepi32_ps,
-        _mm256_cvtepu8_epi32, _mm256_mul_ps, _mm256_set1_ps,
+        __m256, _mm256_add_ps, _mm256_and_ps, _mm256_cvtepi32_ps, _mm256_mul_ps, _mm256_set1_ps,
     };
     let groups = size.div_ceil(LANES);
     let (w, h) = (img.width(), img.height());
@@ -541,13 +541,7 @@ fn sample_avx2(
     let w10 = _mm256_set1_ps(fx * (1.0 - fy));
     let w01 = _mm256_set1_ps((1.0 - fx) * fy);
     let w11 = _mm256_set1_ps(fx * fy);
-    let load8 = |row: &[u8], at: usize| -> __m256 {
-        let bytes: &[u8; 8] = row[at..at + 8].try_into().expect("eight bytes");
-        // SAFETY: `bytes` is eight readable bytes, the width of the unaligned 64-bit load.
-        #[allow(unsafe_code)]
-        let v = unsafe { _mm_loadl_epi64(bytes.as_ptr().cast()) };
-        _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(v))
-    };
+    let load8 = |row: &[u8], at: usize| -> __m256 { _mm256_cvtepi32_ps(load_u8x8(&row[at..])) };
     let span = groups * LANES;
     for r in 0..size {
         let a = &d[(iy + r) * w + ix..(iy + r) * w + ix + span + 1];
