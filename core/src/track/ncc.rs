@@ -143,7 +143,10 @@ impl NccMatcher {
         decimate(
             image,
             cells,
-            Padded::none(),
+            Padded {
+                stride: tw,
+                rows: th,
+            },
             &mut self.bands,
             &mut self.template,
         );
@@ -348,19 +351,12 @@ struct Bands {
     wide: Vec<u32>,
 }
 
-/// Layout of a decimated buffer: rows of `stride` cells and `rows` rows in all, the cells past the
-/// decimated ones zero.
+/// Layout of a decimated buffer: rows of `stride ≥ cols` cells and `rows ≥` the decimated rows in
+/// all, the cells past the decimated ones zero.
 #[derive(Debug, Clone, Copy)]
 struct Padded {
     stride: usize,
     rows: usize,
-}
-
-impl Padded {
-    /// No padding (`stride` and `rows` taken from the decimated size).
-    fn none() -> Self {
-        Self { stride: 0, rows: 0 }
-    }
 }
 
 /// The cells of a decimation: `cols × rows` means of `f × f` blocks starting at full-resolution
@@ -376,10 +372,10 @@ struct Cells {
 
 /// The block means of `cells`, laid out as `pad` says.
 fn decimate(image: &GrayImage, cells: Cells, pad: Padded, bands: &mut Bands, out: &mut Vec<f32>) {
-    let (cols, f) = (cells.cols, cells.f);
-    let stride = pad.stride.max(cols);
+    let (cols, f, stride) = (cells.cols, cells.f, pad.stride);
+    assert!(stride >= cols && pad.rows >= cells.rows);
     out.clear();
-    out.resize(stride * pad.rows.max(cells.rows), 0.0);
+    out.resize(stride * pad.rows, 0.0);
     if f == 1 {
         for r in 0..cells.rows {
             let src = &image.row(cells.y0 + r)[cells.x0..cells.x0 + cols];
