@@ -84,6 +84,17 @@ pub(crate) fn has_avx2_fma() -> bool {
     std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
 }
 
+/// For the tests of the AVX2 paths: whether the CPU has AVX2 and FMA, printing the skip reason
+/// when it has not.
+#[cfg(all(test, target_arch = "x86_64"))]
+pub(crate) fn avx2_fma_or_skip() -> bool {
+    let has = has_avx2_fma();
+    if !has {
+        eprintln!("SKIPPED: this CPU has no AVX2 + FMA");
+    }
+    has
+}
+
 /// Defines a method that runs `$body` — an `#[inline(always)]` method of the same signature —
 /// either as compiled for baseline x86-64 or, where the CPU has AVX2 and FMA, through `$avx2`: a
 /// copy of it compiled for those features, which the macro also defines. Rust never contracts

@@ -555,8 +555,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn the_avx2_copies_of_the_interior_path_give_the_same_bytes() {
-        if !crate::cpu::has_avx2_fma() {
-            eprintln!("SKIPPED: this CPU has no AVX2 + FMA");
+        if !crate::cpu::avx2_fma_or_skip() {
             return;
         }
         let img = noise(2_654_435_761, 12);

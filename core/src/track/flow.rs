@@ -787,8 +787,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn the_avx2_copies_and_kernels_give_the_same_pyramid_and_points() {
-        if !crate::cpu::has_avx2_fma() {
-            eprintln!("SKIPPED: this CPU has no AVX2 + FMA");
+        if !crate::cpu::avx2_fma_or_skip() {
             return;
         }
         let id = [[1.0, 0.0], [0.0, 1.0]];

@@ -646,8 +646,7 @@ pub(crate) mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn the_avx2_copy_gives_the_same_correlation() {
-        if !crate::cpu::has_avx2_fma() {
-            eprintln!("SKIPPED: this CPU has no AVX2 + FMA");
+        if !crate::cpu::avx2_fma_or_skip() {
             return;
         }
         let (a, b) = (shifted([0.0, 0.0]), shifted([-6.0, 2.5]));
