@@ -14,6 +14,7 @@
 pub mod bench;
 pub mod body;
 pub mod camera;
+mod conv;
 pub mod cpu;
 pub mod detect;
 pub mod error;

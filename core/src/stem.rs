@@ -14,6 +14,7 @@
 //! all channels, and the output is written straight into the second layer's padded input (its
 //! border stays zero), so tract's second convolution pads nothing.
 
+use crate::conv::{Conv3x3, ConvWeights};
 use tract_onnx::pb::{AttributeProto, ModelProto, NodeProto, TensorProto};
 use tract_onnx::prelude::*;
 
@@ -27,8 +28,11 @@ pub(crate) struct Stem {
     in_w: usize,
     out_h: usize,
     out_w: usize,
-    /// Border of zeros around each output plane: the second layer's padding.
+    /// Border of zeros around each plane the first layer writes: the second layer's padding.
     pad: usize,
+    /// The 3×3 layers after the first one computed here too ([`crate::conv`]; empty where tract
+    /// computes them), each with the buffer of its input: the previous layer's output.
+    layers: Vec<(Conv3x3, Vec<f32>)>,
     /// Per channel: the 3×3 kernel row by row, then the bias.
     weights: Vec<[f32; 10]>,
     /// The input affine `v · scale + shift`, applied before the zero padding.
@@ -46,11 +50,28 @@ impl Stem {
     /// A stem for a `batch × 1 × in_h × in_w` input with `layer`'s weights, writing planes with
     /// its zero border.
     pub(crate) fn new(batch: usize, in_h: usize, in_w: usize, layer: &StemWeights) -> Self {
-        let (kernel, bias, pad) = (&layer.kernel, &layer.bias, layer.next_pad);
+        let (kernel, bias) = (&layer.kernel, &layer.bias);
+        // With layers after it, the first writes their padding (1); the last writes the next's.
+        let pad = if layer.chain.is_empty() {
+            layer.next_pad
+        } else {
+            1
+        };
         let channels = bias.len();
         debug_assert_eq!(kernel.len(), 9 * channels);
         // ONNX output size of a 3×3 kernel, stride 2, padding 1: ⌊(n + 2 − 3) / 2⌋ + 1.
         let (out_h, out_w) = (in_h.div_ceil(2), in_w.div_ceil(2));
+        let mut layers: Vec<(Conv3x3, Vec<f32>)> = Vec::new();
+        let (mut cin, mut h, mut w) = (channels, out_h, out_w);
+        for (i, weights) in layer.chain.iter().enumerate() {
+            let last = i + 1 == layer.chain.len();
+            let out_pad = if last { layer.next_pad } else { 1 };
+            let conv = Conv3x3::new(batch, cin, h, w, weights, out_pad);
+            let [_, c, ph, pw] = conv.output_shape();
+            (cin, h, w) = (c, ph - 2 * out_pad, pw - 2 * out_pad);
+            let input = vec![0.0; conv.input_len()];
+            layers.push((conv, input));
+        }
         let weights = kernel
             .chunks_exact(9)
             .zip(bias)
@@ -64,6 +85,7 @@ impl Stem {
             out_h,
             out_w,
             pad,
+            layers,
             weights,
             scale: layer.scale,
             shift: layer.shift,
@@ -73,10 +95,39 @@ impl Stem {
         }
     }
 
-    /// The shape of the output: the second layer's input.
+    /// The shape of the output: the input of the first layer tract computes.
     pub(crate) fn output_shape(&self) -> [usize; 4] {
+        if let Some((last, _)) = self.layers.last() {
+            return last.output_shape();
+        }
         let p = 2 * self.pad;
         [self.batch, self.channels, self.out_h + p, self.out_w + p]
+    }
+
+    /// Computes the first layer and the layers after it held here on the current input into the
+    /// interior of `out` (of [`Self::output_shape`]; its border is left as it is, zero).
+    pub(crate) fn run(&mut self, out: &mut [f32]) {
+        if self.layers.is_empty() {
+            self.first(out);
+            return;
+        }
+        let mut layers = std::mem::take(&mut self.layers);
+        self.first(&mut layers[0].1);
+        for i in 0..layers.len() {
+            let (done, rest) = layers.split_at_mut(i + 1);
+            let (conv, input) = &done[i];
+            match rest.first_mut() {
+                Some((_, next)) => conv.run(input, next),
+                None => conv.run(input, out),
+            }
+        }
+        self.layers = layers;
+    }
+
+    /// How many layers after the first one run here.
+    #[cfg(test)]
+    pub(crate) fn layers_after_first(&self) -> usize {
+        self.layers.len()
     }
 
     /// The network input, `batch × in_h × in_w`, for the caller to fill.
@@ -85,9 +136,9 @@ impl Stem {
     }
 
     crate::cpu::with_avx2_copy! {
-        /// Computes the layer on the current input into the interior of `out` (of
-        /// [`Self::output_shape`]; its border is left as it is, zero).
-        pub(crate) fn run / run_avx2 (&mut self, out: &mut [f32]) => run_body
+        /// Computes the first layer on the current input into the interior of `out` (the
+        /// planes with their border `pad`, which is left as it is, zero).
+        fn first / first_avx2 (&mut self, out: &mut [f32]) => run_body
     }
 
     #[inline(always)]
@@ -191,20 +242,25 @@ pub(crate) struct StemWeights {
     /// The input affine before the convolution: `v · scale + shift`.
     pub(crate) scale: f32,
     pub(crate) shift: f32,
-    /// The second convolution's padding, now the border of the stem's output.
+    /// The 3×3 layers after the first one that run here too ([`crate::conv`]), in order.
+    pub(crate) chain: Vec<ConvWeights>,
+    /// The padding of the convolution after the layers taken (0 for another node), now the
+    /// border of the last one's output.
     pub(crate) next_pad: usize,
 }
 
 impl StemWeights {
-    /// Finds the first layer of `proto` ([`StemLayer::find`], inputs of `shapes`), takes its
-    /// weights and cuts it from the graph; `None` (and `proto` untouched) when the layer has
-    /// another form.
+    /// Finds the first layer of `proto` ([`StemLayer::find`], inputs of `shapes`) — and, with
+    /// `chain` where [`crate::conv::available`], the 3×3 layers after it — takes their weights and
+    /// cuts them from the graph; `None` (and `proto` untouched) when the first layer has another
+    /// form.
     pub(crate) fn split_from(
         onnx: &tract_onnx::Onnx,
         proto: &mut ModelProto,
         shapes: &[Vec<usize>],
+        chain: bool,
     ) -> TractResult<Option<Self>> {
-        let Some(layer) = StemLayer::find(proto, shapes) else {
+        let Some(layer) = StemLayer::find(proto, shapes, chain && crate::conv::available()) else {
             return Ok(None);
         };
         let weights = layer.weights(onnx, proto, shapes)?;
@@ -228,12 +284,16 @@ pub(crate) fn with_f32_slice(
 /// (`batch × 1 × h × w`) feeds only a chain of `Sub` / `Mul` / `Add` / `Div` by scalar constants
 /// (possibly empty), which feeds only a 3×3, stride-2, padding-1 `Conv` with a bias, whose output
 /// feeds only a ReLU (`Relu`, or `LeakyRelu` with α = 0), whose output feeds only a `Conv` with the
-/// same padding on every side.
+/// same padding on every side. When asked, also the chain of layers after it that
+/// [`crate::conv`] computes: a 3×3, stride 1 or 2, padding-1 `Conv` with a bias on the previous
+/// ReLU's output alone, feeding only a ReLU; the node after the chain may then be any.
 #[derive(Debug)]
 pub(crate) struct StemLayer {
-    /// Indices of the affine nodes, the convolution and the ReLU (the nodes cut).
+    /// Indices of the affine nodes, the convolutions and the ReLUs (the nodes cut).
     cut: Vec<usize>,
     conv: usize,
+    /// The chain's convolutions and their strides.
+    chain: Vec<(usize, usize)>,
     next: usize,
     next_pad: usize,
     scale: f32,
@@ -271,8 +331,8 @@ fn scalar(t: &TensorProto) -> Option<f32> {
 
 impl StemLayer {
     /// The first layer of `proto` if it has the stem's form, for inputs of `shapes` (the graph's
-    /// inputs, in order; the first `batch × 1 × h × w`).
-    pub(crate) fn find(proto: &ModelProto, shapes: &[Vec<usize>]) -> Option<Self> {
+    /// inputs, in order; the first `batch × 1 × h × w`), with the chain after it if `chain`.
+    pub(crate) fn find(proto: &ModelProto, shapes: &[Vec<usize>], chain: bool) -> Option<Self> {
         let graph = proto.graph.as_ref()?;
         if graph.input.len() != shapes.len() {
             return None;
@@ -342,29 +402,62 @@ impl StemLayer {
         {
             return None;
         }
-        let (relu, r) = only_reader(&c.output[0])?;
-        let is_relu = r.op_type == "Relu"
-            || (r.op_type == "LeakyRelu" && attr(r, "alpha").is_some_and(|a| a.f == 0.0));
-        if !is_relu || r.output.len() != 1 {
-            return None;
-        }
-        let (next, n) = only_reader(&r.output[0])?;
-        let pads = ints_or(n, "pads", &[0; 4]);
-        if !(plain_conv(n) && n.input.first() == Some(&r.output[0]) && pads.len() == 4) {
-            return None;
-        }
-        let next_pad = usize::try_from(pads[0]).ok()?;
+        // The ReLU reading a convolution's output alone, and its output.
+        let relu_of = |conv: &NodeProto| {
+            let (i, r) = only_reader(conv.output.first()?)?;
+            let is_relu = r.op_type == "Relu"
+                || (r.op_type == "LeakyRelu" && attr(r, "alpha").is_some_and(|a| a.f == 0.0));
+            (is_relu && r.output.len() == 1).then_some((i, r.output[0].as_str()))
+        };
+        // A 3×3, padding-1 convolution with a bias on `value` alone: its stride.
+        let conv_3x3 = |n: &NodeProto, value: &str, strides: &[&[i64]]| {
+            (plain_conv(n)
+                && n.input.len() == 3
+                && n.input[0] == value
+                && ints_or(n, "kernel_shape", &[]) == [3, 3]
+                && ints_or(n, "pads", &[0; 4]) == [1, 1, 1, 1]
+                && n.output.len() == 1)
+                .then(|| {
+                    strides
+                        .iter()
+                        .position(|s| ints_or(n, "strides", &[1, 1]) == *s)
+                })
+                .flatten()
+        };
+        conv_3x3(c, value, &[&[2, 2]])?;
+        let (relu, mut value) = relu_of(c)?;
         cut.extend([conv, relu]);
-        (pads.iter().all(|&p| p == pads[0]) && scale.is_finite() && shift.is_finite()).then_some(
-            Self {
-                cut,
-                conv,
-                next,
-                next_pad,
-                scale,
-                shift,
-            },
-        )
+        let mut layers = Vec::new();
+        let (mut next, mut n) = only_reader(value)?;
+        while let (true, Some(stride), Some((relu, out))) =
+            (chain, conv_3x3(n, value, &[&[1, 1], &[2, 2]]), relu_of(n))
+        {
+            layers.push((next, stride + 1));
+            cut.extend([next, relu]);
+            value = out;
+            (next, n) = only_reader(value)?;
+        }
+        // After the first layer alone, a convolution (whose padding the stem writes); after a
+        // chain, any node (a convolution's padding is written the same way).
+        let pads = ints_or(n, "pads", &[0; 4]);
+        let is_conv = plain_conv(n) && pads.len() == 4 && pads.iter().all(|&p| p == pads[0]);
+        if n.input.first().map(String::as_str) != Some(value) || (!is_conv && layers.is_empty()) {
+            return None;
+        }
+        let next_pad = if is_conv {
+            usize::try_from(pads[0]).ok()?
+        } else {
+            0
+        };
+        (scale.is_finite() && shift.is_finite()).then_some(Self {
+            cut,
+            conv,
+            chain: layers,
+            next,
+            next_pad,
+            scale,
+            shift,
+        })
     }
 
     /// The layer's weights, the kernel and bias as tract computes them from the graph (so any
@@ -378,7 +471,6 @@ impl StemLayer {
         let Some(graph) = proto.graph.as_ref() else {
             tract_onnx::tract_core::internal::bail!("no graph");
         };
-        let conv = &graph.node[self.conv];
         let mut model = onnx.model_for_proto_model(proto)?;
         // tract's inputs leave out graph inputs that are initializers: check before indexing.
         if model.input_outlets()?.len() != shapes.len() {
@@ -391,36 +483,59 @@ impl StemLayer {
         for (i, shape) in shapes.iter().enumerate() {
             model.set_input_fact(i, f32::fact(shape).into())?;
         }
-        model.select_outputs_by_name([&conv.input[1], &conv.input[2]])?;
+        let convs: Vec<&NodeProto> = std::iter::once(self.conv)
+            .chain(self.chain.iter().map(|&(i, _)| i))
+            .map(|i| &graph.node[i])
+            .collect();
+        model.select_outputs_by_name(convs.iter().flat_map(|c| [&c.input[1], &c.input[2]]))?;
         let plan = model.into_optimized()?.into_runnable()?;
         let zeros = shapes
             .iter()
             .map(|s| Tensor::zero::<f32>(s).map(TValue::from))
             .collect::<TractResult<TVec<_>>>()?;
         let out = plan.run(zeros)?;
-        let (kernel, bias) = (&out[0], &out[1]);
-        let channels = bias.len();
-        if kernel.shape() != [channels, 1, 3, 3] || bias.rank() != 1 {
-            tract_onnx::tract_core::internal::bail!(
-                "first layer: kernel {:?} and bias {:?}",
-                kernel.shape(),
-                bias.shape()
-            );
-        }
         let values = |t: &TValue| -> TractResult<Vec<f32>> {
             Ok(t.try_as_plain_ram()?.as_slice::<f32>()?.to_vec())
         };
+        // Each layer's kernel `cout × cin × 3 × 3` (cin 1, then the previous cout) and bias.
+        let mut cin = 1;
+        let mut layers = Vec::with_capacity(convs.len());
+        for (kernel, bias) in out.chunks_exact(2).map(|kb| (&kb[0], &kb[1])) {
+            let cout = bias.len();
+            if kernel.shape() != [cout, cin, 3, 3] || bias.rank() != 1 {
+                tract_onnx::tract_core::internal::bail!(
+                    "layer {}: kernel {:?} and bias {:?}",
+                    layers.len() + 1,
+                    kernel.shape(),
+                    bias.shape()
+                );
+            }
+            layers.push((values(kernel)?, values(bias)?));
+            cin = cout;
+        }
+        let mut layers = layers.into_iter();
+        let Some((kernel, bias)) = layers.next() else {
+            tract_onnx::tract_core::internal::bail!("no first layer");
+        };
         Ok(StemWeights {
-            kernel: values(kernel)?,
-            bias: values(bias)?,
+            kernel,
+            bias,
+            chain: layers
+                .zip(&self.chain)
+                .map(|((kernel, bias), &(_, stride))| ConvWeights {
+                    kernel,
+                    bias,
+                    stride,
+                })
+                .collect(),
             scale: self.scale,
             shift: self.shift,
             next_pad: self.next_pad,
         })
     }
 
-    /// Removes the layer from the graph: the next convolution reads the graph input, which will
-    /// hold the stem's output with its padding, so the convolution pads nothing.
+    /// Removes the layers from the graph: the node after them reads the graph input, which will
+    /// hold their output with its padding, so a convolution there pads nothing.
     fn cut(&self, proto: &mut ModelProto) {
         let Some(graph) = proto.graph.as_mut() else {
             return;
@@ -509,6 +624,7 @@ mod tests {
             let weights = StemWeights {
                 kernel: kernel.clone(),
                 bias: bias.to_vec(),
+                chain: Vec::new(),
                 scale: 2.0,
                 shift: -0.5,
                 next_pad: pad,

@@ -55,7 +55,7 @@ impl Net {
             .map_err(load_err(what))?;
         let mut shapes: Vec<Vec<usize>> = inputs.iter().map(|(_, s)| s.to_vec()).collect();
         let weights = if use_stem {
-            StemWeights::split_from(&onnx, &mut proto, &shapes).map_err(load_err(what))?
+            StemWeights::split_from(&onnx, &mut proto, &shapes, true).map_err(load_err(what))?
         } else {
             None
         };
@@ -213,6 +213,18 @@ mod tests {
                 "{name}: first layer not taken as a stem"
             );
             assert!(without.stem.is_none());
+            // Where `conv` runs, every 3×3 layer after the first (all the shipped trunks' layers).
+            let convs = op_types(bytes).iter().filter(|o| *o == "Conv").count();
+            let after_first = with.stem.as_ref().map_or(0, Stem::layers_after_first);
+            let want = if crate::conv::available() {
+                convs - 1
+            } else {
+                0
+            };
+            assert_eq!(
+                after_first, want,
+                "{name}: layers after the first run outside tract"
+            );
             for net in [&mut with, &mut without] {
                 // A varied image in 0..1 and a yaw distribution (the networks' input ranges).
                 net.fill_input(0, |x| {
@@ -258,16 +270,16 @@ mod tests {
             .proto_model_for_read(&mut crate::landmarks::embedded_file("nose.onnx").unwrap())
             .unwrap();
         let shapes = vec![vec![1, 1, 32, 32], vec![1, 5]];
-        assert!(StemLayer::find(&proto, &shapes).is_some());
+        assert!(StemLayer::find(&proto, &shapes, false).is_some());
         // Wrong input count, a two-channel input, stride 1: no stem.
-        assert!(StemLayer::find(&proto, &shapes[..1]).is_none());
-        assert!(StemLayer::find(&proto, &[vec![1, 2, 32, 32], vec![1, 5]]).is_none());
+        assert!(StemLayer::find(&proto, &shapes[..1], false).is_none());
+        assert!(StemLayer::find(&proto, &[vec![1, 2, 32, 32], vec![1, 5]], false).is_none());
         let graph = proto.graph.as_mut().unwrap();
         let conv = graph.node.iter_mut().find(|n| n.op_type == "Conv").unwrap();
         for a in conv.attribute.iter_mut().filter(|a| a.name == "strides") {
             a.ints = vec![1, 1];
         }
-        assert!(StemLayer::find(&proto, &shapes).is_none());
+        assert!(StemLayer::find(&proto, &shapes, false).is_none());
         // A malformed graph (the second conv without inputs): no stem, no panic.
         let graph = proto.graph.as_mut().unwrap();
         for a in graph.node.iter_mut().flat_map(|n| n.attribute.iter_mut()) {
@@ -275,7 +287,7 @@ mod tests {
                 a.ints = vec![2, 2];
             }
         }
-        assert!(StemLayer::find(&proto, &shapes).is_some());
+        assert!(StemLayer::find(&proto, &shapes, false).is_some());
         let graph = proto.graph.as_mut().unwrap();
         let second = graph
             .node
@@ -288,7 +300,7 @@ mod tests {
         for n in graph.node.iter_mut().filter(|n| n.name == second) {
             n.input.clear();
         }
-        assert!(StemLayer::find(&proto, &shapes).is_none());
+        assert!(StemLayer::find(&proto, &shapes, false).is_none());
     }
 
     /// The export's storage passes (`models/train/train_m3.py`) ran on every shipped network: a

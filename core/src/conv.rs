@@ -1,0 +1,379 @@
+//! 3×3 convolutions with zero padding 1, stride 1 or 2, a bias and a ReLU, over multi-channel
+//! maps: the layers that follow a network's first one ([`crate::stem`]) in the M3 trunks, computed
+//! here instead of by tract where the CPU has AVX2 and FMA.
+//!
+//! Why: tract lowers each such layer to an explicit `Pad` copy of its input, a lazily gathered
+//! im2col matrix and a matrix product; `perf` on `m3_per_face` (stop 26, AMD Zen 4) put the
+//! gather alone at 14 % of M3 and the padding (ndarray copies, memmove, memset) at ≈ 7 %, for
+//! layers whose arithmetic its matrix kernel does in ≈ 30 %. Here each layer reads the previous
+//! layer's output in place — written with a zero border that is this layer's padding — and
+//! multiplies straight from it: sixteen output channels in two registers, six output positions at
+//! a time, each input value broadcast from where it lies, so nothing is gathered or copied.
+//!
+//! Layout (the ONNX one, batch-major): input `batch × cin × (in_h + 2) × (in_w + 2)` with a zero
+//! border of one, output `batch × cout × (out_h + 2·pad) × (out_w + 2·pad)`, only its interior
+//! written.
+
+/// One layer's weights as read from the graph.
+#[derive(Debug, Clone)]
+pub(crate) struct ConvWeights {
+    /// `cout × cin × 3 × 3`, as ONNX stores it.
+    pub(crate) kernel: Vec<f32>,
+    pub(crate) bias: Vec<f32>,
+    pub(crate) stride: usize,
+}
+
+/// Output channels computed together: two AVX2 registers of f32.
+const BLOCK: usize = 16;
+
+/// Output positions computed together: with two accumulators each, twelve of the sixteen vector
+/// registers (tract's x86-64 matrix kernel has the same 16 × 6 shape).
+const POSITIONS: usize = 6;
+
+/// A layer for fixed input sizes, with its weights packed for the kernel.
+#[derive(Debug, Clone)]
+pub(crate) struct Conv3x3 {
+    batch: usize,
+    cin: usize,
+    cout: usize,
+    in_plane: usize,
+    out_plane: usize,
+    out_h: usize,
+    out_w: usize,
+    out_pad: usize,
+    /// Per block of [`BLOCK`] output channels: for each of the `9·cin` taps (channel, row,
+    /// column) the block's weights, zero past `cout`.
+    packed: Vec<f32>,
+    /// The bias, zero past `cout` up to a whole block.
+    bias: Vec<f32>,
+    /// Offset of each tap in the padded input from the window's top-left value.
+    taps: Vec<usize>,
+    /// Per output position (row-major): its window's top-left offset in a padded input plane, and
+    /// its offset in an output plane.
+    at_in: Vec<usize>,
+    at_out: Vec<usize>,
+}
+
+impl Conv3x3 {
+    /// A layer over `batch × cin × in_h × in_w` maps (held with a border of one) writing its
+    /// output with a border of `out_pad`.
+    ///
+    /// # Panics
+    /// When the weights do not hold `cout × cin × 9` values for `cout` biases or the stride is
+    /// not 1 or 2 (the graph reader checks both first).
+    pub(crate) fn new(
+        batch: usize,
+        cin: usize,
+        in_h: usize,
+        in_w: usize,
+        weights: &ConvWeights,
+        out_pad: usize,
+    ) -> Self {
+        let cout = weights.bias.len();
+        let s = weights.stride;
+        assert!(s == 1 || s == 2, "stride {s}");
+        assert_eq!(weights.kernel.len(), cout * cin * 9, "kernel size");
+        // ONNX output size of a 3×3 kernel with padding 1: ⌊(n + 2 − 3) / s⌋ + 1.
+        let (out_h, out_w) = ((in_h - 1) / s + 1, (in_w - 1) / s + 1);
+        let (pw, qw) = (in_w + 2, out_w + 2 * out_pad);
+        let k = 9 * cin;
+        let blocks = cout.div_ceil(BLOCK);
+        let mut packed = vec![0.0; blocks * k * BLOCK];
+        for co in 0..cout {
+            let (b, lane) = (co / BLOCK, co % BLOCK);
+            for t in 0..k {
+                packed[(b * k + t) * BLOCK + lane] = weights.kernel[co * k + t];
+            }
+        }
+        let mut bias = weights.bias.clone();
+        bias.resize(blocks * BLOCK, 0.0);
+        let taps = (0..k)
+            .map(|t| {
+                let (c, dy, dx) = (t / 9, t % 9 / 3, t % 3);
+                c * (in_h + 2) * pw + dy * pw + dx
+            })
+            .collect();
+        let (mut at_in, mut at_out) = (Vec::new(), Vec::new());
+        for y in 0..out_h {
+            for x in 0..out_w {
+                at_in.push(s * y * pw + s * x);
+                at_out.push((y + out_pad) * qw + x + out_pad);
+            }
+        }
+        Self {
+            batch,
+            cin,
+            cout,
+            in_plane: (in_h + 2) * pw,
+            out_plane: (out_h + 2 * out_pad) * qw,
+            out_h,
+            out_w,
+            out_pad,
+            packed,
+            bias,
+            taps,
+            at_in,
+            at_out,
+        }
+    }
+
+    /// Output shape, border included: `batch × cout × (out_h + 2·pad) × (out_w + 2·pad)`.
+    pub(crate) fn output_shape(&self) -> [usize; 4] {
+        let p = 2 * self.out_pad;
+        [self.batch, self.cout, self.out_h + p, self.out_w + p]
+    }
+
+    /// Input length: `batch × cin × (in_h + 2) × (in_w + 2)`.
+    pub(crate) fn input_len(&self) -> usize {
+        self.batch * self.cin * self.in_plane
+    }
+
+    /// Computes the layer on `input` (its border zero) into the interior of `out` (of
+    /// [`Self::output_shape`]; the border is not written). Needs AVX2 and FMA ([`available`]).
+    ///
+    /// # Panics
+    /// When the buffer lengths differ from the layer's, or off a CPU with AVX2 and FMA.
+    pub(crate) fn run(&self, input: &[f32], out: &mut [f32]) {
+        assert_eq!(input.len(), self.input_len(), "conv input length");
+        assert_eq!(
+            out.len(),
+            self.output_shape().iter().product::<usize>(),
+            "conv output length"
+        );
+        #[cfg(target_arch = "x86_64")]
+        if crate::cpu::has_avx2_fma() {
+            #[allow(unsafe_code)]
+            // SAFETY: the CPU has AVX2 and FMA; the lengths were checked above.
+            unsafe {
+                self.run_avx2(input, out)
+            };
+            return;
+        }
+        panic!("Conv3x3::run needs AVX2 and FMA (conv::available)");
+    }
+
+    /// # Safety
+    /// The CPU has AVX2 and FMA; `input` and `out` have the layer's lengths.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[allow(unsafe_code)]
+    unsafe fn run_avx2(&self, input: &[f32], out: &mut [f32]) {
+        let k = self.taps.len();
+        let n = self.at_in.len();
+        for b in 0..self.batch {
+            let input = &input[b * self.cin * self.in_plane..][..self.cin * self.in_plane];
+            let out = &mut out[b * self.cout * self.out_plane..][..self.cout * self.out_plane];
+            for (blk, (weights, bias)) in self
+                .packed
+                .chunks_exact(k * BLOCK)
+                .zip(self.bias.chunks_exact(BLOCK))
+                .enumerate()
+            {
+                let block = Block {
+                    input,
+                    weights,
+                    bias,
+                    taps: &self.taps,
+                    channels: BLOCK.min(self.cout - blk * BLOCK),
+                    plane: self.out_plane,
+                };
+                let out = &mut out[blk * BLOCK * self.out_plane..];
+                let mut p = 0;
+                while p + POSITIONS <= n {
+                    // SAFETY: AVX2 + FMA (this function's features); offsets as `Block` needs.
+                    unsafe { block.run::<POSITIONS>(&self.at_in[p..], &self.at_out[p..], out) };
+                    p += POSITIONS;
+                }
+                let (ai, ao) = (&self.at_in[p..], &self.at_out[p..]);
+                // SAFETY: as above.
+                unsafe {
+                    match n - p {
+                        0 => {}
+                        1 => block.run::<1>(ai, ao, out),
+                        2 => block.run::<2>(ai, ao, out),
+                        3 => block.run::<3>(ai, ao, out),
+                        4 => block.run::<4>(ai, ao, out),
+                        _ => block.run::<5>(ai, ao, out),
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Whether [`Conv3x3::run`] can run on this CPU: x86-64 with AVX2 and FMA. Elsewhere tract keeps
+/// these layers (its hand-written kernels for ARM are what phones run; ours are measured on x86-64
+/// only).
+pub(crate) fn available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return crate::cpu::has_avx2_fma();
+    #[cfg(not(target_arch = "x86_64"))]
+    return false;
+}
+
+/// One block of output channels of one batch slot.
+#[cfg(target_arch = "x86_64")]
+struct Block<'a> {
+    input: &'a [f32],
+    /// `taps.len() × BLOCK` weights.
+    weights: &'a [f32],
+    bias: &'a [f32],
+    taps: &'a [usize],
+    /// Channels of the block that exist (the rest of the lanes are not stored).
+    channels: usize,
+    plane: usize,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Block<'_> {
+    /// `P` output positions: window offsets `at_in[..P]`, output offsets `at_out[..P]` (within a
+    /// plane of `out`, whose plane `c` is the block's channel `c`).
+    ///
+    /// # Safety
+    /// AVX2 + FMA; every `at_in[j] + taps[t]` lies inside `input` (the layer's construction) and
+    /// `weights` holds `taps.len() × BLOCK` values.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    #[allow(unsafe_code)]
+    unsafe fn run<const P: usize>(&self, at_in: &[usize], at_out: &[usize], out: &mut [f32]) {
+        use std::arch::x86_64::*;
+        let at: [usize; P] = std::array::from_fn(|j| at_in[j]);
+        // SAFETY: `bias` holds BLOCK values.
+        let (b0, b1) = unsafe {
+            (
+                _mm256_loadu_ps(self.bias.as_ptr()),
+                _mm256_loadu_ps(self.bias.as_ptr().add(8)),
+            )
+        };
+        let mut acc = [[b0, b1]; P];
+        let (x, w) = (self.input.as_ptr(), self.weights.as_ptr());
+        debug_assert!(self.weights.len() >= self.taps.len() * BLOCK);
+        for (t, &tap) in self.taps.iter().enumerate() {
+            // SAFETY: the caller's contract: tap offsets and weights within their buffers.
+            unsafe {
+                let w0 = _mm256_loadu_ps(w.add(t * BLOCK));
+                let w1 = _mm256_loadu_ps(w.add(t * BLOCK + 8));
+                for (acc, &at) in acc.iter_mut().zip(&at) {
+                    debug_assert!(at + tap < self.input.len());
+                    let v = _mm256_broadcast_ss(&*x.add(at + tap));
+                    acc[0] = _mm256_fmadd_ps(w0, v, acc[0]);
+                    acc[1] = _mm256_fmadd_ps(w1, v, acc[1]);
+                }
+            }
+        }
+        let zero = _mm256_setzero_ps();
+        let mut lanes = [0f32; BLOCK];
+        for (acc, &o) in acc.iter().zip(at_out) {
+            // SAFETY: `lanes` holds BLOCK values.
+            unsafe {
+                _mm256_storeu_ps(lanes.as_mut_ptr(), _mm256_max_ps(acc[0], zero));
+                _mm256_storeu_ps(lanes.as_mut_ptr().add(8), _mm256_max_ps(acc[1], zero));
+            }
+            for (c, &v) in lanes[..self.channels].iter().enumerate() {
+                out[c * self.plane + o] = v;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The layer by its definition (zero padding 1, bias, ReLU), in f64, without a border.
+    fn direct(
+        input: &[f32],
+        (cin, h, w): (usize, usize, usize),
+        weights: &ConvWeights,
+    ) -> Vec<f32> {
+        let s = weights.stride;
+        let (oh, ow) = ((h - 1) / s + 1, (w - 1) / s + 1);
+        let cout = weights.bias.len();
+        let mut out = vec![0.0; cout * oh * ow];
+        for co in 0..cout {
+            for y in 0..oh {
+                for x in 0..ow {
+                    let mut sum = f64::from(weights.bias[co]);
+                    for c in 0..cin {
+                        for dy in 0..3 {
+                            for dx in 0..3 {
+                                let (iy, ix) =
+                                    ((s * y + dy) as isize - 1, (s * x + dx) as isize - 1);
+                                if iy < 0 || ix < 0 || iy >= h as isize || ix >= w as isize {
+                                    continue;
+                                }
+                                let v = input[(c * h + iy as usize) * w + ix as usize];
+                                let k = weights.kernel[((co * cin + c) * 3 + dy) * 3 + dx];
+                                sum += f64::from(k) * f64::from(v);
+                            }
+                        }
+                    }
+                    out[(co * oh + y) * ow + x] = sum.max(0.0) as f32;
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn matches_the_definition_with_a_zero_border() {
+        if !crate::cpu::avx2_fma_or_skip() {
+            return;
+        }
+        // Strides 1 and 2, odd and even sides, a partial channel block (24 = 16 + 8), position
+        // counts that leave every remainder of six, batches of one and two, borders 0 and 1.
+        let cases = [
+            (1, 3, 8, 10, 16, 2, 1),
+            (2, 5, 7, 5, 24, 2, 0),
+            (1, 16, 4, 4, 32, 1, 1),
+            (1, 2, 3, 11, 16, 1, 0),
+            (2, 4, 6, 9, 8, 1, 2),
+        ];
+        for (batch, cin, h, w, cout, stride, pad) in cases {
+            let weights = ConvWeights {
+                kernel: (0..cout * cin * 9)
+                    .map(|i| ((i * 37 % 17) as f32 - 8.0) / 20.0)
+                    .collect(),
+                bias: (0..cout).map(|i| (i as f32 - 3.0) / 10.0).collect(),
+                stride,
+            };
+            let layer = Conv3x3::new(batch, cin, h, w, &weights, pad);
+            let maps: Vec<f32> = (0..batch * cin * h * w)
+                .map(|i| (i * 53 % 29) as f32 / 29.0)
+                .collect();
+            // Into the bordered layout; a sentinel in the output's border shows stray writes.
+            let mut input = vec![0.0; layer.input_len()];
+            for (i, &v) in maps.iter().enumerate() {
+                let (x, y, plane) = (i % w, i / w % h, i / (w * h));
+                input[(plane * (h + 2) + y + 1) * (w + 2) + x + 1] = v;
+            }
+            let [nb, nc, ph, pw] = layer.output_shape();
+            let mut out = vec![7.0; nb * nc * ph * pw];
+            layer.run(&input, &mut out);
+            let (oh, ow) = (ph - 2 * pad, pw - 2 * pad);
+            for b in 0..batch {
+                let want = direct(
+                    &maps[b * cin * h * w..][..cin * h * w],
+                    (cin, h, w),
+                    &weights,
+                );
+                for c in 0..cout {
+                    for y in 0..ph {
+                        for x in 0..pw {
+                            let got = out[((b * nc + c) * ph + y) * pw + x];
+                            if (pad..pad + oh).contains(&y) && (pad..pad + ow).contains(&x) {
+                                let v = want[(c * oh + y - pad) * ow + x - pad];
+                                assert!(
+                                    (got - v).abs() < 1e-5,
+                                    "case {batch}x{cin}x{h}x{w}→{cout} s{stride}: b{b} c{c} ({y},{x}) {got} vs {v}"
+                                );
+                            } else {
+                                assert_eq!(got, 7.0, "border written at b{b} c{c} ({y},{x})");
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
