@@ -285,8 +285,9 @@ pub(crate) fn with_f32_slice(
 /// (possibly empty), which feeds only a 3×3, stride-2, padding-1 `Conv` with a bias, whose output
 /// feeds only a ReLU (`Relu`, or `LeakyRelu` with α = 0), whose output feeds only a `Conv` with the
 /// same padding on every side. When asked, also the chain of layers after it that
-/// [`crate::conv`] computes: a 3×3, stride 1 or 2, padding-1 `Conv` with a bias on the previous
-/// ReLU's output alone, feeding only a ReLU; the node after the chain may then be any.
+/// [`crate::conv`] computes: a 3×3, stride 1 or 2, padding-1 `Conv` (group 1) with a bias on the
+/// previous ReLU's output alone, feeding only a ReLU; the node after the chain is then a `Conv`
+/// with the same padding on every side or a node without padding.
 #[derive(Debug)]
 pub(crate) struct StemLayer {
     /// Indices of the affine nodes, the convolutions and the ReLUs (the nodes cut).
@@ -437,11 +438,18 @@ impl StemLayer {
             value = out;
             (next, n) = only_reader(value)?;
         }
-        // After the first layer alone, a convolution (whose padding the stem writes); after a
-        // chain, any node (a convolution's padding is written the same way).
+        // After the first layer alone, a convolution (whose zero padding the stem writes as its
+        // border); after a chain, also a node that pads nothing (a pooling's padding is no zero
+        // border).
         let pads = ints_or(n, "pads", &[0; 4]);
-        let is_conv = plain_conv(n) && pads.len() == 4 && pads.iter().all(|&p| p == pads[0]);
-        if n.input.first().map(String::as_str) != Some(value) || (!is_conv && layers.is_empty()) {
+        let is_conv = n.op_type == "Conv"
+            && attr(n, "auto_pad").is_none_or(|a| a.s.is_empty() || a.s == b"NOTSET")
+            && pads.len() == 4
+            && pads.iter().all(|&p| p == pads[0]);
+        let pads_nothing = attr(n, "pads").is_none() && attr(n, "auto_pad").is_none();
+        if n.input.first().map(String::as_str) != Some(value)
+            || !(is_conv || (pads_nothing && !layers.is_empty()))
+        {
             return None;
         }
         let next_pad = if is_conv {

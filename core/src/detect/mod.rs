@@ -235,7 +235,7 @@ impl FaceDetector {
             .map_err(load)?;
         // The first layer does not depend on the frame size: any shape finds and computes it.
         let nominal = [vec![1, 1, WINDOW_INPUT, WINDOW_INPUT]];
-        let stem = StemWeights::split_from(&onnx, &mut proto, &nominal, false).map_err(load)?;
+        let stem = StemWeights::split_from(&onnx, &mut proto, &nominal, true).map_err(load)?;
         let model = onnx.model_for_proto_model(&proto).map_err(load)?;
         Ok(Self {
             config,
@@ -687,6 +687,10 @@ mod tests {
                 .map(|i| ((i * 7919) % 251) as f32 / 250.0)
                 .collect();
             let idx = det.plan_for(h, w).unwrap();
+            // Where `conv` runs, the three full 3×3 layers after the first (the fourth is
+            // depthwise and stays in tract).
+            let after_first = det.plans[idx].stem.as_ref().unwrap().layers_after_first();
+            assert_eq!(after_first, if crate::conv::available() { 3 } else { 0 });
             let ours = det.plans[idx]
                 .run(|buf| buf.copy_from_slice(&input))
                 .unwrap();
