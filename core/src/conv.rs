@@ -36,6 +36,7 @@ pub(crate) struct Conv3x3 {
     batch: usize,
     cin: usize,
     cout: usize,
+    stride: usize,
     in_plane: usize,
     out_plane: usize,
     out_h: usize,
@@ -104,6 +105,7 @@ impl Conv3x3 {
             batch,
             cin,
             cout,
+            stride: s,
             in_plane: (in_h + 2) * pw,
             out_plane: (out_h + 2 * out_pad) * qw,
             out_h,
@@ -181,19 +183,18 @@ impl Conv3x3 {
                 let mut p = 0;
                 while p + POSITIONS <= n {
                     // SAFETY: AVX2 + FMA (this function's features); offsets as `Block` needs.
-                    unsafe { block.run::<POSITIONS>(&self.at_in[p..], &self.at_out[p..], out) };
+                    unsafe { block.positions::<POSITIONS>(self, p, out) };
                     p += POSITIONS;
                 }
-                let (ai, ao) = (&self.at_in[p..], &self.at_out[p..]);
                 // SAFETY: as above.
                 unsafe {
                     match n - p {
                         0 => {}
-                        1 => block.run::<1>(ai, ao, out),
-                        2 => block.run::<2>(ai, ao, out),
-                        3 => block.run::<3>(ai, ao, out),
-                        4 => block.run::<4>(ai, ao, out),
-                        _ => block.run::<5>(ai, ao, out),
+                        1 => block.positions::<1>(self, p, out),
+                        2 => block.positions::<2>(self, p, out),
+                        3 => block.positions::<3>(self, p, out),
+                        4 => block.positions::<4>(self, p, out),
+                        _ => block.positions::<5>(self, p, out),
                     }
                 }
             }
@@ -226,8 +227,31 @@ struct Block<'a> {
 
 #[cfg(target_arch = "x86_64")]
 impl Block<'_> {
-    /// `P` output positions: window offsets `at_in[..P]`, output offsets `at_out[..P]` (within a
-    /// plane of `out`, whose plane `c` is the block's channel `c`).
+    /// The `P` output positions from `p` of `layer`: as one run along a row where they lie in
+    /// one (their windows then `stride` apart, so one address serves all six loads — the general
+    /// form keeps six offsets in registers and spills), else each at its own offset.
+    ///
+    /// # Safety
+    /// As [`Self::run`].
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    #[allow(unsafe_code)]
+    unsafe fn positions<const P: usize>(&self, layer: &Conv3x3, p: usize, out: &mut [f32]) {
+        let (ai, ao) = (&layer.at_in[p..p + P], &layer.at_out[p..p + P]);
+        let in_row = ai[P - 1] - ai[0] == layer.stride * (P - 1);
+        // SAFETY: the caller's contract.
+        unsafe {
+            match (in_row, layer.stride) {
+                (true, 1) => self.run::<P, 1>(ai, ao, out),
+                (true, 2) => self.run::<P, 2>(ai, ao, out),
+                _ => self.run::<P, 0>(ai, ao, out),
+            }
+        }
+    }
+
+    /// `P` output positions: window offsets `at_in[..P]` (with `S` > 0, `at_in[0] + S·j`),
+    /// output offsets `at_out[..P]` (within a plane of `out`, whose plane `c` is the block's
+    /// channel `c`).
     ///
     /// # Safety
     /// AVX2 + FMA; every `at_in[j] + taps[t]` lies inside `input` (the layer's construction) and
@@ -235,9 +259,15 @@ impl Block<'_> {
     #[target_feature(enable = "avx2,fma")]
     #[inline]
     #[allow(unsafe_code)]
-    unsafe fn run<const P: usize>(&self, at_in: &[usize], at_out: &[usize], out: &mut [f32]) {
+    unsafe fn run<const P: usize, const S: usize>(
+        &self,
+        at_in: &[usize],
+        at_out: &[usize],
+        out: &mut [f32],
+    ) {
         use std::arch::x86_64::*;
-        let at: [usize; P] = std::array::from_fn(|j| at_in[j]);
+        let at: [usize; P] =
+            std::array::from_fn(|j| if S == 0 { at_in[j] } else { at_in[0] + S * j });
         // SAFETY: `bias` holds BLOCK values.
         let (b0, b1) = unsafe {
             (
