@@ -2,17 +2,20 @@
 //! `Add`, `Div` by constants), a 3×3, stride-2, zero-padded convolution and a ReLU — computed here
 //! instead of by tract: [`StemLayer`] finds the layer in the ONNX graph, takes its weights from it
 //! and cuts it out, and [`Stem`] computes it before tract runs the rest (`landmarks::net`, and
-//! `detect`). The ONNX files stay whole: training, the Python references and `M3_IO.md` see the
-//! same networks.
+//! `detect`). Where [`crate::conv`] runs (x86-64 with AVX2 + FMA), the layer goes through its
+//! kernel, and so do the plain 3×3 layers that follow it, cut from the graph the same way: tract
+//! then runs what comes after them (M3's fully connected heads; the detector's depthwise blocks
+//! and heads). The ONNX files stay whole: training, the Python references and `M3_IO.md` see the
+//! same networks, and the tests hold the outputs to tract's run of the whole graph.
 //!
 //! Why: tract lowers every convolution to a matrix product over an im2col matrix; with one input
 //! channel that matrix has nine rows and gathering it, not the arithmetic, is the cost — 36 µs of M3
 //! level 1's 155 µs for 1.6 % of its multiply-adds (`core/examples/profile_net.rs`), and its explicit
 //! `Pad` passes (of the input, and of the first layer's output for the second layer: 368 µs of the
-//! detector's 2.66 ms at 267×200) cost more. Here the input rows are split into even and odd
-//! columns so every tap is a contiguous run, each output block keeps its nine taps in registers for
-//! all channels, and the output is written straight into the second layer's padded input (its
-//! border stays zero), so tract's second convolution pads nothing.
+//! detector's 2.66 ms at 267×200) cost more. In the portable path the input rows are split into
+//! even and odd columns so every tap is a contiguous run, each output block keeps its nine taps in
+//! registers for all channels, and the output is written straight into the second layer's padded
+//! input (its border stays zero), so tract's second convolution pads nothing.
 
 use crate::conv::{Conv3x3, ConvWeights};
 use tract_onnx::pb::{AttributeProto, ModelProto, NodeProto, TensorProto};
