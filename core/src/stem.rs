@@ -37,7 +37,7 @@ pub(crate) struct Stem {
     /// computes them), each with the buffer of its input: the previous layer's output.
     layers: Vec<(Conv3x3, Vec<f32>)>,
     /// The layer itself as a [`Conv3x3`] of one input channel where [`crate::conv::available`],
-    /// with its zero-bordered input (the lane loop below is the portable path): ≈ 6× faster.
+    /// with its zero-bordered input (the lane loop below is the portable path).
     direct: Option<(Conv3x3, Vec<f32>)>,
     /// Per channel: the 3×3 kernel row by row, then the bias.
     weights: Vec<[f32; 10]>,

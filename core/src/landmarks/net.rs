@@ -271,6 +271,22 @@ mod tests {
             .unwrap();
         let shapes = vec![vec![1, 1, 32, 32], vec![1, 5]];
         assert!(StemLayer::find(&proto, &shapes, false).is_some());
+        assert!(StemLayer::find(&proto, &shapes, true).is_some());
+        // A chain that ends at a node padding by rules of its own (a pooling's padding is no zero
+        // border): nothing is taken.
+        let mut padded_end = proto.clone();
+        let graph = padded_end.graph.as_mut().unwrap();
+        let flatten = graph
+            .node
+            .iter_mut()
+            .find(|n| n.op_type == "Flatten")
+            .unwrap();
+        flatten.attribute.push(tract_onnx::pb::AttributeProto {
+            name: "pads".into(),
+            ints: vec![1, 1, 1, 1],
+            ..Default::default()
+        });
+        assert!(StemLayer::find(&padded_end, &shapes, true).is_none());
         // Wrong input count, a two-channel input, stride 1: no stem.
         assert!(StemLayer::find(&proto, &shapes[..1], false).is_none());
         assert!(StemLayer::find(&proto, &[vec![1, 2, 32, 32], vec![1, 5]], false).is_none());
