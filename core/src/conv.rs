@@ -28,9 +28,12 @@ const BLOCK: usize = 16;
 
 /// Output positions computed together: with two accumulators each, twelve of the sixteen vector
 /// registers (tract's x86-64 matrix kernel has the same 16 × 6 shape).
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 const POSITIONS: usize = 6;
 
 /// A layer for fixed input sizes, with its weights packed for the kernel.
+// Off x86-64 nothing runs the kernel ([`available`] is false there), so the packed layout is unread.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 #[derive(Debug, Clone)]
 pub(crate) struct Conv3x3 {
     batch: usize,
