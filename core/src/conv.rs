@@ -1,11 +1,11 @@
-//! 3×3 convolutions with zero padding 1, stride 1 or 2, a bias and a ReLU, over multi-channel
-//! maps: the layers that follow a network's first one ([`crate::stem`]) in the M3 trunks, computed
-//! here instead of by tract where the CPU has AVX2 and FMA.
+//! 3×3 convolutions with zero padding 1, stride 1 or 2, a bias and a ReLU: the layers of the M3
+//! trunks and the detector's first ones ([`crate::stem`] finds them in the graphs), computed here
+//! instead of by tract where the CPU has AVX2 and FMA.
 //!
 //! Why: tract lowers each such layer to an explicit `Pad` copy of its input, a lazily gathered
 //! im2col matrix and a matrix product; `perf` on `m3_per_face` (stop 26, AMD Zen 4) put the
-//! gather alone at 14 % of M3 and the padding (ndarray copies, memmove, memset) at ≈ 7 %, for
-//! layers whose arithmetic its matrix kernel does in ≈ 30 %. Here each layer reads the previous
+//! gather alone at 14 % of M3 and the copies around it (ndarray `Zip` 3.6 %, memmove and memset
+//! 3.9 %) at 5–8 %, for layers whose arithmetic its matrix kernels did in ≈ 30 %. Here each layer reads the previous
 //! layer's output in place — written with a zero border that is this layer's padding — and
 //! multiplies straight from it: sixteen output channels in two registers, six output positions at
 //! a time, each input value broadcast from where it lies, so nothing is gathered or copied.
