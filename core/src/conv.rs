@@ -77,8 +77,9 @@ impl Conv3x3 {
         let s = weights.stride;
         assert!(s == 1 || s == 2, "stride {s}");
         assert_eq!(weights.kernel.len(), cout * cin * 9, "kernel size");
-        // ONNX output size of a 3×3 kernel with padding 1: ⌊(n + 2 − 3) / s⌋ + 1.
-        let (out_h, out_w) = ((in_h - 1) / s + 1, (in_w - 1) / s + 1);
+        // ONNX output size of a 3×3 kernel with padding 1: ⌊(n + 2 − 3) / s⌋ + 1 (0 for n = 0).
+        let side = |n: usize| if n == 0 { 0 } else { (n - 1) / s + 1 };
+        let (out_h, out_w) = (side(in_h), side(in_w));
         let (pw, qw) = (in_w + 2, out_w + 2 * out_pad);
         let k = 9 * cin;
         let blocks = cout.div_ceil(BLOCK);
@@ -320,7 +321,8 @@ mod tests {
         weights: &ConvWeights,
     ) -> Vec<f32> {
         let s = weights.stride;
-        let (oh, ow) = ((h - 1) / s + 1, (w - 1) / s + 1);
+        let side = |n: usize| if n == 0 { 0 } else { (n - 1) / s + 1 };
+        let (oh, ow) = (side(h), side(w));
         let cout = weights.bias.len();
         let mut out = vec![0.0; cout * oh * ow];
         for co in 0..cout {
@@ -354,13 +356,15 @@ mod tests {
             return;
         }
         // Strides 1 and 2, odd and even sides, a partial channel block (24 = 16 + 8), position
-        // counts that leave every remainder of six, batches of one and two, borders 0 and 1.
+        // counts that leave every remainder of six, batches of one and two, borders 0, 1 and 2,
+        // and an empty map (no output, no panic).
         let cases = [
             (1, 3, 8, 10, 16, 2, 1),
             (2, 5, 7, 5, 24, 2, 0),
             (1, 16, 4, 4, 32, 1, 1),
             (1, 2, 3, 11, 16, 1, 0),
             (2, 4, 6, 9, 8, 1, 2),
+            (1, 2, 0, 4, 16, 2, 1),
         ];
         for (batch, cin, h, w, cout, stride, pad) in cases {
             let weights = ConvWeights {
