@@ -36,26 +36,47 @@ pub(crate) struct Stem {
     /// The 3×3 layers after the first one computed here too ([`crate::conv`]; empty where tract
     /// computes them), each with the buffer of its input: the previous layer's output.
     layers: Vec<(Conv3x3, Vec<f32>)>,
-    /// The layer itself as a [`Conv3x3`] of one input channel where [`crate::conv::available`],
-    /// with its zero-bordered input (the lane loop below is the portable path).
-    direct: Option<(Conv3x3, Vec<f32>)>,
-    /// Per channel: the 3×3 kernel row by row, then the bias.
-    weights: Vec<[f32; 10]>,
+    /// How the layer itself is computed, with that path's weights and buffers.
+    first: First,
     /// The input affine `v · scale + shift`, applied before the zero padding.
     scale: f32,
     shift: f32,
     /// The network input as the caller filled it.
     input: Vec<f32>,
-    /// The zero-padded input's `in_h + 2` rows split into even and odd columns, each row
-    /// `out_w` rounded up to [`LANES`], plus one, long.
-    even: Vec<f32>,
-    odd: Vec<f32>,
+}
+
+/// The two ways of computing the first layer.
+#[derive(Debug, Clone)]
+enum First {
+    /// Where [`crate::conv::available`]: a [`Conv3x3`] of one input channel, with its
+    /// zero-bordered input.
+    Direct(Conv3x3, Vec<f32>),
+    /// The portable path ([`first_lanes`]).
+    Lanes {
+        /// Per channel: the 3×3 kernel row by row, then the bias.
+        weights: Vec<[f32; 10]>,
+        /// The zero-padded input's `in_h + 2` rows split into even and odd columns, each row
+        /// `out_w` rounded up to [`LANES`], plus one, long.
+        even: Vec<f32>,
+        odd: Vec<f32>,
+    },
 }
 
 impl Stem {
     /// A stem for a `batch × 1 × in_h × in_w` input with `layer`'s weights, writing planes with
     /// its zero border.
     pub(crate) fn new(batch: usize, in_h: usize, in_w: usize, layer: &StemWeights) -> Self {
+        Self::with_path(batch, in_h, in_w, layer, crate::conv::available())
+    }
+
+    /// [`Self::new`], the first layer through [`Conv3x3`] if `direct`, else the lane loop.
+    fn with_path(
+        batch: usize,
+        in_h: usize,
+        in_w: usize,
+        layer: &StemWeights,
+        direct: bool,
+    ) -> Self {
         let (kernel, bias) = (&layer.kernel, &layer.bias);
         // With layers after it, the first writes their padding (1); the last writes the next's.
         let pad = if layer.chain.is_empty() {
@@ -78,7 +99,7 @@ impl Stem {
             let input = vec![0.0; conv.input_len()];
             layers.push((conv, input));
         }
-        let direct = crate::conv::available().then(|| {
+        let first = if direct {
             let weights = ConvWeights {
                 kernel: kernel.clone(),
                 bias: bias.clone(),
@@ -86,13 +107,19 @@ impl Stem {
             };
             let conv = Conv3x3::new(batch, 1, in_h, in_w, &weights, pad);
             let input = vec![0.0; conv.input_len()];
-            (conv, input)
-        });
-        let weights = kernel
-            .chunks_exact(9)
-            .zip(bias)
-            .map(|(k, &b)| std::array::from_fn(|i| if i < 9 { k[i] } else { b }))
-            .collect();
+            First::Direct(conv, input)
+        } else {
+            let row = out_w.next_multiple_of(LANES) + 1;
+            First::Lanes {
+                weights: kernel
+                    .chunks_exact(9)
+                    .zip(bias)
+                    .map(|(k, &b)| std::array::from_fn(|i| if i < 9 { k[i] } else { b }))
+                    .collect(),
+                even: vec![0.0; (in_h + 2) * row],
+                odd: vec![0.0; (in_h + 2) * row],
+            }
+        };
         Self {
             batch,
             channels,
@@ -102,13 +129,10 @@ impl Stem {
             out_w,
             pad,
             layers,
-            direct,
-            weights,
+            first,
             scale: layer.scale,
             shift: layer.shift,
             input: vec![0.0; batch * in_h * in_w],
-            even: vec![0.0; (in_h + 2) * (out_w.next_multiple_of(LANES) + 1)],
-            odd: vec![0.0; (in_h + 2) * (out_w.next_multiple_of(LANES) + 1)],
         }
     }
 
@@ -143,9 +167,13 @@ impl Stem {
     /// Computes the first layer on the current input into the interior of `out` (the planes
     /// with their border `pad`, which is left as it is, zero).
     fn first(&mut self, out: &mut [f32]) {
-        let Some((conv, padded)) = &mut self.direct else {
-            self.first_lanes(out);
-            return;
+        let (conv, padded) = match &mut self.first {
+            First::Direct(conv, padded) => (conv, padded),
+            First::Lanes { weights, even, odd } => {
+                let dims = [self.in_h, self.in_w, self.out_h, self.out_w, self.pad];
+                let affine = (self.scale, self.shift);
+                return first_lanes(dims, affine, &self.input, weights, [even, odd], out);
+            }
         };
         let (h, w, a, c) = (self.in_h, self.in_w, self.scale, self.shift);
         for (image, plane) in self
@@ -166,13 +194,6 @@ impl Stem {
         conv.run(padded, out);
     }
 
-    /// The portable path of [`Self::first`] without [`Self::direct`].
-    #[cfg(test)]
-    fn without_direct(mut self) -> Self {
-        self.direct = None;
-        self
-    }
-
     /// How many layers after the first one run here.
     #[cfg(test)]
     pub(crate) fn layers_after_first(&self) -> usize {
@@ -183,59 +204,65 @@ impl Stem {
     pub(crate) fn input_mut(&mut self) -> &mut [f32] {
         &mut self.input
     }
+}
 
-    /// [`Self::first`] in lanes of output positions: the input rows split into even and odd
-    /// columns, so each tap is a contiguous run.
-    fn first_lanes(&mut self, out: &mut [f32]) {
-        let (h, w, oh, ow, p) = (self.in_h, self.in_w, self.out_h, self.out_w, self.pad);
-        let (pw, plane) = (ow + 2 * p, (oh + 2 * p) * (ow + 2 * p));
-        let ew = ow.next_multiple_of(LANES) + 1;
-        let (even, odd) = (&mut self.even, &mut self.odd);
-        for (b, image) in self.input.chunks_exact(h * w).enumerate() {
-            // Padded row r (image row r − 1) into its even and odd columns: padded column 2j is
-            // image column 2j − 1, padded column 2j + 1 is image column 2j. Zeros elsewhere: the
-            // padding, and the lanes past the row's end.
-            even.fill(0.0);
-            odd.fill(0.0);
-            for (r, src) in image.chunks_exact(w).enumerate() {
-                let (e, o) = (
-                    &mut even[(r + 1) * ew..][..ew],
-                    &mut odd[(r + 1) * ew..][..ew],
-                );
-                let (a, c) = (self.scale, self.shift);
-                for (d, &v) in e[1..].iter_mut().zip(src.iter().skip(1).step_by(2)) {
-                    *d = v * a + c;
-                }
-                for (d, &v) in o.iter_mut().zip(src.iter().step_by(2)) {
-                    *d = v * a + c;
-                }
+/// [`Stem::first`] in lanes of output positions ([`First::Lanes`]): the input rows split into
+/// even and odd columns, so each tap is a contiguous run. `dims`: the stem's `in_h`, `in_w`,
+/// `out_h`, `out_w` and `pad`; `affine`: its `scale` and `shift`.
+fn first_lanes(
+    [h, w, oh, ow, p]: [usize; 5],
+    (a, c): (f32, f32),
+    input: &[f32],
+    weights: &[[f32; 10]],
+    [even, odd]: [&mut [f32]; 2],
+    out: &mut [f32],
+) {
+    let channels = weights.len();
+    let (pw, plane) = (ow + 2 * p, (oh + 2 * p) * (ow + 2 * p));
+    let ew = ow.next_multiple_of(LANES) + 1;
+    for (b, image) in input.chunks_exact(h * w).enumerate() {
+        // Padded row r (image row r − 1) into its even and odd columns: padded column 2j is
+        // image column 2j − 1, padded column 2j + 1 is image column 2j. Zeros elsewhere: the
+        // padding, and the lanes past the row's end.
+        even.fill(0.0);
+        odd.fill(0.0);
+        for (r, src) in image.chunks_exact(w).enumerate() {
+            let (e, o) = (
+                &mut even[(r + 1) * ew..][..ew],
+                &mut odd[(r + 1) * ew..][..ew],
+            );
+            for (d, &v) in e[1..].iter_mut().zip(src.iter().skip(1).step_by(2)) {
+                *d = v * a + c;
             }
-            let out_b = &mut out[b * self.channels * plane..][..self.channels * plane];
-            for y in 0..oh {
-                for x0 in (0..ow).step_by(LANES) {
-                    // The nine taps of LANES outputs, loaded once for every channel.
-                    let taps: [[f32; LANES]; 9] = std::array::from_fn(|k| {
-                        let (dy, dx) = (k / 3, k % 3);
-                        let row = (2 * y + dy) * ew;
-                        let (src, at) = match dx {
-                            0 => (&*even, row + x0),
-                            1 => (&*odd, row + x0),
-                            _ => (&*even, row + x0 + 1),
-                        };
-                        std::array::from_fn(|l| src[at + l])
-                    });
-                    let at = (y + p) * pw + p + x0;
-                    let n = LANES.min(ow - x0);
-                    let groups = self.weights.chunks_exact(GROUP);
-                    let rest = groups.remainder();
-                    let mut planes = out_b.chunks_exact_mut(GROUP * plane);
-                    for (wg, dst) in groups.zip(&mut planes) {
-                        block::<GROUP>(wg, &taps, dst, plane, at, n);
-                    }
-                    let rest_out = planes.into_remainder();
-                    for (wt, dst) in rest.chunks_exact(1).zip(rest_out.chunks_exact_mut(plane)) {
-                        block::<1>(wt, &taps, dst, plane, at, n);
-                    }
+            for (d, &v) in o.iter_mut().zip(src.iter().step_by(2)) {
+                *d = v * a + c;
+            }
+        }
+        let out_b = &mut out[b * channels * plane..][..channels * plane];
+        for y in 0..oh {
+            for x0 in (0..ow).step_by(LANES) {
+                // The nine taps of LANES outputs, loaded once for every channel.
+                let taps: [[f32; LANES]; 9] = std::array::from_fn(|k| {
+                    let (dy, dx) = (k / 3, k % 3);
+                    let row = (2 * y + dy) * ew;
+                    let (src, at) = match dx {
+                        0 => (&*even, row + x0),
+                        1 => (&*odd, row + x0),
+                        _ => (&*even, row + x0 + 1),
+                    };
+                    std::array::from_fn(|l| src[at + l])
+                });
+                let at = (y + p) * pw + p + x0;
+                let n = LANES.min(ow - x0);
+                let groups = weights.chunks_exact(GROUP);
+                let rest = groups.remainder();
+                let mut planes = out_b.chunks_exact_mut(GROUP * plane);
+                for (wg, dst) in groups.zip(&mut planes) {
+                    block::<GROUP>(wg, &taps, dst, plane, at, n);
+                }
+                let rest_out = planes.into_remainder();
+                for (wt, dst) in rest.chunks_exact(1).zip(rest_out.chunks_exact_mut(plane)) {
+                    block::<1>(wt, &taps, dst, plane, at, n);
                 }
             }
         }
@@ -683,7 +710,7 @@ mod tests {
             };
             for mut stem in [
                 Stem::new(batch, h, w, &weights),
-                Stem::new(batch, h, w, &weights).without_direct(),
+                Stem::with_path(batch, h, w, &weights, false),
             ] {
                 let images: Vec<f32> = (0..batch * h * w)
                     .map(|i| (i * 53 % 29) as f32 / 29.0)
