@@ -321,17 +321,15 @@ pub(crate) struct StemWeights {
 }
 
 impl StemWeights {
-    /// Finds the first layer of `proto` ([`StemLayer::find`], inputs of `shapes`) — and, with
-    /// `chain` where [`crate::conv::available`], the 3×3 layers after it — takes their weights and
-    /// cuts them from the graph; `None` (and `proto` untouched) when the first layer has another
-    /// form.
+    /// Finds the first layer of `proto` ([`StemLayer::find`], inputs of `shapes`) — and, where
+    /// [`crate::conv::available`], the 3×3 layers after it — takes their weights and cuts them
+    /// from the graph; `None` (and `proto` untouched) when the first layer has another form.
     pub(crate) fn split_from(
         onnx: &tract_onnx::Onnx,
         proto: &mut ModelProto,
         shapes: &[Vec<usize>],
-        chain: bool,
     ) -> TractResult<Option<Self>> {
-        let Some(layer) = StemLayer::find(proto, shapes, chain && crate::conv::available()) else {
+        let Some(layer) = StemLayer::find(proto, shapes, crate::conv::available()) else {
             return Ok(None);
         };
         let weights = layer.weights(onnx, proto, shapes)?;

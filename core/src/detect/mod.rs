@@ -235,7 +235,7 @@ impl FaceDetector {
             .map_err(load)?;
         // The first layer does not depend on the frame size: any shape finds and computes it.
         let nominal = [vec![1, 1, WINDOW_INPUT, WINDOW_INPUT]];
-        let stem = StemWeights::split_from(&onnx, &mut proto, &nominal, true).map_err(load)?;
+        let stem = StemWeights::split_from(&onnx, &mut proto, &nominal).map_err(load)?;
         let model = onnx.model_for_proto_model(&proto).map_err(load)?;
         Ok(Self {
             config,

@@ -55,7 +55,7 @@ impl Net {
             .map_err(load_err(what))?;
         let mut shapes: Vec<Vec<usize>> = inputs.iter().map(|(_, s)| s.to_vec()).collect();
         let weights = if use_stem {
-            StemWeights::split_from(&onnx, &mut proto, &shapes, true).map_err(load_err(what))?
+            StemWeights::split_from(&onnx, &mut proto, &shapes).map_err(load_err(what))?
         } else {
             None
         };
