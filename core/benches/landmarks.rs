@@ -1,5 +1,5 @@
 //! Measures the whole M3 per face (level-1 crop and net, brows, both eyes, mouth: warps, filters,
-//! networks and merge), one thread, and level 1 alone (the tracker's face check). The image is a
+//! networks and merge), one thread, in both modes, and level 1 alone (the tracker's face check). The image is a
 //! synthetic 640×480 pattern with a 200 px face box: every stage's cost is independent of the
 //! pixel values (fixed-size warps, filters and networks).
 
@@ -48,6 +48,15 @@ fn bench(c: &mut Criterion) {
                 .unwrap()
         })
     });
+    // Mirror-average mode (level 1 and the zones marked in m3.json also run mirrored).
+    m3.set_mirror_average(true);
+    c.bench_function("m3_per_face_mirror_average", |b| {
+        b.iter(|| {
+            m3.estimate(black_box(&img), black_box(&face), &mut out)
+                .unwrap()
+        })
+    });
+    m3.set_mirror_average(false);
     c.bench_function("m3_level1_face_confidence", |b| {
         b.iter(|| {
             m3.face_confidence(black_box(&img), black_box(&face))

@@ -27,6 +27,8 @@ struct Case {
     image: String,
     #[serde(rename = "box")]
     bbox: [f32; 4],
+    /// M3's mode (`M3::set_mirror_average`).
+    mirror_average: bool,
     landmarks68: Vec<[f64; 2]>,
     yaw_probs: Vec<f64>,
     face_prob: f64,
@@ -69,6 +71,7 @@ fn m3_matches_the_python_reference() {
     for c in &exp.cases {
         let img = load_gray(&c.image);
         let [x, y, w, h] = c.bbox;
+        m3.set_mirror_average(c.mirror_average);
         m3.estimate(&img, &Rect::new(x, y, w, h), &mut out).unwrap();
         let pts = out
             .points
@@ -93,8 +96,8 @@ fn m3_matches_the_python_reference() {
         .into_iter()
         .fold(0.0, f64::max);
         println!(
-            "{} {:?}: max point error {pts:.4} px, probabilities {probs:.5}, gaze {gaze:.5}",
-            c.image, c.bbox
+            "{} {:?} mirror_average {}: max point error {pts:.4} px, probabilities {probs:.5}, gaze {gaze:.5}",
+            c.image, c.bbox, c.mirror_average
         );
         assert!(pts <= POINT_TOL_PX, "{}: points off by {pts} px", c.image);
         assert!(

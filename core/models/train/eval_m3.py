@@ -6,7 +6,8 @@
 - Faces: the faces68 validation split (M3_IO.md: line i % 10 == 0), boxes = landmark boxes with
   seeded realistic jitter (centre ±5 %, side ±10 % of the box side: a detector's or tracker's box).
 - Ours: the Python reference (m3_reference.py, onnxruntime) and, with --monotrack, the shipped Rust
-  implementation through `monotrack landmarks` (the CLI's own timings).
+  implementation through `monotrack landmarks` (the CLI's own timings); both in the default mode and
+  in mirror-average mode (M3_IO.md; `metrics.json`'s "mirror_average" holds the latter's figures).
 - Peers (--peers): ../shared/tools/peer_landmarks.py (dlib's 68-point predictor, PFLD) on the same
   manifest; dlib also in its fair setting (boxes from its own HOG detector).
 - NME: CONTRACT.md (mean over 68 points / distance between points 36 and 45), overall and per zone.
@@ -98,15 +99,10 @@ def summarize(errs):
     return {k: float(np.mean([e[k] for e in errs])) for k in errs[0]}
 
 
-def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--peers", action="store_true")
-    ap.add_argument("--monotrack", help="path of the built `monotrack` CLI to measure the Rust implementation")
-    a = ap.parse_args()
-    paths, faces = D.load_faces68("val")
-    boxes = jittered_boxes(faces)
+def measure(m3, paths, faces, boxes):
+    """The Python reference's metrics in `m3`'s mode: NME per zone, yaw-class accuracy, gestures on
+    the validation faces, smile on the held-out GENKI-4K split, time per face."""
     grays = {}
-    m3 = R.M3(MODEL_DIR)
     errs, yaw_ok, mouth, brows, times = [], [], [], [], []
     for f, b in zip(faces, boxes):
         g = grays.setdefault(f["image"], D.load_gray(paths[f["image"]]))
@@ -147,22 +143,34 @@ def main():
     tp, fp, fn = np.sum(ps & ys), np.sum(ps & (1 - ys)), np.sum((1 - ps) & ys)
     metrics["genki_smile"] = {"n": len(ys), "accuracy": float(np.mean(ps == ys)),
                               "f1": float(2 * tp / max(2 * tp + fp + fn, 1))}
+    return metrics
 
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--peers", action="store_true")
+    ap.add_argument("--monotrack", help="path of the built `monotrack` CLI to measure the Rust implementation")
+    a = ap.parse_args()
+    paths, faces = D.load_faces68("val")
+    boxes = jittered_boxes(faces)
+    metrics = measure(R.M3(MODEL_DIR), paths, faces, boxes)
+    metrics["mirror_average"] = measure(R.M3(MODEL_DIR, mirror_average=True), paths, faces, boxes)
     manifest = os.path.join(tempfile.mkdtemp(), "val_manifest.jsonl")
     with open(manifest, "w") as fh:
         for f, b in zip(faces, boxes):
             fh.write(json.dumps({"image": paths[f["image"]], "faces": [{"box": [float(v) for v in b],
                                  "landmarks68": f["pts"].tolist()}]}) + "\n")
     if a.monotrack:
-        out = manifest + ".ours.jsonl"
-        subprocess.run([a.monotrack, "landmarks", manifest, "--out", out], check=True)
-        errs_rs, us = [], []
-        for f, line in zip(faces, open(out)):
-            o = json.loads(line)
-            errs_rs.append(nme_parts(np.array(o["faces"][0]["landmarks68"]), f["pts"]))
-            us.append(o["timings_us"]["landmarks"])
-        metrics["nme_rust"] = summarize(errs_rs)
-        metrics["rust_landmarks_us_median"] = float(np.median(us))
+        for extra, into in (([], metrics), (["--mirror-average"], metrics["mirror_average"])):
+            out = manifest + ".ours.jsonl"
+            subprocess.run([a.monotrack, "landmarks", manifest, "--out", out] + extra, check=True)
+            errs_rs, us = [], []
+            for f, line in zip(faces, open(out)):
+                o = json.loads(line)
+                errs_rs.append(nme_parts(np.array(o["faces"][0]["landmarks68"]), f["pts"]))
+                us.append(o["timings_us"]["landmarks"])
+            into["nme_rust"] = summarize(errs_rs)
+            into["rust_landmarks_us_median"] = float(np.median(us))
     if a.peers:
         tool = os.path.join(D.DATA, "..", "tools", "peer_landmarks.py")
         cal_manifest = manifest + ".dlibcal.jsonl"

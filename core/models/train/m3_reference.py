@@ -27,24 +27,48 @@ def softmax(x):
 
 
 class Level1Runner:
-    def __init__(self, path, size=64, crop_scale=1.3, indices=None):
+    def __init__(self, path, size=64, crop_scale=1.3, indices=None, mirror_average=False):
         self.sess = _session(path)
         self.size, self.crop_scale = size, crop_scale
+        self.indices, self.mirror_average = indices, mirror_average
+
+    def _net(self, crop):
+        lm, yl, fl = self.sess.run(None, {"image": (crop / 255.0).astype(np.float32)[None, None]})
+        return lm.reshape(-1, 2).astype(np.float64), softmax(yl[0].astype(np.float64)), fl[0, 0]
 
     def run(self, gray, box):
         c, s = D.square_of_box(box)
         A = D.level1_map(c, s, self.size, self.crop_scale)
         crop = D.sample(gray, A, self.size, self.size)
-        lm, yl, fl = self.sess.run(None, {"image": (crop / 255.0).astype(np.float32)[None, None]})
-        pts = D.apply(A, lm.reshape(-1, 2) * self.size)
-        return pts, softmax(yl[0]), 1.0 / (1.0 + np.exp(-fl[0, 0]))
+        lm, yaw, fl = self._net(crop)
+        if self.mirror_average:
+            # M3_IO.md: the mirrored crop's points, un-mirrored, averaged with the crop's; yaw and
+            # the face probability are the crop's alone.
+            lmf, _, _ = self._net(np.ascontiguousarray(crop[:, ::-1]))
+            lm = 0.5 * (lm + unflip(lmf, self.indices))
+        pts = D.apply(A, lm * self.size)
+        return pts, yaw, 1.0 / (1.0 + np.exp(-fl))
+
+
+def unflip(lm, indices):
+    """Points a net gave for its mirrored input (net units 0..1, in `indices` order), mapped back:
+    x -> 1 - x, and the estimate of point i is the mirrored input's point MIRROR68[i] (M3_IO.md)."""
+    pos = {int(i): k for k, i in enumerate(indices)}
+    out = lm[[pos[int(D.MIRROR68[i])] for i in indices]].copy()
+    out[:, 0] = 1.0 - out[:, 0]
+    return out
 
 
 class M3:
-    def __init__(self, model_dir):
+    """`mirror_average`: the mode of M3_IO.md in which level 1 and the zones marked `mirror_average`
+    in m3.json also run on their mirrored input and average (core::landmarks::M3::set_mirror_average)."""
+
+    def __init__(self, model_dir, mirror_average=False):
         self.cfg = json.load(open(os.path.join(model_dir, "m3.json")))
+        self.mirror_average = mirror_average
         l1 = self.cfg["level1"]
-        self.l1 = Level1Runner(os.path.join(model_dir, l1["file"]), l1["input_size"], l1["crop_scale"])
+        self.l1 = Level1Runner(os.path.join(model_dir, l1["file"]), l1["input_size"], l1["crop_scale"],
+                               l1["indices68"], mirror_average and l1.get("mirror_average", False))
         self.zones = {k: (z, _session(os.path.join(model_dir, z["file"]))) for k, z in self.cfg["zones"].items()}
         self.shape_prior = D.load_shape_prior(model_dir, self.cfg)
 
@@ -58,10 +82,22 @@ class M3:
             # patch u -> W - u: sample at A(W - u, v)
             A = A @ np.array([[-1.0, 0, W], [0, 1, 0], [0, 0, 1]])
         patch = D.zone_filter(z, D.sample(gray, A, W, H))
-        outs = sess.run(None, {"patch": (patch / 255.0).astype(np.float32)[None, None],
-                               "yaw": yaw[None].astype(np.float32)})
-        pts = D.apply(A, outs[0].reshape(-1, 2) * [W, H])
-        return pts, outs[-1][0], A
+
+        def net(p, y):
+            outs = sess.run(None, {"patch": (p / 255.0).astype(np.float32)[None, None],
+                                   "yaw": y[None].astype(np.float32)})
+            return outs[0].reshape(-1, 2).astype(np.float64), outs[-1][0].astype(np.float64)
+
+        lm, g = net(patch, yaw)
+        if self.mirror_average and z.get("mirror_average"):
+            # M3_IO.md: the mirrored patch with the reversed yaw; points un-mirrored and averaged,
+            # gesture probabilities averaged (returned as log-probabilities: softmax gives them back).
+            lmf, gf = net(np.ascontiguousarray(patch[:, ::-1]), yaw[::-1])
+            lm = 0.5 * (lm + unflip(lmf, z["indices68"]))
+            if z.get("gestures"):
+                g = np.log(0.5 * (softmax(g) + softmax(gf)))
+        pts = D.apply(A, lm * [W, H])
+        return pts, g, A
 
     def run(self, gray, box):
         pts32, yaw, face = self.l1.run(gray, box)

@@ -527,7 +527,11 @@ def write_config():
         e.update({k: v for k, v in z.items()})
         e.setdefault("bilateral", None)
         e.setdefault("equalize", False)
+        if name in D.MIRROR_AVERAGE:
+            e["mirror_average"] = True
         cfg["zones"][name] = e
+    if "level1" in D.MIRROR_AVERAGE:
+        cfg["level1"]["mirror_average"] = True
     with open(os.path.join(OUT, "m3.json"), "w") as fh:
         json.dump(cfg, fh, indent=1)
 

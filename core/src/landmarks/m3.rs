@@ -5,7 +5,7 @@ use super::filter::{Bilateral, equalize_hist};
 use super::net::Net;
 use super::prior::{ShapePrior, ShapePriorConfig};
 use super::warp::{Affine, sample};
-use super::{BROW_GESTURES, FaceLandmarks, MOUTH_GESTURES, N_POINTS, YAW_CLASSES_DEG};
+use super::{BROW_GESTURES, FaceLandmarks, MIRROR68, MOUTH_GESTURES, N_POINTS, YAW_CLASSES_DEG};
 use crate::error::{Error, Result};
 use crate::image::{GrayImage, Rect};
 use crate::metrics::outer_eye_distance;
@@ -64,6 +64,10 @@ pub struct Level1Config {
     pub indices68: Vec<usize>,
     /// Yaw classes, degrees; must equal [`YAW_CLASSES_DEG`].
     pub yaw_classes_deg: Vec<i32>,
+    /// In mirror-average mode ([`M3::set_mirror_average`]), average the points with the net's run
+    /// on the mirrored crop (`M3_IO.md`); yaw and the face probability stay the crop's.
+    #[serde(default)]
+    pub mirror_average: bool,
 }
 
 /// `bilateral` of a zone in `m3.json` (OpenCV `bilateralFilter` parameters).
@@ -123,6 +127,11 @@ pub struct ZoneConfig {
     /// Where the reference points come from (default: level 1's, with the eye zone's corners).
     #[serde(default)]
     pub refs: RefSource,
+    /// In mirror-average mode ([`M3::set_mirror_average`]), average the points and gesture
+    /// probabilities with the net's run on the mirrored patch (`M3_IO.md`). Not the eye zone,
+    /// which is mirrored per side already.
+    #[serde(default)]
+    pub mirror_average: bool,
 }
 
 /// The points a zone's references are read from (`refs` in `m3.json`).
@@ -250,6 +259,11 @@ impl ZoneConfig {
                 "{name}.template must hold two distinct finite points"
             )));
         }
+        if kind == ZoneKind::Eye && self.mirror_average {
+            return Err(bad(format!(
+                "{name}.mirror_average: the eye zone runs mirrored per side already"
+            )));
+        }
         if kind == ZoneKind::Eye && self.refs != RefSource::Level1 {
             return Err(bad(format!(
                 "{name}.refs: the eye zone reads level 1's corners"
@@ -277,6 +291,9 @@ impl ZoneConfig {
             n,
             &mut given.merged,
         )?;
+        if self.mirror_average {
+            flip_partners(&format!("{name}.mirror_average"), &self.indices68)?;
+        }
         if let Some(b) = &self.bilateral {
             if !(b.sigma_color.is_finite() && b.sigma_space.is_finite()) || b.d > MAX_BILATERAL_D {
                 return Err(bad(format!("{name}.bilateral out of range: {b:?}")));
@@ -385,6 +402,9 @@ impl M3Config {
         }
         let mut level1 = [false; N_POINTS];
         check_indices("level1.indices68", &l1.indices68, N_LEVEL1, &mut level1)?;
+        if l1.mirror_average {
+            flip_partners("level1.mirror_average", &l1.indices68)?;
+        }
         for required in ["brows", "eye", "mouth"] {
             if !self.zones.contains_key(required) {
                 return Err(bad(format!("zone {required:?} missing")));
@@ -438,6 +458,15 @@ struct Zone {
     net: Net,
     patch: Vec<u8>,
     filtered: Vec<u8>,
+    /// With `mirror_average`: per output point, the mirrored run's point that estimates it.
+    flip: Option<Vec<usize>>,
+    /// The last run's points, net units, `(x, y)` interleaved (averaged with the mirrored run's
+    /// under `flip`).
+    lm: Vec<f64>,
+    /// The last run's gesture probabilities (averaged likewise), if the zone has gestures.
+    gestures: Vec<f32>,
+    /// The mirrored run's gesture probabilities.
+    gestures_flipped: Vec<f32>,
 }
 
 impl Zone {
@@ -483,6 +512,13 @@ impl Zone {
             net,
             patch: Vec::with_capacity(w * h),
             filtered: vec![0; w * h],
+            flip: cfg
+                .mirror_average
+                .then(|| flip_partners(name, &cfg.indices68))
+                .transpose()?,
+            lm: vec![0.0; 2 * cfg.indices68.len()],
+            gestures: vec![0.0; n_gestures],
+            gestures_flipped: vec![0.0; n_gestures],
         })
     }
 
@@ -519,31 +555,50 @@ impl Zone {
         self.net.fill_input(0, |x| to_unit(src, x))
     }
 
-    /// Runs the network on the prepared patch with `yaw`.
-    fn run(&mut self, yaw: &[f32; 5]) -> Result<()> {
+    /// Runs the network on the prepared patch with `yaw` and keeps its points and gesture
+    /// probabilities; with `mirror` and the zone's `mirror_average` also on the mirrored patch
+    /// with the yaw classes reversed, and averages (`M3_IO.md`).
+    fn run(&mut self, yaw: &[f32; 5], mirror: bool) -> Result<()> {
         self.net.fill_input(1, |x| x.copy_from_slice(yaw))?;
-        self.net.run()
+        self.net.run()?;
+        read_points(self.net.output(0)?, &mut self.lm);
+        let has_gestures = !self.gestures.is_empty();
+        if has_gestures {
+            softmax(self.net.output(1)?, &mut self.gestures);
+        }
+        let Some(partner) = self.flip.as_ref().filter(|_| mirror) else {
+            return Ok(());
+        };
+        let (src, w) = (&self.patch, self.width);
+        self.net.fill_input(0, |x| to_unit_mirrored(src, w, x))?;
+        self.net.fill_input(1, |x| {
+            for (d, &s) in x.iter_mut().zip(yaw.iter().rev()) {
+                *d = s;
+            }
+        })?;
+        self.net.run()?;
+        average_flipped(&mut self.lm, self.net.output(0)?, partner);
+        if has_gestures {
+            softmax(self.net.output(1)?, &mut self.gestures_flipped);
+            for (g, &f) in self.gestures.iter_mut().zip(&self.gestures_flipped) {
+                *g = 0.5 * (*g + f);
+            }
+        }
+        Ok(())
     }
 
     /// Writes the points of the last run through `map` into `pts[indices]` (the mirrored eye's
     /// indices when `mirrored`).
-    fn write_points(
-        &self,
-        map: &Affine,
-        mirrored: bool,
-        pts: &mut [[f64; 2]; N_POINTS],
-    ) -> Result<()> {
+    fn write_points(&self, map: &Affine, mirrored: bool, pts: &mut [[f64; 2]; N_POINTS]) {
         let idx = match (&self.mirror, mirrored) {
             (Some((_, mi)), true) => mi,
             _ => &self.indices68,
         };
-        let n = 2 * idx.len();
-        let lm = &self.net.output(0)?[..n];
+        let lm = &self.lm;
         let (wf, hf) = (self.width as f64, self.height as f64);
         for (k, &i) in idx.iter().enumerate() {
-            pts[i] = map.apply([f64::from(lm[2 * k]) * wf, f64::from(lm[2 * k + 1]) * hf]);
+            pts[i] = map.apply([lm[2 * k] * wf, lm[2 * k + 1] * hf]);
         }
-        Ok(())
     }
 
     /// A single-patch zone: samples, filters and runs it for the patch map `map` and writes its
@@ -553,11 +608,13 @@ impl Zone {
         image: &GrayImage,
         map: &Affine,
         yaw: &[f32; 5],
+        mirror: bool,
         pts: &mut [[f64; 2]; N_POINTS],
     ) -> Result<()> {
         self.prepare(image, map)?;
-        self.run(yaw)?;
-        self.write_points(map, false, pts)
+        self.run(yaw, mirror)?;
+        self.write_points(map, false, pts);
+        Ok(())
     }
 
     /// Both eyes, the right eye then the left eye mirrored, one run each; returns their unit gaze
@@ -580,8 +637,8 @@ impl Zone {
         let mut gaze = [[0.0; 3]; 2];
         for (slot, map) in maps.iter().enumerate() {
             self.prepare(image, map)?;
-            self.run(yaw)?;
-            self.write_points(map, slot == 1, pts)?;
+            self.run(yaw, false)?;
+            self.write_points(map, slot == 1, pts);
             let g = &self.net.output(1)?[..3];
             // Patch frame → camera frame: the patch axes as image unit vectors. For the mirrored
             // eye the u axis points the other way, which is M3_IO.md's "gaze x negated".
@@ -613,7 +670,17 @@ fn to_unit(src: &[u8], dst: &mut [f32]) {
     }
 }
 
-fn softmax<const N: usize>(logits: &[f32], out: &mut [f32; N]) {
+/// As [`to_unit`], of the image of rows `width` long mirrored left–right.
+fn to_unit_mirrored(src: &[u8], width: usize, dst: &mut [f32]) {
+    for (d, s) in dst.chunks_exact_mut(width).zip(src.chunks_exact(width)) {
+        for (d, &s) in d.iter_mut().zip(s.iter().rev()) {
+            *d = f32::from(s) / 255.0;
+        }
+    }
+}
+
+/// Softmax of `logits` into `out` (as many values as `out` holds).
+fn softmax(logits: &[f32], out: &mut [f32]) {
     let m = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
     let mut sum = 0.0;
     for (o, &l) in out.iter_mut().zip(logits) {
@@ -630,6 +697,42 @@ fn normalized(v: [f64; 3]) -> [f64; 3] {
         .sqrt()
         .max(NORM_EPS);
     [v[0] / n, v[1] / n, v[2] / n]
+}
+
+/// For each point of `indices` (68 indices, all < [`N_POINTS`]), the position in `indices` of its
+/// mirror image ([`MIRROR68`]): where a net's run on the mirrored input gives that point.
+///
+/// # Errors
+/// [`Error::ModelLoad`] if a point's mirror image is not among `indices`.
+fn flip_partners(what: &str, indices: &[usize]) -> Result<Vec<usize>> {
+    indices
+        .iter()
+        .map(|&i| {
+            let m = MIRROR68[i];
+            indices.iter().position(|&j| j == m).ok_or_else(|| {
+                bad(format!(
+                    "{what}: the mirror image {m} of point {i} is not among the net's points"
+                ))
+            })
+        })
+        .collect()
+}
+
+/// The last run's points, net units, `(x, y)` interleaved: the first `lm.len()` values of `out`.
+fn read_points(out: &[f32], lm: &mut [f64]) {
+    for (d, &s) in lm.iter_mut().zip(out) {
+        *d = f64::from(s);
+    }
+}
+
+/// Averages `lm` (points of the input, net units) with `flipped` (the same net's points for the
+/// mirrored input), un-mirrored: x ↦ 1 − x, and point k's estimate is the mirrored run's point
+/// `partner[k]` (`M3_IO.md`).
+fn average_flipped(lm: &mut [f64], flipped: &[f32], partner: &[usize]) {
+    for (k, &j) in partner.iter().enumerate() {
+        lm[2 * k] = 0.5 * (lm[2 * k] + (1.0 - f64::from(flipped[2 * j])));
+        lm[2 * k + 1] = 0.5 * (lm[2 * k + 1] + f64::from(flipped[2 * j + 1]));
+    }
 }
 
 /// `(68 index, weight)` for the points of `indices` with a weight above 0.
@@ -651,6 +754,12 @@ fn lerp(a: [f64; 2], b: [f64; 2], w: f64) -> [f64; 2] {
 pub struct M3 {
     cfg: M3Config,
     level1: Net,
+    /// With level 1's `mirror_average`: per level-1 point, the mirrored run's point that estimates it.
+    level1_flip: Option<Vec<usize>>,
+    /// Mirror-average mode ([`M3::set_mirror_average`]).
+    mirror_average: bool,
+    /// Level 1's points of the last run, crop units, `(x, y)` interleaved.
+    level1_lm: Vec<f64>,
     zones: Vec<Zone>,
     crop: Vec<u8>,
     /// The merged 68 points of the face in progress, image pixels.
@@ -717,8 +826,16 @@ impl M3 {
             .as_ref()
             .map(|p| ShapePrior::new(p, file(&p.file)?))
             .transpose()?;
+        let level1_flip = cfg
+            .level1
+            .mirror_average
+            .then(|| flip_partners("level1", &cfg.level1.indices68))
+            .transpose()?;
         Ok(Self {
             crop: Vec::with_capacity(s * s),
+            level1_flip,
+            mirror_average: false,
+            level1_lm: vec![0.0; 2 * N_LEVEL1],
             prior,
             cfg,
             level1,
@@ -733,6 +850,19 @@ impl M3 {
     /// The configuration in use.
     pub fn config(&self) -> &M3Config {
         &self.cfg
+    }
+
+    /// Mirror-average mode on or off (off when built). On, level 1 and every zone whose
+    /// `mirror_average` is set in `m3.json` also run on their mirrored input, and each such net's
+    /// points (and gesture probabilities) are the average of both runs (`M3_IO.md`): more accurate
+    /// and slower, as those nets run twice (`models/MODEL_CARD.md` has both modes' figures).
+    pub fn set_mirror_average(&mut self, on: bool) {
+        self.mirror_average = on;
+    }
+
+    /// Whether mirror-average mode is on ([`M3::set_mirror_average`]).
+    pub fn mirror_average(&self) -> bool {
+        self.mirror_average
     }
 
     fn check_input(image: &GrayImage, face: &Rect) -> Result<()> {
@@ -751,8 +881,10 @@ impl M3 {
         Ok(())
     }
 
-    /// Runs level 1 on the crop of `face` and writes its points into `self.pts`.
-    fn run_level1(&mut self, image: &GrayImage, face: &Rect) -> Result<Level1Out> {
+    /// Runs level 1 on the crop of `face` and, with `points`, writes its points into `self.pts`
+    /// (under `mirror_average` averaged with the mirrored crop's run, which the face probability
+    /// alone does not need).
+    fn run_level1(&mut self, image: &GrayImage, face: &Rect, points: bool) -> Result<Level1Out> {
         Self::check_input(image, face)?;
         let l1 = &self.cfg.level1;
         let s = l1.input_size;
@@ -763,17 +895,22 @@ impl M3 {
         let crop = &self.crop;
         self.level1.fill_input(0, |x| to_unit(crop, x))?;
         self.level1.run()?;
-        let lm = self.level1.output(0)?;
-        for (k, &i) in l1.indices68.iter().enumerate() {
-            let p = [
-                f64::from(lm[2 * k]) * s as f64,
-                f64::from(lm[2 * k + 1]) * s as f64,
-            ];
-            self.pts[i] = map.apply(p);
-        }
         let mut yaw = [0.0; 5];
         softmax(self.level1.output(1)?, &mut yaw);
         let logit = self.level1.output(2)?[0];
+        if points {
+            read_points(self.level1.output(0)?, &mut self.level1_lm);
+            if let Some(partner) = self.level1_flip.as_ref().filter(|_| self.mirror_average) {
+                self.level1
+                    .fill_input(0, |x| to_unit_mirrored(crop, s, x))?;
+                self.level1.run()?;
+                average_flipped(&mut self.level1_lm, self.level1.output(0)?, partner);
+            }
+            let lm = &self.level1_lm;
+            for (k, &i) in l1.indices68.iter().enumerate() {
+                self.pts[i] = map.apply([lm[2 * k] * s as f64, lm[2 * k + 1] * s as f64]);
+            }
+        }
         Ok(Level1Out {
             yaw,
             face_prob: 1.0 / (1.0 + (-logit).exp()),
@@ -787,7 +924,7 @@ impl M3 {
     /// [`Error::InvalidInput`] for an empty image or a non-finite / empty box;
     /// [`Error::Internal`] if the network fails to run.
     pub fn face_confidence(&mut self, image: &GrayImage, face: &Rect) -> Result<f32> {
-        Ok(self.run_level1(image, face)?.face_prob)
+        Ok(self.run_level1(image, face, false)?.face_prob)
     }
 
     /// Level 1 alone on `face`: writes its points (at their 68-point indices), the yaw
@@ -803,7 +940,7 @@ impl M3 {
         face: &Rect,
         out: &mut FaceLandmarks,
     ) -> Result<f32> {
-        let l1 = self.run_level1(image, face)?;
+        let l1 = self.run_level1(image, face, true)?;
         for &i in &self.cfg.level1.indices68 {
             out.points[i] = [self.pts[i][0] as f32, self.pts[i][1] as f32];
         }
@@ -868,7 +1005,7 @@ impl M3 {
             if !zone.prior_blend.is_empty() {
                 self.prior_pts = self.pts;
             }
-            zone.run_one(image, &map, &yaw, &mut self.pts)?;
+            zone.run_one(image, &map, &yaw, self.mirror_average, &mut self.pts)?;
             for &(i, w) in &zone.level1_blend {
                 self.pts[i] = lerp(self.pts[i], self.level1_pts[i], w);
             }
@@ -876,8 +1013,8 @@ impl M3 {
                 self.pts[i] = lerp(self.pts[i], self.prior_pts[i], w);
             }
             match zone.kind {
-                ZoneKind::Brows => softmax(zone.net.output(1)?, &mut out.brows),
-                ZoneKind::Mouth => softmax(zone.net.output(1)?, &mut out.mouth),
+                ZoneKind::Brows => out.brows.copy_from_slice(&zone.gestures),
+                ZoneKind::Mouth => out.mouth.copy_from_slice(&zone.gestures),
                 ZoneKind::Eye | ZoneKind::Plain => {}
             }
         }
@@ -947,6 +1084,117 @@ mod tests {
             .map(|i| (((i % w) * 3 + (i / w) * 2 + (i * 31) % 17) % 256) as u8)
             .collect();
         GrayImage::from_vec(w, h, data).unwrap()
+    }
+
+    #[test]
+    fn mirror68_is_an_involution_within_each_zone() {
+        for (i, &m) in MIRROR68.iter().enumerate() {
+            assert_eq!(MIRROR68[m], i);
+        }
+        for zone in [0..17, 17..27, 27..36, 36..48, 48..60, 60..68] {
+            assert!(
+                zone.clone().all(|i| zone.contains(&MIRROR68[i])),
+                "{zone:?}"
+            );
+        }
+        // The nose ridge lies on the symmetry line.
+        assert_eq!(&MIRROR68[27..31], &[27, 28, 29, 30]);
+    }
+
+    #[test]
+    fn flip_partners_pair_each_point_with_its_mirror_image() {
+        assert_eq!(flip_partners("t", &[0, 16, 8]).unwrap(), vec![1, 0, 2]);
+        assert_eq!(flip_partners("t", &[27, 36, 45]).unwrap(), vec![0, 2, 1]);
+        assert!(matches!(
+            flip_partners("t", &[0, 1]),
+            Err(Error::ModelLoad(_))
+        ));
+        // Un-mirroring: the mirrored run's point 1 (x 0.3) is point 0's estimate at x 0.7.
+        let mut lm = [0.6, 0.5, 0.2, 0.4];
+        average_flipped(&mut lm, &[0.9, 0.3, 0.3, 0.7], &[1, 0]);
+        for (got, want) in lm.iter().zip([0.65, 0.6, 0.15, 0.35]) {
+            assert!((got - want).abs() < 1e-6, "{lm:?}");
+        }
+    }
+
+    #[test]
+    fn mirror_average_makes_level_1_symmetric_on_a_symmetric_crop() {
+        // Rows symmetric about x = 80 and a box centred there whose crop maps pixels one to one
+        // (crop side = 1.3 · box side = 64): the crop is its own mirror image, so averaging its
+        // points with the mirrored run's puts each point and its mirror image symmetric about
+        // x = 80 — exactly, up to rounding. Without averaging the net alone is not symmetric.
+        let (w, h) = (160, 120);
+        let data = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let d = if x < w / 2 { w / 2 - 1 - x } else { x - w / 2 };
+                ((d * 7 + y * 3 + (d * y) % 23) % 256) as u8
+            })
+            .collect();
+        let img = GrayImage::from_vec(w, h, data).unwrap();
+        let side = 64.0 / 1.3;
+        let face = Rect::new(80.0 - side / 2.0, 30.0, side, side);
+        let mut m3 = M3::new().unwrap();
+        let mut out = FaceLandmarks::default();
+        let asymmetry = |m3: &mut M3, out: &mut FaceLandmarks| {
+            m3.level1(&img, &face, out).unwrap();
+            let l1 = m3.config().level1.indices68.clone();
+            l1.iter()
+                .map(|&i| {
+                    let (p, q) = (out.points[i], out.points[MIRROR68[i]]);
+                    (p[0] + q[0] - 160.0).abs().max((p[1] - q[1]).abs())
+                })
+                .fold(0.0, f32::max)
+        };
+        assert!(!m3.mirror_average());
+        let plain = asymmetry(&mut m3, &mut out);
+        m3.set_mirror_average(true);
+        let averaged = asymmetry(&mut m3, &mut out);
+        assert!(averaged < 1e-3, "{averaged} px");
+        assert!(plain > 0.05, "{plain} px");
+    }
+
+    #[test]
+    fn mirror_average_mode_changes_the_marked_nets_only() {
+        let img = image();
+        let face = test_face();
+        // Without the shape prior, which would move every zone's points with any other's.
+        let run = |edit: &dyn Fn(&mut Value), on: bool| {
+            let json = json_with(|v| {
+                v.as_object_mut().unwrap().remove("shape_prior");
+                edit(v);
+            });
+            let mut m3 = M3::from_bytes(&json, EMBEDDED_FILES).unwrap();
+            m3.set_mirror_average(on);
+            let mut out = FaceLandmarks::default();
+            m3.estimate(&img, &face, &mut out).unwrap();
+            out
+        };
+        let off = run(&|_| {}, false);
+        let on = run(&|_| {}, true);
+        assert_ne!(off.points, on.points);
+        assert_eq!(off.yaw_probs, on.yaw_probs);
+        assert_eq!(off.face_prob, on.face_prob);
+        assert_ne!(off.mouth, on.mouth);
+        // With no net marked, the mode changes nothing.
+        let unmarked = |v: &mut Value| {
+            v["level1"]["mirror_average"] = false.into();
+            for z in v["zones"].as_object_mut().unwrap().values_mut() {
+                z["mirror_average"] = false.into();
+            }
+        };
+        assert_eq!(run(&unmarked, true), off);
+        // Only the mouth marked: level 1's points stay, so the eyes (from level 1's corners)
+        // stay too; the mouth's points and gestures move.
+        let mouth_only = |v: &mut Value| {
+            unmarked(v);
+            v["zones"]["mouth"]["mirror_average"] = true.into();
+        };
+        let m = run(&mouth_only, true);
+        assert_eq!(&m.points[36..48], &off.points[36..48]);
+        assert_ne!(&m.points[48..60], &off.points[48..60]);
+        assert_ne!(m.mouth, off.mouth);
+        assert_eq!(m.brows, off.brows);
     }
 
     #[test]
@@ -1291,6 +1539,13 @@ mod tests {
             json_with(|v| {
                 v["zones"]["face"]["refs"] = "merged".into();
                 v["zones"]["face"]["ref68"] = serde_json::json!([49, 36]);
+            }),
+            // Mirror averaging: not the eye (mirrored per side already), and only for a net
+            // whose points include each one's mirror image (the face zone without point 16).
+            json_with(|v| v["zones"]["eye"]["mirror_average"] = true.into()),
+            json_with(|v| {
+                v["zones"]["face"]["indices68"][16] = 49.into();
+                v["zones"]["face"]["level1_weight"] = Value::Null;
             }),
         ] {
             assert!(

@@ -35,6 +35,18 @@ pub use prior::{PriorZoneConfig, ShapePriorConfig};
 /// Number of landmarks in the merged output (iBUG 68).
 pub const N_POINTS: usize = 68;
 
+/// The index of each point's mirror image under a left–right flip of the face (iBUG 68 order:
+/// jaw point 0 ↔ 16, brow 17 ↔ 26, the nose ridge on itself, …); `models/train/m3data.py` holds the
+/// same table as `MIRROR68`.
+pub const MIRROR68: [usize; N_POINTS] = [
+    16, 15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0, // jaw
+    26, 25, 24, 23, 22, 21, 20, 19, 18, 17, // brows
+    27, 28, 29, 30, 35, 34, 33, 32, 31, // nose
+    45, 44, 43, 42, 47, 46, 39, 38, 37, 36, 41, 40, // eyes
+    54, 53, 52, 51, 50, 49, 48, 59, 58, 57, 56, 55, // outer lips
+    64, 63, 62, 61, 60, 67, 66, 65, // inner lips
+];
+
 /// Yaw classes of level 1, degrees (−60: < −60°, −30: −60..−30°, 0: −30..30°, 30: 30..60°,
 /// 60: > 60°).
 pub const YAW_CLASSES_DEG: [i32; 5] = [-60, -30, 0, 30, 60];

@@ -199,8 +199,9 @@ fn landmarks_line(text: &str, base: &Path, p: &mut Pipeline) -> Result<Value, St
     }))
 }
 
-/// Runs the subcommand; returns whether every line succeeded.
-pub fn run(input: &Path, out: Option<&Path>) -> Result<bool, String> {
+/// Runs the subcommand (M3 in mirror-average mode with `mirror_average`); returns whether every
+/// line succeeded.
+pub fn run(input: &Path, out: Option<&Path>, mirror_average: bool) -> Result<bool, String> {
     let lines = read_lines(input)?;
     let base = input
         .parent()
@@ -215,6 +216,7 @@ pub fn run(input: &Path, out: Option<&Path>) -> Result<bool, String> {
         detector: None,
         found: Vec::new(),
     };
+    p.m3.set_mirror_average(mirror_average);
     let mut ok = true;
     for (n, text) in lines {
         let v = landmarks_line(&text, &base, &mut p).unwrap_or_else(|e| {

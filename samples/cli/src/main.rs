@@ -46,6 +46,10 @@ enum Command {
         /// Output JSON lines (default: stdout).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// M3 in mirror-average mode: level 1 and the zones marked in m3.json also run on their
+        /// mirrored input and average (more accurate, slower; core/models/MODEL_CARD.md).
+        #[arg(long)]
+        mirror_average: bool,
     },
     /// Detect faces in images with the SDK's detector: {"image": path} lines in, boxes + scores out.
     Detect {
@@ -178,7 +182,11 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Fit { input, out, method } => fit::run(&input, out.as_deref(), method),
-        Command::Landmarks { input, out } => landmarks::run(&input, out.as_deref()),
+        Command::Landmarks {
+            input,
+            out,
+            mirror_average,
+        } => landmarks::run(&input, out.as_deref(), mirror_average),
         Command::Detect {
             input,
             out,

@@ -8,7 +8,8 @@ luma by the M3_IO.md formula, so no JPEG decoder enters the comparison:
 - `astronaut.png`: a 256x256 crop around the face, box = the face's tight 68-point box (by eye);
 - `astronaut_rot.png`: the same crop rotated by 18 degrees and scaled by 0.75 (box transformed);
 - `astronaut_mirror.png`: the crop mirrored left-right (swaps the eye paths).
-Each case also runs with a box shifted by 8 % of its side (tracker-like).
+Each case also runs with a box shifted by 8 % of its side (tracker-like), and every case in both
+modes of M3_IO.md (default and mirror-average; `"mirror_average"` says which).
 
 Expected values: the Python reference inference `core/models/train/m3_reference.py` (onnxruntime +
 the OpenCV preprocessing the training uses), i.e. an independent implementation of
@@ -64,15 +65,15 @@ def main():
         "astronaut_rot.png": (rot, box_after(R, box)),
         "astronaut_mirror.png": (mirror, [256 - box[0] - box[2], box[1], box[2], box[3]]),
     }
-    m3 = m3_reference.M3(MODELS)
+    modes = [(False, m3_reference.M3(MODELS)), (True, m3_reference.M3(MODELS, mirror_average=True))]
     cases = []
     for name, (img, b) in images.items():
         cv2.imwrite(os.path.join(HERE, name), img)
-        for shift in (0.0, 0.08):
+        for shift, (mirror_average, m3) in ((s, m) for s in (0.0, 0.08) for m in modes):
             bb = [b[0] + shift * b[2], b[1] - shift * b[3], b[2], b[3]]
             r = m3.run(img, bb)
             cases.append({
-                "image": name, "box": [round(v, 3) for v in bb],
+                "image": name, "box": [round(v, 3) for v in bb], "mirror_average": mirror_average,
                 "landmarks68": np.round(r["landmarks68"], 4).tolist(),
                 "yaw_probs": np.round(r["yaw_probs"], 6).tolist(),
                 "face_prob": round(float(r["face_prob"]), 6),
