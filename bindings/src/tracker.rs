@@ -35,6 +35,9 @@ pub struct TrackerConfig {
     pub flow_filter: bool,
     /// Frames over which a new track's shape units are estimated before being held (1..=1000).
     pub shape_frames: u32,
+    /// Landmarks in M3's mirror-average mode: more accurate, slower (the landmark nets but the
+    /// eyes' run twice; `core/models/MODEL_CARD.md`).
+    pub mirror_average: bool,
 }
 
 /// The default settings: video mode, one face, default intrinsics, filter on.
@@ -48,7 +51,19 @@ pub fn default_tracker_config() -> TrackerConfig {
         min_face_size_px: DetectorConfig::default().min_face_px.round() as u32,
         flow_filter: c.flow_filter,
         shape_frames: c.shape_frames as u32,
+        mirror_average: false,
     }
+}
+
+/// The embedded models' tracker for `config`; in image mode whatever its mode with `stills`.
+fn build_tracker(config: &TrackerConfig, stills: bool) -> Result<Tracker, MonotrackError> {
+    let (mut core, det) = to_core(config)?;
+    if stills {
+        core.mode = core_track::Mode::Image;
+    }
+    let mut t = Tracker::with_detector_config(core, det)?;
+    t.estimator_mut().set_mirror_average(config.mirror_average);
+    Ok(t)
 }
 
 fn to_core(
@@ -323,8 +338,7 @@ impl FaceTracker {
     /// `InvalidConfig` for out-of-range settings, `ModelLoad` if the embedded models cannot load.
     #[uniffi::constructor]
     pub fn new(config: TrackerConfig) -> Result<Arc<Self>, MonotrackError> {
-        let (core, det) = to_core(&config)?;
-        let video = Tracker::with_detector_config(core, det)?;
+        let video = build_tracker(&config, false)?;
         Ok(Arc::new(Self {
             state: Mutex::new(State {
                 config,
@@ -371,9 +385,7 @@ impl FaceTracker {
         let frame = Frame::new(bytes, desc.try_into()?)?;
         let mut g = self.lock();
         if g.stills.is_none() {
-            let (mut core, det) = to_core(&g.config)?;
-            core.mode = core_track::Mode::Image;
-            g.stills = Some(Tracker::with_detector_config(core, det)?);
+            g.stills = Some(build_tracker(&g.config, true)?);
         }
         let stills = g.stills.as_mut().ok_or_else(|| MonotrackError::Internal {
             msg: "no image tracker".into(),

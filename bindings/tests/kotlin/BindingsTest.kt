@@ -244,6 +244,21 @@ class BindingsTest {
     }
 
     @Test
+    fun mirrorAverageModeIsATrackerSetting() {
+        assertEquals(false, defaultTrackerConfig().mirrorAverage)
+        val (buf, stride) = rgbaFrame()
+        val d = desc(PixelFormat.RGBA8, stride, 0)
+        val plain = FaceTracker(defaultTrackerConfig()).use { it.processImage(buf, d).faces[0].landmarks }
+        FaceTracker(defaultTrackerConfig().copy(mirrorAverage = true)).use { t ->
+            assertEquals(true, t.config().mirrorAverage)
+            val averaged = t.processImage(buf, d).faces[0].landmarks
+            val moved = plain.zip(averaged).maxOf { (a, b) -> kotlin.math.hypot(a.x - b.x, a.y - b.y) }
+            // The mode moves points, by less than the nets' own error on a ~100 px face.
+            assertTrue(moved > 0.01f && moved < 10f, "largest move $moved px")
+        }
+    }
+
+    @Test
     fun badTrackerConfigRaisesInvalidConfig() {
         assertThrows(MonotrackException.InvalidConfig::class.java) {
             FaceTracker(defaultTrackerConfig().copy(maxFaces = 0u))

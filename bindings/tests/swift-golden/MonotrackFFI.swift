@@ -2998,6 +2998,11 @@ public struct TrackerConfig: Equatable, Hashable {
      * Frames over which a new track's shape units are estimated before being held (1..=1000).
      */
     public var shapeFrames: UInt32
+    /**
+     * Landmarks in M3's mirror-average mode: more accurate, slower (the landmark nets but the
+     * eyes' run twice; `core/models/MODEL_CARD.md`).
+     */
+    public var mirrorAverage: Bool
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -3019,13 +3024,18 @@ public struct TrackerConfig: Equatable, Hashable {
          */flowFilter: Bool, 
         /**
          * Frames over which a new track's shape units are estimated before being held (1..=1000).
-         */shapeFrames: UInt32) {
+         */shapeFrames: UInt32, 
+        /**
+         * Landmarks in M3's mirror-average mode: more accurate, slower (the landmark nets but the
+         * eyes' run twice; `core/models/MODEL_CARD.md`).
+         */mirrorAverage: Bool) {
         self.runningMode = runningMode
         self.maxFaces = maxFaces
         self.camera = camera
         self.minFaceSizePx = minFaceSizePx
         self.flowFilter = flowFilter
         self.shapeFrames = shapeFrames
+        self.mirrorAverage = mirrorAverage
     }
 
     
@@ -3049,7 +3059,8 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
                 camera: FfiConverterOptionTypeCameraIntrinsics.read(from: &buf), 
                 minFaceSizePx: FfiConverterUInt32.read(from: &buf), 
                 flowFilter: FfiConverterBool.read(from: &buf), 
-                shapeFrames: FfiConverterUInt32.read(from: &buf)
+                shapeFrames: FfiConverterUInt32.read(from: &buf), 
+                mirrorAverage: FfiConverterBool.read(from: &buf)
         )
     }
 
@@ -3060,6 +3071,7 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
         FfiConverterUInt32.write(value.minFaceSizePx, into: &buf)
         FfiConverterBool.write(value.flowFilter, into: &buf)
         FfiConverterUInt32.write(value.shapeFrames, into: &buf)
+        FfiConverterBool.write(value.mirrorAverage, into: &buf)
     }
 }
 
