@@ -2,7 +2,8 @@
 //! i % 10 == 0), from landmark-derived boxes (the tight box of the 68 points) with seeded realistic
 //! jitter: centre ±5 % and scale ±10 % of the box side, uniform. Prints NME (CONTRACT: mean over
 //! the points / distance between points 36 and 45) per zone and overall, the yaw-class spread and
-//! the time per face, and asserts the overall mean NME below [`MAX_MEAN_NME`]. Images are turned
+//! the time per face, and asserts the overall mean NME below [`MAX_MEAN_NME`] and lower still in
+//! mirror-average mode. Images are turned
 //! into luma by the core's frame conversion, as the CLI does. Skips with a printed reason when
 //! `../shared` is absent.
 //!
@@ -73,6 +74,9 @@ fn m3_nme_on_the_validation_split() {
     };
     let train = std::fs::read_to_string(data.join("faces68/train.jsonl")).unwrap();
     let mut m3 = M3::new().unwrap();
+    let mut mirrored = M3::new().unwrap();
+    mirrored.set_mirror_average(true);
+    let mut sum_mirrored = 0.0;
     let mut rng = StdRng::seed_from_u64(SEED);
     let mut gray = GrayImage::default();
     let mut out = FaceLandmarks::default();
@@ -105,6 +109,13 @@ fn m3_nme_on_the_validation_split() {
                 sums[z] += nme(&pred, truth, range.clone()).unwrap();
             }
             sums[ZONES.len()] += overall;
+            mirrored.estimate(&gray, &rect, &mut out).unwrap();
+            let pred: Vec<[f64; 2]> = out
+                .points
+                .iter()
+                .map(|p| [f64::from(p[0]), f64::from(p[1])])
+                .collect();
+            sum_mirrored += nme(&pred, truth, 0..N_POINTS).unwrap_or(f64::NAN);
             all.push(overall);
             yaw_hist[(out.yaw_class_deg() / 30 + 2) as usize] += 1;
             n += 1;
@@ -131,6 +142,16 @@ fn m3_nme_on_the_validation_split() {
         "  {:.0} µs per face (this build's profile)",
         us as f64 / n as f64
     );
+    let mean_mirrored = sum_mirrored / n as f64;
+    println!(
+        "  NME overall in mirror-average mode {:.2} %",
+        100.0 * mean_mirrored
+    );
     assert!(n > 100, "only {n} validation faces");
     assert!(mean < MAX_MEAN_NME, "mean NME {mean}");
+    // The mode's point (MODEL_CARD.md: 3.98 → 3.875 % with the shipped weights).
+    assert!(
+        mean_mirrored < mean - 0.0005,
+        "mirror average {mean_mirrored} against {mean}"
+    );
 }

@@ -159,6 +159,57 @@ fn landmarks_on_given_boxes_follow_the_contract() {
 }
 
 #[test]
+fn mirror_average_moves_the_points_and_keeps_the_contract() {
+    let dir = dir_with_astronaut("mirror");
+    let input = dir.join("in.jsonl");
+    let b = ASTRONAUT_BOX;
+    std::fs::write(
+        &input,
+        format!(
+            r#"{{"image": "astronaut.jpg", "faces": [{{"box": [{}, {}, {}, {}]}}]}}"#,
+            b[0], b[1], b[2], b[3]
+        ),
+    )
+    .unwrap();
+    let run = |extra: &[&str]| {
+        let out_path = dir.join("out.jsonl");
+        let mut args = vec![
+            "landmarks",
+            input.to_str().unwrap(),
+            "--out",
+            out_path.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        assert!(monotrack(&args).status.success());
+        let text = std::fs::read_to_string(&out_path).unwrap();
+        let line: serde_json::Value = serde_json::from_str(text.trim()).unwrap();
+        line["faces"][0].clone()
+    };
+    let (plain, averaged) = (run(&[]), run(&["--mirror-average"]));
+    let pts = |f: &serde_json::Value| -> Vec<f64> {
+        f["landmarks68"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|p| p.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()))
+            .collect()
+    };
+    let (p, q) = (pts(&plain), pts(&averaged));
+    assert_eq!(q.len(), 136);
+    let moved = p
+        .iter()
+        .zip(&q)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    // The mode moves points, by less than the nets' own error on this ~100 px face.
+    assert!(moved > 0.01 && moved < 10.0, "largest move {moved} px");
+    // Yaw and the face score are level 1's first run in both modes.
+    assert_eq!(plain["yaw_probs"], averaged["yaw_probs"]);
+    assert_eq!(plain["score"], averaged["score"]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn detect_reports_the_face_check_on_request() {
     let dir = dir_with_astronaut("detect");
     let manifest = dir.join("in.jsonl");
