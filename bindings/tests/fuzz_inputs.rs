@@ -129,6 +129,7 @@ fn frames_and_trackers_never_panic() {
             min_face_size_px: r.small(),
             flow_filter: r.below(2) == 0,
             shape_frames: r.small(),
+            mirror_average: r.below(2) == 0,
         };
         no_panic("FaceTracker::new", case, || {
             let _ = FaceTracker::new(cfg);
