@@ -5,8 +5,9 @@
 //!
 //! ```text
 //! cargo run --profile bench -p monotrack-tests --example track_eval -- \
-//!     [--video ../shared/data/video/obama_3ddfa_demo.mp4 --reference REF.jsonl]
+//!     [--video ../shared/data/video/obama_3ddfa_demo.mp4 --reference REF.jsonl] [--mirror-average]
 //! ```
+//! `--mirror-average` runs M3 in its mirror-average mode (`core/models/M3_IO.md`).
 //! `REF.jsonl` comes from `tests/scripts/video_reference.py VIDEO REF.jsonl` (dlib's 68 points as
 //! pseudo ground truth). Video frames are decoded with `ffmpeg` (rgb24, CONTRACT luma). Prints
 //! markdown tables; timings are single-threaded means over all frames on this machine.
@@ -54,10 +55,11 @@ fn configs() -> Vec<(&'static str, TrackerConfig)> {
     ]
 }
 
-fn report(title: &str, clip: &[ClipFrame]) -> Result<(), String> {
+fn report(title: &str, clip: &[ClipFrame], mirror_average: bool) -> Result<(), String> {
     println!("\n### {title}\n\n{}", table_header());
     for (name, cfg) in configs() {
         let mut tracker = Tracker::with_default_models(cfg).map_err(|e| e.to_string())?;
+        tracker.estimator_mut().set_mirror_average(mirror_average);
         // Warm-up pass (plans, buffers), then the measured pass.
         run_clip(&mut tracker, clip, CORRECT_NME).map_err(|e| e.to_string())?;
         let s = run_clip(&mut tracker, clip, CORRECT_NME).map_err(|e| e.to_string())?;
@@ -134,7 +136,10 @@ fn main() -> Result<(), String> {
             .position(|a| a == name)
             .and_then(|i| args.get(i + 1).cloned())
     };
-    println!("correct frame: NME (inter-ocular) < {CORRECT_NME}");
+    let mirror_average = args.iter().any(|a| a == "--mirror-average");
+    println!(
+        "correct frame: NME (inter-ocular) < {CORRECT_NME}; M3 mirror average {mirror_average}"
+    );
     if let Some(data) = shared_data() {
         let faces = load_validation_faces(&data, 24, 100.0)?;
         let cfg = SeqConfig {
@@ -155,6 +160,7 @@ fn main() -> Result<(), String> {
                 cfg.segments
             ),
             &clip,
+            mirror_average,
         )?;
     } else {
         println!("../shared/data not found: synthetic sequences skipped");
@@ -168,6 +174,7 @@ fn main() -> Result<(), String> {
                 clip.len()
             ),
             &clip,
+            mirror_average,
         )?;
     }
     Ok(())
