@@ -4,8 +4,9 @@
 //!
 //! One frame is processed `iterations` times on the tracking path (video mode: the first call
 //! detects, every later one tracks the face by NCC) and `iterations` times on the re-detect path
-//! (image mode: whole-frame detection every call). Each stage's median, 90th percentile and mean
-//! are reported in microseconds.
+//! (image mode: whole-frame detection every call), then `iterations` times on the tracking path with
+//! M3 in its mirror-average mode (`models/M3_IO.md`), whose cost on a phone decides whether to turn
+//! it on there. Each stage's median, 90th percentile and mean are reported in microseconds.
 
 use crate::error::{Error, Result};
 use crate::image::Frame;
@@ -37,7 +38,7 @@ pub struct BenchReport {
     pub faces: u32,
     /// Model load + plan optimisation time, microseconds (once per tracker).
     pub load_us: f64,
-    /// Per-stage statistics: `tracking/*` then `redetect/*`.
+    /// Per-stage statistics: `tracking/*`, `redetect/*`, then `tracking_mirror_average/*`.
     pub stages: Vec<StageStat>,
 }
 
@@ -74,7 +75,8 @@ fn push_stages(prefix: &str, runs: &[StageTimings], out: &mut Vec<StageStat>) {
     }
 }
 
-/// Runs the tracking path and the re-detect path `iterations` times each on `frame`.
+/// Runs the tracking path, the re-detect path and the tracking path in mirror-average mode
+/// `iterations` times each on `frame`.
 ///
 /// # Errors
 /// [`Error::InvalidConfig`] for 0 or more than [`MAX_ITERATIONS`] iterations; model-load and
@@ -99,18 +101,28 @@ pub fn run_benchmark(
         mode: Mode::Image,
         ..*config
     })?;
+    let mut mirrored = Tracker::with_default_models(TrackerConfig {
+        mode: Mode::Video,
+        ..*config
+    })?;
+    mirrored.estimator_mut().set_mirror_average(true);
     let mut tracking = Vec::with_capacity(iterations as usize);
     let mut redetect = Vec::with_capacity(iterations as usize);
+    let mut tracking_mirrored = Vec::with_capacity(iterations as usize);
     // Warm-up: the first video call detects; buffers reach their size.
     let faces = video.process_frame(frame, 0)?.faces.len() as u32;
     image.process_frame(frame, 0)?;
+    mirrored.process_frame(frame, 0)?;
     for i in 0..iterations {
-        tracking.push(video.process_frame(frame, 1 + i64::from(i))?.timings);
-        redetect.push(image.process_frame(frame, 1 + i64::from(i))?.timings);
+        let ts = 1 + i64::from(i);
+        tracking.push(video.process_frame(frame, ts)?.timings);
+        redetect.push(image.process_frame(frame, ts)?.timings);
+        tracking_mirrored.push(mirrored.process_frame(frame, ts)?.timings);
     }
-    let mut stages = Vec::with_capacity(14);
+    let mut stages = Vec::with_capacity(21);
     push_stages("tracking", &tracking, &mut stages);
     push_stages("redetect", &redetect, &mut stages);
+    push_stages("tracking_mirror_average", &tracking_mirrored, &mut stages);
     Ok(BenchReport {
         iterations,
         faces,

@@ -273,8 +273,9 @@ class BindingsTest {
         val (buf, stride) = rgbaFrame()
         val r = runBenchmark(buf, desc(PixelFormat.RGBA8, stride, 0), 3u)
         assertEquals(3u, r.iterations)
-        assertEquals(14, r.stages.size)
+        assertEquals(21, r.stages.size)
         assertTrue(r.stages.first { it.name == "tracking/landmarks" }.medianUs > 0.0, "a face was tracked")
+        assertTrue(r.stages.first { it.name == "tracking_mirror_average/landmarks" }.medianUs > 0.0)
         assertTrue(r.stages.first { it.name == "redetect/detect" }.medianUs > 0.0)
     }
 

@@ -34,9 +34,10 @@ enum BenchSummary {
     static let thesisTrackingMs = 19.6
     /// Thesis, iPhone SE: milliseconds per frame with face detection.
     static let thesisDetectionMs = 525.6
-    /// The benchmark's two paths, in report order.
+    /// The benchmark's paths, in report order (the third: the tracking path with M3 in mirror-average mode).
     static let paths = [BenchPath(prefix: "tracking", title: "tracking path"),
-                        BenchPath(prefix: "redetect", title: "re-detect path")]
+                        BenchPath(prefix: "redetect", title: "re-detect path"),
+                        BenchPath(prefix: "tracking_mirror_average", title: "tracking path, mirror-average landmarks")]
 
     /// Header of the stage column; the unit of every number column.
     private static let stageHeader = "stage, ms"
