@@ -1,7 +1,7 @@
 //! Measures the whole M3 per face (level-1 crop and net, brows, both eyes, mouth: warps, filters,
-//! networks and merge), one thread, in both modes, and level 1 alone (the tracker's face check). The image is a
-//! synthetic 640×480 pattern with a 200 px face box: every stage's cost is independent of the
-//! pixel values (fixed-size warps, filters and networks).
+//! networks and merge), one thread, in both modes (default and mirror average), and level 1 alone
+//! (the tracker's face check). The image is a synthetic 640×480 pattern with a 200 px face box:
+//! every stage's cost is independent of the pixel values (fixed-size warps, filters and networks).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use monotrack_core::image::{GrayImage, Rect};

@@ -4,9 +4,10 @@
 //!
 //! One frame is processed `iterations` times on the tracking path (video mode: the first call
 //! detects, every later one tracks the face by NCC) and `iterations` times on the re-detect path
-//! (image mode: whole-frame detection every call), then `iterations` times on the tracking path with
-//! M3 in its mirror-average mode (`models/M3_IO.md`), whose cost on a phone decides whether to turn
-//! it on there. Each stage's median, 90th percentile and mean are reported in microseconds.
+//! (image mode: whole-frame detection every call), then `iterations` times on the tracking path
+//! with M3 in its mirror-average mode (`models/M3_IO.md`), whose cost on a phone decides whether
+//! to turn it on there. Each stage's median, 90th percentile and mean are reported in
+//! microseconds.
 
 use crate::error::{Error, Result};
 use crate::image::Frame;

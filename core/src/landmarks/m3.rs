@@ -754,7 +754,8 @@ fn lerp(a: [f64; 2], b: [f64; 2], w: f64) -> [f64; 2] {
 pub struct M3 {
     cfg: M3Config,
     level1: Net,
-    /// With level 1's `mirror_average`: per level-1 point, the mirrored run's point that estimates it.
+    /// With level 1's `mirror_average`: per level-1 point, the mirrored run's point that
+    /// estimates it.
     level1_flip: Option<Vec<usize>>,
     /// Mirror-average mode ([`M3::set_mirror_average`]).
     mirror_average: bool,
