@@ -96,7 +96,7 @@ LEVEL1 = {"input_size": 64, "crop_scale": 1.3}
 # The nets that run a second time on their mirrored input in mirror-average mode (M3_IO.md), written
 # into m3.json as `"mirror_average": true`: level 1 and every zone but the eye (mirrored per side
 # already). Validation NME with the stop-21 weights (stop 27, MODEL_CARD.md): 3.98 % in the default
-# mode; 3.876 % with all of these; 3.890 % with level 1, brows, mouth and mouth_fine; 3.925 % with
+# mode; 3.875 % with all of these; 3.890 % with level 1, brows, mouth and mouth_fine; 3.925 % with
 # the five zones without level 1.
 MIRROR_AVERAGE = ("level1", "brows", "face", "mouth", "mouth_fine", "nose")
 
