@@ -1157,22 +1157,10 @@ mod tests {
 
     #[test]
     fn mirror_average_mode_changes_the_marked_nets_only() {
-        let img = image();
-        let face = test_face();
-        // Without the shape prior, which would move every zone's points with any other's.
-        let run = |edit: &dyn Fn(&mut Value), on: bool| {
-            let json = json_with(|v| {
-                v.as_object_mut().unwrap().remove("shape_prior");
-                edit(v);
-            });
-            let mut m3 = M3::from_bytes(&json, EMBEDDED_FILES).unwrap();
-            m3.set_mirror_average(on);
-            let mut out = FaceLandmarks::default();
-            m3.estimate(&img, &face, &mut out).unwrap();
-            out
-        };
-        let off = run(&|_| {}, false);
-        let on = run(&|_| {}, true);
+        // `estimate_in_mode` runs without the shape prior, which would move every zone's points
+        // with any other's.
+        let off = estimate_in_mode(&|_| {}, false);
+        let on = estimate_in_mode(&|_| {}, true);
         assert_ne!(off.points, on.points);
         assert_eq!(off.yaw_probs, on.yaw_probs);
         assert_eq!(off.face_prob, on.face_prob);
@@ -1184,14 +1172,14 @@ mod tests {
                 z["mirror_average"] = false.into();
             }
         };
-        assert_eq!(run(&unmarked, true), off);
+        assert_eq!(estimate_in_mode(&unmarked, true), off);
         // Only the mouth marked: level 1's points stay, so the eyes (from level 1's corners)
         // stay too; the mouth's points and gestures move.
         let mouth_only = |v: &mut Value| {
             unmarked(v);
             v["zones"]["mouth"]["mirror_average"] = true.into();
         };
-        let m = run(&mouth_only, true);
+        let m = estimate_in_mode(&mouth_only, true);
         assert_eq!(&m.points[36..48], &off.points[36..48]);
         assert_ne!(&m.points[48..60], &off.points[48..60]);
         assert_ne!(m.mouth, off.mouth);
@@ -1274,12 +1262,18 @@ mod tests {
     /// label offset 0 and its shape prior off unless the edit sets them, so that points compare
     /// with level 1's and the zones' own.
     fn estimate_with(edit: &dyn Fn(&mut Value)) -> FaceLandmarks {
+        estimate_in_mode(edit, false)
+    }
+
+    /// [`estimate_with`] with mirror-average mode `on` or off.
+    fn estimate_in_mode(edit: &dyn Fn(&mut Value), on: bool) -> FaceLandmarks {
         let json = json_with(|v| {
             v["x_offset_iod"] = serde_json::json!(0.0);
             v.as_object_mut().unwrap().remove("shape_prior");
             edit(v);
         });
         let mut m3 = M3::from_bytes(&json, EMBEDDED_FILES).unwrap();
+        m3.set_mirror_average(on);
         let mut out = FaceLandmarks::default();
         m3.estimate(&image(), &test_face(), &mut out).unwrap();
         out
