@@ -67,6 +67,14 @@ fn jittered_box(pts: &[[f64; 2]], rng: &mut StdRng) -> Rect {
     Rect::new(cx - 0.5 * k * w, cy - 0.5 * k * h, k * w, k * h)
 }
 
+/// `out`'s points in f64, as `nme` takes them.
+fn points64(out: &FaceLandmarks) -> Vec<[f64; 2]> {
+    out.points
+        .iter()
+        .map(|p| [f64::from(p[0]), f64::from(p[1])])
+        .collect()
+}
+
 #[test]
 fn m3_nme_on_the_validation_split() {
     let Some(data) = monotrack_tests::shared_data_or_skip("m3_nme_on_the_validation_split") else {
@@ -97,11 +105,7 @@ fn m3_nme_on_the_validation_split() {
             let t0 = Instant::now();
             m3.estimate(&gray, &rect, &mut out).unwrap();
             us += t0.elapsed().as_micros();
-            let pred: Vec<[f64; 2]> = out
-                .points
-                .iter()
-                .map(|p| [f64::from(p[0]), f64::from(p[1])])
-                .collect();
+            let pred = points64(&out);
             let Some(overall) = nme(&pred, truth, 0..N_POINTS) else {
                 continue;
             };
@@ -110,11 +114,7 @@ fn m3_nme_on_the_validation_split() {
             }
             sums[ZONES.len()] += overall;
             mirrored.estimate(&gray, &rect, &mut out).unwrap();
-            let pred: Vec<[f64; 2]> = out
-                .points
-                .iter()
-                .map(|p| [f64::from(p[0]), f64::from(p[1])])
-                .collect();
+            let pred = points64(&out);
             sum_mirrored += nme(&pred, truth, 0..N_POINTS).unwrap_or(f64::NAN);
             all.push(overall);
             yaw_hist[(out.yaw_class_deg() / 30 + 2) as usize] += 1;
