@@ -99,13 +99,13 @@ def summarize(errs):
     return {k: float(np.mean([e[k] for e in errs])) for k in errs[0]}
 
 
-def measure(m3, paths, faces, boxes):
+def measure(m3, faces, boxes, grays, genki):
     """The Python reference's metrics in `m3`'s mode: NME per zone, yaw-class accuracy, gestures on
-    the validation faces, smile on the held-out GENKI-4K split, time per face."""
-    grays = {}
+    the validation faces (`grays`: their images by name), smile on the held-out GENKI-4K split
+    (`genki`), time per face."""
     errs, yaw_ok, mouth, brows, times = [], [], [], [], []
     for f, b in zip(faces, boxes):
-        g = grays.setdefault(f["image"], D.load_gray(paths[f["image"]]))
+        g = grays[f["image"]]
         t0 = time.perf_counter()
         r = m3.run(g, np.array(b))
         times.append(time.perf_counter() - t0)
@@ -130,9 +130,8 @@ def measure(m3, paths, faces, boxes):
         "python_onnxruntime_ms_per_face": 1e3 * float(np.median(times)),
     }
     # GENKI-4K held-out smile split: level 1 on the whole crop, then again on the box of its points.
-    gk = D.load_genki("test")
     ys, ps = [], []
-    for img, label, _ in gk:
+    for img, label, _ in genki:
         box = np.array([6.0, 8.0, 52.0, 52.0])
         for _ in range(2):
             r = m3.run(img, box)
@@ -153,8 +152,11 @@ def main():
     a = ap.parse_args()
     paths, faces = D.load_faces68("val")
     boxes = jittered_boxes(faces)
-    metrics = measure(R.M3(MODEL_DIR), paths, faces, boxes)
-    metrics["mirror_average"] = measure(R.M3(MODEL_DIR, mirror_average=True), paths, faces, boxes)
+    # Loaded once for both modes.
+    grays = {f["image"]: D.load_gray(paths[f["image"]]) for f in faces}
+    genki = D.load_genki("test")
+    metrics = measure(R.M3(MODEL_DIR), faces, boxes, grays, genki)
+    metrics["mirror_average"] = measure(R.M3(MODEL_DIR, mirror_average=True), faces, boxes, grays, genki)
     manifest = os.path.join(tempfile.mkdtemp(), "val_manifest.jsonl")
     with open(manifest, "w") as fh:
         for f, b in zip(faces, boxes):
