@@ -268,10 +268,10 @@ impl Bfgs {
         }
         let mut h = SMatrix::<f64, N, N>::identity() * h0;
         let mut approx = SMatrix::<f64, N, N>::zeros();
-        if problem.hessian_approximation(x, &mut approx) {
-            if let Some(inv) = approx.cholesky().map(|c| c.inverse()) {
-                h = inv;
-            }
+        if problem.hessian_approximation(x, &mut approx)
+            && let Some(inv) = approx.cholesky().map(|c| c.inverse())
+        {
+            h = inv;
         }
         let h_start = h;
         let mut g_new = SVector::<f64, N>::zeros();

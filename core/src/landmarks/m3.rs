@@ -294,10 +294,10 @@ impl ZoneConfig {
         if self.mirror_average {
             flip_partners(&format!("{name}.mirror_average"), &self.indices68)?;
         }
-        if let Some(b) = &self.bilateral {
-            if !(b.sigma_color.is_finite() && b.sigma_space.is_finite()) || b.d > MAX_BILATERAL_D {
-                return Err(bad(format!("{name}.bilateral out of range: {b:?}")));
-            }
+        if let Some(b) = &self.bilateral
+            && (!(b.sigma_color.is_finite() && b.sigma_space.is_finite()) || b.d > MAX_BILATERAL_D)
+        {
+            return Err(bad(format!("{name}.bilateral out of range: {b:?}")));
         }
         let got = self.gestures.as_deref().filter(|g| !g.is_empty());
         let same = match (gestures, got) {

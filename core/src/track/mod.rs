@@ -654,12 +654,12 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         }
         let video = self.config.mode == Mode::Video;
         if video {
-            if let Some(last) = self.last_timestamp {
-                if timestamp_ns <= last {
-                    return Err(Error::InvalidInput(format!(
-                        "video mode needs strictly increasing timestamps: got {timestamp_ns} ns after {last} ns"
-                    )));
-                }
+            if let Some(last) = self.last_timestamp
+                && timestamp_ns <= last
+            {
+                return Err(Error::InvalidInput(format!(
+                    "video mode needs strictly increasing timestamps: got {timestamp_ns} ns after {last} ns"
+                )));
             }
             self.last_timestamp = Some(timestamp_ns);
             if self.frame_size != (w, h) {

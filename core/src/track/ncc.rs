@@ -315,7 +315,7 @@ impl NccMatcher {
         self.num.resize(nxp * rows, 0.0);
         // The window holds `rows + th − 1` rows of `ws ≥ nxp + tw − 1` cells (see `search`).
         assert!(ws >= nxp + tw - 1 && self.window.len() >= (rows + th - 1) * ws);
-        assert!(rows % ROWS == 0 && self.template.len() == tw * th);
+        assert!(rows.is_multiple_of(ROWS) && self.template.len() == tw * th);
         for j in (0..rows).step_by(ROWS) {
             for b in 0..blocks {
                 let i0 = b * BLOCK;
