@@ -56,6 +56,24 @@ pub(crate) struct Conv3x3 {
     /// its offset in an output plane.
     at_in: Vec<usize>,
     at_out: Vec<usize>,
+    /// The bf16 form of the layer, where the CPU multiplies bf16 pairs ([`bf16_available`]).
+    pairs: Option<Pairs>,
+}
+
+/// A layer in bf16 (`vdpbf16ps`: two bf16 products summed into an f32 lane, twice the
+/// multiply-adds per instruction of an f32 FMA): the input channels taken in pairs, each pair's
+/// two values at a position held as one 32-bit word (low half the even channel), so one
+/// broadcast feeds both products.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+#[derive(Debug, Clone)]
+struct Pairs {
+    /// Per block of [`BLOCK`] output channels: for each of the `9·⌈cin/2⌉` pair taps (channel
+    /// pair, row, column) the block's weight pairs, zero past `cout` and past `cin`.
+    packed: Vec<u32>,
+    /// Offset of each pair tap in the paired input from the window's top-left word.
+    taps: Vec<usize>,
+    /// The input rounded to bf16 and paired: `batch × ⌈cin/2⌉` padded planes of words.
+    input: Vec<u32>,
 }
 
 impl Conv3x3 {
@@ -105,12 +123,43 @@ impl Conv3x3 {
                 at_out.push((y + out_pad) * qw + x + out_pad);
             }
         }
+        let in_plane = (in_h + 2) * pw;
+        // One input channel gains nothing from pairing (half of each pair would be zero).
+        let pairs = (cin >= 2 && bf16_available()).then(|| {
+            let cp = cin.div_ceil(2);
+            let k2 = 9 * cp;
+            let mut packed = vec![0u32; blocks * k2 * BLOCK];
+            for co in 0..cout {
+                let (b, lane) = (co / BLOCK, co % BLOCK);
+                for t in 0..k2 {
+                    let (pair, tap) = (t / 9, t % 9);
+                    let half = |c: usize| {
+                        (c < cin)
+                            .then(|| weights.kernel[(co * cin + c) * 9 + tap])
+                            .map_or(0, bf16_bits)
+                    };
+                    packed[(b * k2 + t) * BLOCK + lane] =
+                        half(2 * pair) | (half(2 * pair + 1) << 16);
+                }
+            }
+            let taps = (0..k2)
+                .map(|t| {
+                    let (pair, dy, dx) = (t / 9, t % 9 / 3, t % 3);
+                    pair * in_plane + dy * pw + dx
+                })
+                .collect();
+            Pairs {
+                packed,
+                taps,
+                input: vec![0; batch * cp * in_plane],
+            }
+        });
         Self {
             batch,
             cin,
             cout,
             stride: s,
-            in_plane: (in_h + 2) * pw,
+            in_plane,
             out_plane: (out_h + 2 * out_pad) * qw,
             out_h,
             out_w,
@@ -120,6 +169,7 @@ impl Conv3x3 {
             taps,
             at_in,
             at_out,
+            pairs,
         }
     }
 
@@ -135,17 +185,30 @@ impl Conv3x3 {
     }
 
     /// Computes the layer on `input` (its border zero) into the interior of `out` (of
-    /// [`Self::output_shape`]; the border is not written). Needs AVX2 and FMA ([`available`]).
+    /// [`Self::output_shape`]; the border is not written). Needs AVX2 and FMA ([`available`]);
+    /// where the CPU has AVX-512 BF16 too, the products are of bf16-rounded inputs and weights
+    /// (f32 sums).
     ///
     /// # Panics
     /// When the buffer lengths differ from the layer's, or off a CPU with AVX2 and FMA.
-    pub(crate) fn run(&self, input: &[f32], out: &mut [f32]) {
+    pub(crate) fn run(&mut self, input: &[f32], out: &mut [f32]) {
         assert_eq!(input.len(), self.input_len(), "conv input length");
         assert_eq!(
             out.len(),
             self.output_shape().iter().product::<usize>(),
             "conv output length"
         );
+        #[cfg(target_arch = "x86_64")]
+        if let Some(mut pairs) = self.pairs.take() {
+            #[allow(unsafe_code)]
+            // SAFETY: `pairs` exists only where the CPU has AVX2, FMA and AVX-512 BF16 + VL
+            // (`bf16_available`); the lengths were checked above.
+            unsafe {
+                self.run_bf16(&mut pairs, input, out)
+            };
+            self.pairs = Some(pairs);
+            return;
+        }
         #[cfg(target_arch = "x86_64")]
         if crate::cpu::has_avx2_fma() {
             #[allow(unsafe_code)]
@@ -206,6 +269,171 @@ impl Conv3x3 {
     }
 }
 
+impl Conv3x3 {
+    /// The layer as it was built, without its bf16 form: f32 products (the tests compare the
+    /// two).
+    #[cfg(test)]
+    pub(crate) fn without_bf16(mut self) -> Self {
+        self.pairs = None;
+        self
+    }
+
+    /// Whether the layer runs in bf16.
+    #[cfg(test)]
+    pub(crate) fn is_bf16(&self) -> bool {
+        self.pairs.is_some()
+    }
+
+    /// # Safety
+    /// The CPU has AVX2, FMA, AVX-512 BF16 and VL; `input` and `out` have the layer's lengths
+    /// and `pairs` is the layer's.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,avx512f,avx512vl,avx512bf16")]
+    #[allow(unsafe_code)]
+    unsafe fn run_bf16(&self, pairs: &mut Pairs, input: &[f32], out: &mut [f32]) {
+        let cp = self.cin.div_ceil(2);
+        for b in 0..self.batch {
+            let planes = &input[b * self.cin * self.in_plane..][..self.cin * self.in_plane];
+            let paired = &mut pairs.input[b * cp * self.in_plane..][..cp * self.in_plane];
+            for (pair, dst) in paired.chunks_exact_mut(self.in_plane).enumerate() {
+                let even = &planes[2 * pair * self.in_plane..][..self.in_plane];
+                let odd = (2 * pair + 1 < self.cin)
+                    .then(|| &planes[(2 * pair + 1) * self.in_plane..][..self.in_plane]);
+                pair_bf16(even, odd, dst);
+            }
+        }
+        let k2 = pairs.taps.len();
+        let n = self.at_in.len();
+        for b in 0..self.batch {
+            let input = &pairs.input[b * cp * self.in_plane..][..cp * self.in_plane];
+            let out = &mut out[b * self.cout * self.out_plane..][..self.cout * self.out_plane];
+            for (blk, (weights, bias)) in pairs
+                .packed
+                .chunks_exact(k2 * BLOCK)
+                .zip(self.bias.chunks_exact(BLOCK))
+                .enumerate()
+            {
+                let block = Block {
+                    input,
+                    weights,
+                    bias,
+                    taps: &pairs.taps,
+                    channels: BLOCK.min(self.cout - blk * BLOCK),
+                    plane: self.out_plane,
+                };
+                let out = &mut out[blk * BLOCK * self.out_plane..];
+                let mut p = 0;
+                while p + POSITIONS_BF16 <= n {
+                    // SAFETY: this function's features; offsets as `Block` needs.
+                    unsafe { block.positions_bf16::<POSITIONS_BF16>(self, p, out) };
+                    p += POSITIONS_BF16;
+                }
+                // SAFETY: as above.
+                unsafe {
+                    match n - p {
+                        0 => {}
+                        1 => block.positions_bf16::<1>(self, p, out),
+                        2 => block.positions_bf16::<2>(self, p, out),
+                        3 => block.positions_bf16::<3>(self, p, out),
+                        4 => block.positions_bf16::<4>(self, p, out),
+                        5 => block.positions_bf16::<5>(self, p, out),
+                        6 => block.positions_bf16::<6>(self, p, out),
+                        7 => block.positions_bf16::<7>(self, p, out),
+                        8 => block.positions_bf16::<8>(self, p, out),
+                        9 => block.positions_bf16::<9>(self, p, out),
+                        10 => block.positions_bf16::<10>(self, p, out),
+                        _ => block.positions_bf16::<11>(self, p, out),
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+thread_local! {
+    static F32_PRODUCTS: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `f` with the layers it builds on this thread in f32 products, bf16 or not: for the tests
+/// that hold a network to tract's f32 run at float rounding.
+#[cfg(test)]
+pub(crate) fn with_f32_products<R>(f: impl FnOnce() -> R) -> R {
+    F32_PRODUCTS.set(true);
+    let r = f();
+    F32_PRODUCTS.set(false);
+    r
+}
+
+/// Output positions computed together in bf16: 24 accumulators of the 32 vector registers that
+/// AVX-512 VL gives.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+const POSITIONS_BF16: usize = 6;
+
+/// Whether the CPU multiplies bf16 pairs (AVX-512 BF16 with VL, and AVX2 + FMA): then the layers
+/// of more than one input channel run in bf16.
+pub(crate) fn bf16_available() -> bool {
+    #[cfg(test)]
+    if F32_PRODUCTS.get() {
+        return false;
+    }
+    #[cfg(target_arch = "x86_64")]
+    return crate::cpu::has_avx2_fma()
+        && std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+        && std::arch::is_x86_feature_detected!("avx512bf16");
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+/// `v` rounded to the nearest bf16 (ties to even), as its 16 bits: what `vcvtneps2bf16` gives
+/// for the finite values the weights are.
+fn bf16_bits(v: f32) -> u32 {
+    let bits = v.to_bits();
+    (bits + 0x7fff + ((bits >> 16) & 1)) >> 16
+}
+
+/// Rounds two planes to bf16 (to nearest, ties to even, as [`bf16_bits`]) and pairs them:
+/// `dst[i]` = `even[i]` in the low half, `odd[i]` (0 without `odd`) in the high half. Integer
+/// arithmetic on the bits: eight words in a handful of AVX2 operations.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(unsafe_code)]
+fn pair_bf16(even: &[f32], odd: Option<&[f32]>, dst: &mut [u32]) {
+    use std::arch::x86_64::*;
+    let n = dst.len();
+    assert!(even.len() >= n && odd.is_none_or(|o| o.len() >= n));
+    let (bias, one, high) = (
+        _mm256_set1_epi32(0x7fff),
+        _mm256_set1_epi32(1),
+        _mm256_set1_epi32(0xffff_0000_u32 as i32),
+    );
+    // bits + 0x7fff + (bit 16), whose upper half is the rounded bf16.
+    let round = |v: __m256i| {
+        _mm256_add_epi32(
+            _mm256_add_epi32(v, bias),
+            _mm256_and_si256(_mm256_srli_epi32::<16>(v), one),
+        )
+    };
+    let mut i = 0;
+    while i + 8 <= n {
+        // SAFETY: `i + 8 <= n` and both planes hold at least `n` values (asserted above).
+        unsafe {
+            let e = round(_mm256_loadu_si256(even.as_ptr().add(i).cast()));
+            let mut w = _mm256_srli_epi32::<16>(e);
+            if let Some(o) = odd {
+                let o = round(_mm256_loadu_si256(o.as_ptr().add(i).cast()));
+                w = _mm256_or_si256(w, _mm256_and_si256(o, high));
+            }
+            _mm256_storeu_si256(dst.as_mut_ptr().add(i).cast(), w);
+        }
+        i += 8;
+    }
+    for j in i..n {
+        dst[j] = bf16_bits(even[j]) | odd.map_or(0, |o| bf16_bits(o[j]) << 16);
+    }
+}
+
 /// Whether [`Conv3x3::run`] can run on this CPU: x86-64 with AVX2 and FMA. Elsewhere tract keeps
 /// these layers (its hand-written kernels for ARM are what phones run; ours are measured on x86-64
 /// only).
@@ -218,10 +446,11 @@ pub(crate) fn available() -> bool {
 
 /// One block of output channels of one batch slot.
 #[cfg(target_arch = "x86_64")]
-struct Block<'a> {
-    input: &'a [f32],
+/// `T`: f32 values, or bf16 pairs as words ([`Pairs`]).
+struct Block<'a, T> {
+    input: &'a [T],
     /// `taps.len() × BLOCK` weights.
-    weights: &'a [f32],
+    weights: &'a [T],
     bias: &'a [f32],
     taps: &'a [usize],
     /// Channels of the block that exist (the rest of the lanes are not stored).
@@ -230,7 +459,105 @@ struct Block<'a> {
 }
 
 #[cfg(target_arch = "x86_64")]
-impl Block<'_> {
+impl<T> Block<'_, T> {
+    /// The accumulators of `P` positions, with the ReLU, into their offsets `at_out` of the
+    /// block's channel planes in `out`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn store<const P: usize>(
+        &self,
+        acc: &[[std::arch::x86_64::__m256; 2]; P],
+        at_out: &[usize],
+        out: &mut [f32],
+    ) {
+        use std::arch::x86_64::*;
+        let zero = _mm256_setzero_ps();
+        let mut lanes = [0f32; BLOCK];
+        for (acc, &o) in acc.iter().zip(at_out) {
+            // SAFETY: `lanes` holds BLOCK values.
+            #[allow(unsafe_code)]
+            unsafe {
+                _mm256_storeu_ps(lanes.as_mut_ptr(), _mm256_max_ps(acc[0], zero));
+                _mm256_storeu_ps(lanes.as_mut_ptr().add(8), _mm256_max_ps(acc[1], zero));
+            }
+            for (c, &v) in lanes[..self.channels].iter().enumerate() {
+                out[c * self.plane + o] = v;
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Block<'_, u32> {
+    /// [`Block::positions`] in bf16.
+    ///
+    /// # Safety
+    /// As [`Self::run_bf16`].
+    #[target_feature(enable = "avx2,fma,avx512f,avx512vl,avx512bf16")]
+    #[inline]
+    #[allow(unsafe_code)]
+    unsafe fn positions_bf16<const P: usize>(&self, layer: &Conv3x3, p: usize, out: &mut [f32]) {
+        let (ai, ao) = (&layer.at_in[p..p + P], &layer.at_out[p..p + P]);
+        let in_row = ai[P - 1] - ai[0] == layer.stride * (P - 1);
+        // SAFETY: the caller's contract.
+        unsafe {
+            match (in_row, layer.stride) {
+                (true, 1) => self.run_bf16::<P, 1>(ai, ao, out),
+                (true, 2) => self.run_bf16::<P, 2>(ai, ao, out),
+                _ => self.run_bf16::<P, 0>(ai, ao, out),
+            }
+        }
+    }
+
+    /// [`Block::run`] on bf16 pairs: per pair tap one broadcast word, two `vdpbf16ps`.
+    ///
+    /// # Safety
+    /// AVX2, FMA, AVX-512 BF16 + VL; every `at_in[j] + taps[t]` lies inside `input` and
+    /// `weights` holds `taps.len() × BLOCK` words.
+    #[target_feature(enable = "avx2,fma,avx512f,avx512vl,avx512bf16")]
+    #[inline]
+    #[allow(unsafe_code)]
+    unsafe fn run_bf16<const P: usize, const S: usize>(
+        &self,
+        at_in: &[usize],
+        at_out: &[usize],
+        out: &mut [f32],
+    ) {
+        use std::arch::x86_64::*;
+        let at: [usize; P] =
+            std::array::from_fn(|j| if S == 0 { at_in[j] } else { at_in[0] + S * j });
+        // SAFETY: `bias` holds BLOCK values.
+        let (b0, b1) = unsafe {
+            (
+                _mm256_loadu_ps(self.bias.as_ptr()),
+                _mm256_loadu_ps(self.bias.as_ptr().add(8)),
+            )
+        };
+        let mut acc = [[b0, b1]; P];
+        let (x, w) = (self.input.as_ptr(), self.weights.as_ptr());
+        debug_assert!(self.weights.len() >= self.taps.len() * BLOCK);
+        for (t, &tap) in self.taps.iter().enumerate() {
+            // SAFETY: the caller's contract: tap offsets and weights within their buffers; the
+            // words are bf16 pairs, so reading them as `__m256bh` is what they hold.
+            unsafe {
+                let w0: __m256bh = std::mem::transmute(_mm256_loadu_si256(w.add(t * BLOCK).cast()));
+                let w1: __m256bh =
+                    std::mem::transmute(_mm256_loadu_si256(w.add(t * BLOCK + 8).cast()));
+                for (acc, &at) in acc.iter_mut().zip(&at) {
+                    debug_assert!(at + tap < self.input.len());
+                    let v: __m256bh =
+                        std::mem::transmute(_mm256_set1_epi32(*x.add(at + tap) as i32));
+                    acc[0] = _mm256_dpbf16_ps(acc[0], w0, v);
+                    acc[1] = _mm256_dpbf16_ps(acc[1], w1, v);
+                }
+            }
+        }
+        self.store(&acc, at_out, out);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Block<'_, f32> {
     /// The `P` output positions from `p` of `layer`: as one run along a row where they lie in
     /// one (their windows then `stride` apart, so one address serves all six loads — the general
     /// form keeps six offsets in registers and spills), else each at its own offset.
@@ -295,18 +622,7 @@ impl Block<'_> {
                 }
             }
         }
-        let zero = _mm256_setzero_ps();
-        let mut lanes = [0f32; BLOCK];
-        for (acc, &o) in acc.iter().zip(at_out) {
-            // SAFETY: `lanes` holds BLOCK values.
-            unsafe {
-                _mm256_storeu_ps(lanes.as_mut_ptr(), _mm256_max_ps(acc[0], zero));
-                _mm256_storeu_ps(lanes.as_mut_ptr().add(8), _mm256_max_ps(acc[1], zero));
-            }
-            for (c, &v) in lanes[..self.channels].iter().enumerate() {
-                out[c * self.plane + o] = v;
-            }
-        }
+        self.store(&acc, at_out, out);
     }
 }
 
@@ -314,21 +630,23 @@ impl Block<'_> {
 mod tests {
     use super::*;
 
-    /// The layer by its definition (zero padding 1, bias, ReLU), in f64, without a border.
+    /// The layer by its definition (zero padding 1, bias, ReLU), in f64, without a border; with
+    /// each output the sum of the magnitudes of its terms (the scale of its rounding error).
     fn direct(
         input: &[f32],
         (cin, h, w): (usize, usize, usize),
         weights: &ConvWeights,
-    ) -> Vec<f32> {
+    ) -> Vec<(f32, f32)> {
         let s = weights.stride;
         let side = |n: usize| if n == 0 { 0 } else { (n - 1) / s + 1 };
         let (oh, ow) = (side(h), side(w));
         let cout = weights.bias.len();
-        let mut out = vec![0.0; cout * oh * ow];
+        let mut out = vec![(0.0, 0.0); cout * oh * ow];
         for co in 0..cout {
             for y in 0..oh {
                 for x in 0..ow {
                     let mut sum = f64::from(weights.bias[co]);
+                    let mut mag = sum.abs();
                     for c in 0..cin {
                         for dy in 0..3 {
                             for dx in 0..3 {
@@ -340,10 +658,11 @@ mod tests {
                                 let v = input[(c * h + iy as usize) * w + ix as usize];
                                 let k = weights.kernel[((co * cin + c) * 3 + dy) * 3 + dx];
                                 sum += f64::from(k) * f64::from(v);
+                                mag += (f64::from(k) * f64::from(v)).abs();
                             }
                         }
                     }
-                    out[(co * oh + y) * ow + x] = sum.max(0.0) as f32;
+                    out[(co * oh + y) * ow + x] = (sum.max(0.0) as f32, mag as f32);
                 }
             }
         }
@@ -374,38 +693,48 @@ mod tests {
                 bias: (0..cout).map(|i| (i as f32 - 3.0) / 10.0).collect(),
                 stride,
             };
-            let layer = Conv3x3::new(batch, cin, h, w, &weights, pad);
+            let built = Conv3x3::new(batch, cin, h, w, &weights, pad);
             let maps: Vec<f32> = (0..batch * cin * h * w)
                 .map(|i| (i * 53 % 29) as f32 / 29.0)
                 .collect();
             // Into the bordered layout; a sentinel in the output's border shows stray writes.
-            let mut input = vec![0.0; layer.input_len()];
+            let mut input = vec![0.0; built.input_len()];
             for (i, &v) in maps.iter().enumerate() {
                 let (x, y, plane) = (i % w, i / w % h, i / (w * h));
                 input[(plane * (h + 2) + y + 1) * (w + 2) + x + 1] = v;
             }
-            let [nb, nc, ph, pw] = layer.output_shape();
-            let mut out = vec![7.0; nb * nc * ph * pw];
-            layer.run(&input, &mut out);
-            let (oh, ow) = (ph - 2 * pad, pw - 2 * pad);
-            for b in 0..batch {
-                let want = direct(
-                    &maps[b * cin * h * w..][..cin * h * w],
-                    (cin, h, w),
-                    &weights,
-                );
-                for c in 0..cout {
-                    for y in 0..ph {
-                        for x in 0..pw {
-                            let got = out[((b * nc + c) * ph + y) * pw + x];
-                            if (pad..pad + oh).contains(&y) && (pad..pad + ow).contains(&x) {
-                                let v = want[(c * oh + y - pad) * ow + x - pad];
-                                assert!(
-                                    (got - v).abs() < 1e-5,
-                                    "case {batch}x{cin}x{h}x{w}→{cout} s{stride}: b{b} c{c} ({y},{x}) {got} vs {v}"
-                                );
-                            } else {
-                                assert_eq!(got, 7.0, "border written at b{b} c{c} ({y},{x})");
+            // f32 products to float rounding; bf16 ones (where the CPU has them) within the
+            // rounding of both factors to 8 significant bits: 2⁻⁸ of the terms' magnitude.
+            let bf16 = built.is_bf16();
+            assert_eq!(bf16, cin >= 2 && bf16_available());
+            for (mut layer, rel) in [(built.clone().without_bf16(), 0.0), (built, 2f32.powi(-8))] {
+                if rel > 0.0 && !bf16 {
+                    continue;
+                }
+                let [nb, nc, ph, pw] = layer.output_shape();
+                let mut out = vec![7.0; nb * nc * ph * pw];
+                layer.run(&input, &mut out);
+                let (oh, ow) = (ph - 2 * pad, pw - 2 * pad);
+                for b in 0..batch {
+                    let want = direct(
+                        &maps[b * cin * h * w..][..cin * h * w],
+                        (cin, h, w),
+                        &weights,
+                    );
+                    for c in 0..cout {
+                        for y in 0..ph {
+                            for x in 0..pw {
+                                let got = out[((b * nc + c) * ph + y) * pw + x];
+                                if (pad..pad + oh).contains(&y) && (pad..pad + ow).contains(&x) {
+                                    let (v, mag) = want[(c * oh + y - pad) * ow + x - pad];
+                                    assert!(
+                                        (got - v).abs() <= 1e-5 + rel * mag,
+                                        "case {batch}x{cin}x{h}x{w}→{cout} s{stride} bf16 {}: b{b} c{c} ({y},{x}) {got} vs {v}",
+                                        rel > 0.0
+                                    );
+                                } else {
+                                    assert_eq!(got, 7.0, "border written at b{b} c{c} ({y},{x})");
+                                }
                             }
                         }
                     }

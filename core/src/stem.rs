@@ -50,7 +50,7 @@ pub(crate) struct Stem {
 enum First {
     /// Where [`crate::conv::available`]: a [`Conv3x3`] of one input channel, with its
     /// zero-bordered input.
-    Direct(Conv3x3, Vec<f32>),
+    Direct(Box<Conv3x3>, Vec<f32>),
     /// The portable path ([`first_lanes`]).
     Lanes {
         /// Per channel: the 3×3 kernel row by row, then the bias.
@@ -107,7 +107,7 @@ impl Stem {
             };
             let conv = Conv3x3::new(batch, 1, in_h, in_w, &weights, pad);
             let input = vec![0.0; conv.input_len()];
-            First::Direct(conv, input)
+            First::Direct(Box::new(conv), input)
         } else {
             let row = out_w.next_multiple_of(LANES) + 1;
             First::Lanes {
@@ -155,7 +155,7 @@ impl Stem {
         }
         for i in 0..layers.len() {
             let (done, rest) = layers.split_at_mut(i + 1);
-            let (conv, input) = &done[i];
+            let (conv, input) = &mut done[i];
             match rest.first_mut() {
                 Some((_, next)) => conv.run(input, next),
                 None => conv.run(input, out),
@@ -632,16 +632,29 @@ impl StemLayer {
 }
 
 /// Asserts that `got` equals `want` (a network's output as tract computes it for the whole graph)
-/// to float rounding: within 1e-4 of the largest |value| of `want` (at least 1). For the tests
-/// that hold networks run with a [`Stem`] to their whole-graph outputs.
+/// to float rounding: within 1e-4 of the largest |value| of `want` (at least 1) — or, with
+/// `bf16` (the layers here ran in bf16 products, `conv`), within [`BF16_TOLERANCE`] of it. For
+/// the tests that hold networks run with a [`Stem`] to their whole-graph outputs.
 #[cfg(test)]
-pub(crate) fn assert_close_to_whole_graph(what: &str, got: &[f32], want: &[f32]) {
+pub(crate) fn assert_close_to_whole_graph(what: &str, got: &[f32], want: &[f32], bf16: bool) {
     assert_eq!(got.len(), want.len(), "{what}: lengths");
     let scale = want.iter().fold(1f32, |m, v| m.max(v.abs()));
-    for (x, y) in got.iter().zip(want) {
-        assert!((x - y).abs() <= 1e-4 * scale, "{what}: {x} vs {y}");
-    }
+    let tol = if bf16 { BF16_TOLERANCE } else { 1e-4 };
+    let worst = got
+        .iter()
+        .zip(want)
+        .fold(0f32, |m, (x, y)| m.max((x - y).abs() / scale));
+    assert!(worst <= tol, "{what} (bf16 {bf16}): {worst} of the scale");
 }
+
+/// How far a network whose 3×3 layers ran in bf16 products may be from tract's f32 run, as a
+/// share of its largest output (at least 1). bf16 keeps 8 significant bits, so each product is
+/// off by up to 2⁻⁸ ≈ 4e-3 of itself, and the errors mostly cancel in the sums: measured on the
+/// shipped networks (the tests' inputs) up to 1.0e-2 for the mouth net's gesture logits, up to
+/// 3.3e-3 for every other output. What this costs in landmarks is measured end to end
+/// (`models/MODEL_CARD.md`); the golden tests hold the pipeline to the Python reference.
+#[cfg(test)]
+pub(crate) const BF16_TOLERANCE: f32 = 2e-2;
 
 #[cfg(test)]
 mod tests {

@@ -202,62 +202,68 @@ mod tests {
     /// whole graph to float rounding.
     #[test]
     fn shipped_networks_run_their_first_layer_as_a_stem_with_the_same_outputs() {
-        for (name, bytes) in EMBEDDED_FILES.iter().filter(|(n, _)| n.ends_with(".onnx")) {
-            let shapes = shipped_inputs(name);
-            let inputs: Vec<(&str, &[usize])> =
-                shapes.iter().map(|(n, s)| (*n, s.as_slice())).collect();
-            let mut with = Net::load(name, bytes, &inputs, &[]).unwrap();
-            let mut without = Net::load_with_stem(name, bytes, &inputs, &[], false).unwrap();
-            assert!(
-                with.stem.is_some(),
-                "{name}: first layer not taken as a stem"
-            );
-            assert!(without.stem.is_none());
-            // Where `conv` runs, every 3×3 layer after the first (all the shipped trunks' layers).
-            let convs = op_types(bytes).iter().filter(|o| *o == "Conv").count();
-            let after_first = with.stem.as_ref().map_or(0, Stem::layers_after_first);
-            let want = if crate::conv::available() {
-                convs - 1
-            } else {
-                0
-            };
-            assert_eq!(
-                after_first, want,
-                "{name}: layers after the first run outside tract"
-            );
-            for net in [&mut with, &mut without] {
-                // A varied image in 0..1 and a yaw distribution (the networks' input ranges).
-                net.fill_input(0, |x| {
-                    x.iter_mut()
-                        .enumerate()
-                        .for_each(|(i, v)| *v = ((i * 7919) % 251) as f32 / 250.0)
-                })
-                .unwrap();
-                if inputs.len() > 1 {
-                    net.fill_input(1, |x| {
+        // Both forms of the layers here where the CPU has bf16 products (`conv`), f32 elsewhere.
+        let forms = [false, true]
+            .into_iter()
+            .filter(|&b| !b || crate::conv::bf16_available());
+        for bf16 in forms {
+            for (name, bytes) in EMBEDDED_FILES.iter().filter(|(n, _)| n.ends_with(".onnx")) {
+                let shapes = shipped_inputs(name);
+                let inputs: Vec<(&str, &[usize])> =
+                    shapes.iter().map(|(n, s)| (*n, s.as_slice())).collect();
+                let load = || Net::load(name, bytes, &inputs, &[]).unwrap();
+                let mut with = if bf16 {
+                    load()
+                } else {
+                    crate::conv::with_f32_products(load)
+                };
+                let mut without = Net::load_with_stem(name, bytes, &inputs, &[], false).unwrap();
+                assert!(
+                    with.stem.is_some(),
+                    "{name}: first layer not taken as a stem"
+                );
+                assert!(without.stem.is_none());
+                // Where `conv` runs, every 3×3 layer after the first (all the shipped trunks' layers).
+                let convs = op_types(bytes).iter().filter(|o| *o == "Conv").count();
+                let after_first = with.stem.as_ref().map_or(0, Stem::layers_after_first);
+                let want = if crate::conv::available() {
+                    convs - 1
+                } else {
+                    0
+                };
+                assert_eq!(
+                    after_first, want,
+                    "{name}: layers after the first run outside tract"
+                );
+                for net in [&mut with, &mut without] {
+                    // A varied image in 0..1 and a yaw distribution (the networks' input ranges).
+                    net.fill_input(0, |x| {
                         x.iter_mut()
                             .enumerate()
-                            .for_each(|(i, v)| *v = [0.05, 0.1, 0.7, 0.1, 0.05][i % 5])
+                            .for_each(|(i, v)| *v = ((i * 7919) % 251) as f32 / 250.0)
                     })
                     .unwrap();
+                    if inputs.len() > 1 {
+                        net.fill_input(1, |x| {
+                            x.iter_mut()
+                                .enumerate()
+                                .for_each(|(i, v)| *v = [0.05, 0.1, 0.7, 0.1, 0.05][i % 5])
+                        })
+                        .unwrap();
+                    }
+                    net.run().unwrap();
                 }
-                net.run().unwrap();
-            }
-            assert_eq!(with.outputs.len(), without.outputs.len());
-            for (a, b) in with.outputs.iter().zip(&without.outputs) {
-                let (a, b) = (
-                    a.try_as_plain_ram()
-                        .unwrap()
-                        .as_slice::<f32>()
-                        .unwrap()
-                        .to_vec(),
-                    b.try_as_plain_ram()
-                        .unwrap()
-                        .as_slice::<f32>()
-                        .unwrap()
-                        .to_vec(),
-                );
-                assert_close_to_whole_graph(name, &a, &b);
+                assert_eq!(with.outputs.len(), without.outputs.len());
+                for (a, b) in with.outputs.iter().zip(&without.outputs) {
+                    let plain = |t: &TValue| {
+                        t.try_as_plain_ram()
+                            .unwrap()
+                            .as_slice::<f32>()
+                            .unwrap()
+                            .to_vec()
+                    };
+                    assert_close_to_whole_graph(name, &plain(a), &plain(b), bf16);
+                }
             }
         }
     }
