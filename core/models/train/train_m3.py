@@ -68,6 +68,8 @@ ZONE_SEED = {"brows": 2, "eye": 3, "mouth": 4, "face": 5, "nose": 6, "mouth_fine
 # the outer-eye-corner distance (zone_sample): the size of the reference errors the net must absorb.
 REF_NOISE = {"default": 0.045}
 DEVICE = torch.device("cpu")
+# Weight averaging (exponential moving average of the weights and BN statistics); 0 = the last weights.
+EMA_DECAYS = ()
 
 
 class Data:
@@ -292,6 +294,7 @@ def train_level1(data, steps, fh):
     rng = np.random.default_rng(SEED + 1)
     weights = data.mix(balanced_weights([f["yaw_class"] for f in data.faces_for("level1")], 5), "level1")
     yaw_w = torch.ones(5, device=DEVICE)
+    emas = ema_models(model)
     t0, acc = time.time(), np.zeros(3)
     model.train()
     for step in range(steps):
@@ -306,12 +309,14 @@ def train_level1(data, steps, fh):
         loss.backward()
         opt.step()
         sched.step()
+        for e in emas:
+            e.update_parameters(model)
         acc += [l_lm.item(), l_yaw.item(), l_face.item()]
         if (step + 1) % 200 == 0:
             a = acc / 200
             log(fh, f"level1 step {step + 1}: lm {a[0]:.4f} yaw {a[1]:.4f} face {a[2]:.4f} ({time.time() - t0:.0f} s)")
             acc[:] = 0
-    return model.cpu().eval()
+    return finals(model, emas)
 
 
 def train_zone(name, data, steps, fh, genki=None):
@@ -338,6 +343,7 @@ def train_zone(name, data, steps, fh, genki=None):
         weights = np.full(n, 1.0 / n)
         cw = None
     weights = data.mix(weights, name)
+    emas = ema_models(model)
     t0, acc = time.time(), np.zeros(3)
     model.train()
     for step in range(steps):
@@ -366,12 +372,24 @@ def train_zone(name, data, steps, fh, genki=None):
         loss.backward()
         opt.step()
         sched.step()
+        for e in emas:
+            e.update_parameters(model)
         acc += [l_lm.item(), l_x.item(), 0]
         if (step + 1) % 200 == 0:
             a = acc / 200
             log(fh, f"{name} step {step + 1}: lm {a[0]:.4f} {'gest' if gest else 'gaze'} {a[1]:.4f} ({time.time() - t0:.0f} s)")
             acc[:] = 0
-    return model.cpu().eval()
+    return finals(model, emas)
+
+
+def ema_models(model):
+    from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
+    return [AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(d), use_buffers=True) for d in EMA_DECAYS]
+
+
+def finals(model, emas):
+    """The last weights, then each EMA's (in EMA_DECAYS order)."""
+    return [model.cpu().eval()] + [e.module.cpu().eval() for e in emas]
 
 
 def export(model, path, names_in, shapes_in, names_out):
@@ -422,6 +440,8 @@ def main():
     ap.add_argument("--ref-noise", default=None)
     # Another seed for a run-to-run spread check (the shipped weights use SEED)
     ap.add_argument("--seed", type=int, default=None)
+    # e.g. --ema 0.999,0.9995: also write NAME.ema0.999.onnx ... (weight averages of the same run)
+    ap.add_argument("--ema", default=None)
     # Results differ from the CPU run's in the last bits (GPU kernels); the shipped weights are CPU's.
     ap.add_argument("--device", default="cpu")
     # Zone nets train in this many processes at once after level 1 (each net seeds itself, so the
@@ -430,7 +450,9 @@ def main():
     # Set for the zone processes run_zones_in_processes starts: their parent calibrates at the end.
     ap.add_argument("--no-calibrate", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
-    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE, SEED
+    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE, SEED, EMA_DECAYS
+    if a.ema:
+        EMA_DECAYS = tuple(float(d) for d in a.ema.split(","))
     if a.seed is not None:
         SEED = a.seed
     if a.ref_noise:
@@ -474,8 +496,8 @@ def main():
     steps = {k: int(v * a.steps_scale) for k, v in STEPS.items()}
     if "level1" in only:
         log(fh, f"level1 hard negatives: {data.mine_hard_negatives()} detector false positives on the training images")
-        m = train_level1(data, steps["level1"], fh)
-        export(m, os.path.join(OUT, "level1.onnx"), ["image"], [(1, 1, 64, 64)], ["landmarks", "yaw_logits", "face_logit"])
+        for tag, m in zip([""] + [f".ema{d}" for d in EMA_DECAYS], train_level1(data, steps["level1"], fh)):
+            export(m, os.path.join(OUT, f"level1{tag}.onnx"), ["image"], [(1, 1, 64, 64)], ["landmarks", "yaw_logits", "face_logit"])
     zones = [n for n in ("face", "mouth", "brows", "mouth_fine", "nose", "eye") if n in only]  # longest first
     if a.jobs > 1 and len(zones) > 1:
         run_zones_in_processes(zones, a, fh)
@@ -485,9 +507,9 @@ def main():
         genki = genki_with_refs(os.path.join(OUT, "level1.onnx"), "train") if name == "mouth" else None
         if genki is not None:
             log(fh, f"GENKI-4K train crops for the mouth smile head: {len(genki)}")
-        m = train_zone(name, data, steps[name], fh, genki)
         outs = ["landmarks"] + (["gaze"] if z.get("gaze") else ["gesture_logits"] if z.get("gestures") else [])
-        export(m, os.path.join(OUT, f"{name}.onnx"), ["patch", "yaw"], [(1, 1, z["height"], z["width"]), (1, 5)], outs)
+        for tag, m in zip([""] + [f".ema{d}" for d in EMA_DECAYS], train_zone(name, data, steps[name], fh, genki)):
+            export(m, os.path.join(OUT, f"{name}{tag}.onnx"), ["patch", "yaw"], [(1, 1, z["height"], z["width"]), (1, 5)], outs)
     write_config()
     # The label-convention offset and shape prior (calibrate_m3.py) depend on every net: fitted once they all exist.
     if not a.no_calibrate and all(os.path.exists(os.path.join(OUT, f))
@@ -504,6 +526,8 @@ def run_zones_in_processes(zones, a, fh):
         base += ["--zone-size", a.zone_size]
     base += ["--pseudo-nets", ",".join(PSEUDO_NETS), "--pseudo-share", str(PSEUDO_SHARE), "--seed", str(SEED),
              "--ref-noise", ",".join(f"{k}={v}" for k, v in REF_NOISE.items())]
+    if EMA_DECAYS:
+        base += ["--ema", ",".join(str(d) for d in EMA_DECAYS)]
     pending, running = list(zones), []
     while pending or running:
         while pending and len(running) < a.jobs:
