@@ -36,7 +36,8 @@ pub(crate) struct ConvWeights {
 const BLOCK: usize = 16;
 
 /// Output positions computed together: with two accumulators each, twelve of the sixteen vector
-/// registers (tract's x86-64 matrix kernel has the same 16 × 6 shape).
+/// registers (tract's x86-64 matrix kernel has the same 16 × 6 shape). In bf16 too: 8 and 10
+/// measured the same, 12 slower (spills).
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 const POSITIONS: usize = 6;
 
@@ -83,6 +84,33 @@ struct Pairs {
     taps: Vec<usize>,
     /// The input rounded to bf16 and paired: `batch × ⌈cin/2⌉` padded planes of words.
     input: Vec<u32>,
+}
+
+/// Runs `$block.$method::<P>($layer, p, $out)` over a layer's output positions: groups of
+/// [`POSITIONS`], then the remainder. For the `unsafe` kernels of [`Block`]: the caller has their
+/// CPU features and the layer's offsets.
+#[cfg(target_arch = "x86_64")]
+macro_rules! each_group {
+    ($block:ident . $method:ident, $layer:expr, $out:expr) => {{
+        let n = $layer.at_in.len();
+        let mut p = 0;
+        #[allow(unsafe_code)]
+        // SAFETY: the caller's features; offsets from the layer, as `Block` needs.
+        unsafe {
+            while p + POSITIONS <= n {
+                $block.$method::<POSITIONS>($layer, p, $out);
+                p += POSITIONS;
+            }
+            match n - p {
+                0 => {}
+                1 => $block.$method::<1>($layer, p, $out),
+                2 => $block.$method::<2>($layer, p, $out),
+                3 => $block.$method::<3>($layer, p, $out),
+                4 => $block.$method::<4>($layer, p, $out),
+                _ => $block.$method::<5>($layer, p, $out),
+            }
+        }
+    }};
 }
 
 impl Conv3x3 {
@@ -236,14 +264,38 @@ impl Conv3x3 {
     #[target_feature(enable = "avx2,fma")]
     #[allow(unsafe_code)]
     unsafe fn run_avx2(&self, input: &[f32], out: &mut [f32]) {
-        let k = self.taps.len();
-        let n = self.at_in.len();
+        let per_slot = self.cin * self.in_plane;
+        self.for_each_block(
+            input,
+            per_slot,
+            &self.packed,
+            &self.taps,
+            out,
+            |block, out| {
+                each_group!(block.positions, self, out);
+            },
+        );
+    }
+
+    /// Calls `each` with every block of [`BLOCK`] output channels of every batch slot (`input`
+    /// holding `per_slot` values per slot, `packed` the weights per block as the kernel reads
+    /// them) and that block's part of `out`.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn for_each_block<T>(
+        &self,
+        input: &[T],
+        per_slot: usize,
+        packed: &[T],
+        taps: &[usize],
+        out: &mut [f32],
+        mut each: impl FnMut(&Block<'_, T>, &mut [f32]),
+    ) {
         for b in 0..self.batch {
-            let input = &input[b * self.cin * self.in_plane..][..self.cin * self.in_plane];
+            let input = &input[b * per_slot..][..per_slot];
             let out = &mut out[b * self.cout * self.out_plane..][..self.cout * self.out_plane];
-            for (blk, (weights, bias)) in self
-                .packed
-                .chunks_exact(k * BLOCK)
+            for (blk, (weights, bias)) in packed
+                .chunks_exact(taps.len() * BLOCK)
                 .zip(self.bias.chunks_exact(BLOCK))
                 .enumerate()
             {
@@ -251,28 +303,11 @@ impl Conv3x3 {
                     input,
                     weights,
                     bias,
-                    taps: &self.taps,
+                    taps,
                     channels: BLOCK.min(self.cout - blk * BLOCK),
                     plane: self.out_plane,
                 };
-                let out = &mut out[blk * BLOCK * self.out_plane..];
-                let mut p = 0;
-                while p + POSITIONS <= n {
-                    // SAFETY: AVX2 + FMA (this function's features); offsets as `Block` needs.
-                    unsafe { block.positions::<POSITIONS>(self, p, out) };
-                    p += POSITIONS;
-                }
-                // SAFETY: as above.
-                unsafe {
-                    match n - p {
-                        0 => {}
-                        1 => block.positions::<1>(self, p, out),
-                        2 => block.positions::<2>(self, p, out),
-                        3 => block.positions::<3>(self, p, out),
-                        4 => block.positions::<4>(self, p, out),
-                        _ => block.positions::<5>(self, p, out),
-                    }
-                }
+                each(&block, &mut out[blk * BLOCK * self.out_plane..]);
             }
         }
     }
@@ -311,51 +346,17 @@ impl Conv3x3 {
                 pair_bf16(even, odd, dst);
             }
         }
-        let k2 = pairs.taps.len();
-        let n = self.at_in.len();
-        for b in 0..self.batch {
-            let input = &pairs.input[b * cp * self.in_plane..][..cp * self.in_plane];
-            let out = &mut out[b * self.cout * self.out_plane..][..self.cout * self.out_plane];
-            for (blk, (weights, bias)) in pairs
-                .packed
-                .chunks_exact(k2 * BLOCK)
-                .zip(self.bias.chunks_exact(BLOCK))
-                .enumerate()
-            {
-                let block = Block {
-                    input,
-                    weights,
-                    bias,
-                    taps: &pairs.taps,
-                    channels: BLOCK.min(self.cout - blk * BLOCK),
-                    plane: self.out_plane,
-                };
-                let out = &mut out[blk * BLOCK * self.out_plane..];
-                let mut p = 0;
-                while p + POSITIONS_BF16 <= n {
-                    // SAFETY: this function's features; offsets as `Block` needs.
-                    unsafe { block.positions_bf16::<POSITIONS_BF16>(self, p, out) };
-                    p += POSITIONS_BF16;
-                }
-                // SAFETY: as above.
-                unsafe {
-                    match n - p {
-                        0 => {}
-                        1 => block.positions_bf16::<1>(self, p, out),
-                        2 => block.positions_bf16::<2>(self, p, out),
-                        3 => block.positions_bf16::<3>(self, p, out),
-                        4 => block.positions_bf16::<4>(self, p, out),
-                        5 => block.positions_bf16::<5>(self, p, out),
-                        6 => block.positions_bf16::<6>(self, p, out),
-                        7 => block.positions_bf16::<7>(self, p, out),
-                        8 => block.positions_bf16::<8>(self, p, out),
-                        9 => block.positions_bf16::<9>(self, p, out),
-                        10 => block.positions_bf16::<10>(self, p, out),
-                        _ => block.positions_bf16::<11>(self, p, out),
-                    }
-                }
-            }
-        }
+        let per_slot = cp * self.in_plane;
+        self.for_each_block(
+            &pairs.input,
+            per_slot,
+            &pairs.packed,
+            &pairs.taps,
+            out,
+            |block, out| {
+                each_group!(block.positions_bf16, self, out);
+            },
+        );
     }
 }
 
@@ -373,11 +374,6 @@ pub(crate) fn with_f32_products<R>(f: impl FnOnce() -> R) -> R {
     F32_PRODUCTS.set(false);
     r
 }
-
-/// Output positions computed together in bf16: 24 accumulators of the 32 vector registers that
-/// AVX-512 VL gives.
-#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-const POSITIONS_BF16: usize = 6;
 
 /// Whether the CPU multiplies bf16 pairs (AVX-512 BF16 with VL, and AVX2 + FMA): then the layers
 /// of more than one input channel run in bf16.
@@ -453,6 +449,16 @@ pub(crate) fn available() -> bool {
     return false;
 }
 
+/// The input and output offsets of `layer`'s `P` output positions from `p`, and whether they lie
+/// in one row (their windows then `stride` apart, so one address serves all their loads — the
+/// general form keeps `P` offsets in registers and spills).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn group<const P: usize>(layer: &Conv3x3, p: usize) -> (&[usize], &[usize], bool) {
+    let (ai, ao) = (&layer.at_in[p..p + P], &layer.at_out[p..p + P]);
+    (ai, ao, ai[P - 1] - ai[0] == layer.stride * (P - 1))
+}
+
 /// One block of output channels of one batch slot.
 #[cfg(target_arch = "x86_64")]
 /// `T`: f32 values, or bf16 pairs as words ([`Pairs`]).
@@ -469,6 +475,29 @@ struct Block<'a, T> {
 
 #[cfg(target_arch = "x86_64")]
 impl<T> Block<'_, T> {
+    /// The window offsets of `P` positions (`at_in[..P]`, or with `S` > 0 `at_in[0] + S·j`) and
+    /// their accumulators, started at the bias.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    #[allow(clippy::type_complexity)]
+    fn start<const P: usize, const S: usize>(
+        &self,
+        at_in: &[usize],
+    ) -> ([usize; P], [[std::arch::x86_64::__m256; 2]; P]) {
+        use std::arch::x86_64::*;
+        let at = std::array::from_fn(|j| if S == 0 { at_in[j] } else { at_in[0] + S * j });
+        let bias: &[f32; BLOCK] = self.bias[..BLOCK].try_into().expect("a block of biases");
+        #[allow(unsafe_code)]
+        // SAFETY: `bias` holds BLOCK values.
+        let (b0, b1) = unsafe {
+            (
+                _mm256_loadu_ps(bias.as_ptr()),
+                _mm256_loadu_ps(bias.as_ptr().add(8)),
+            )
+        };
+        (at, [[b0, b1]; P])
+    }
+
     /// The accumulators of `P` positions, with the ReLU, into their offsets `at_out` of the
     /// block's channel planes in `out`.
     #[target_feature(enable = "avx2,fma")]
@@ -506,8 +535,7 @@ impl Block<'_, u32> {
     #[inline]
     #[allow(unsafe_code)]
     unsafe fn positions_bf16<const P: usize>(&self, layer: &Conv3x3, p: usize, out: &mut [f32]) {
-        let (ai, ao) = (&layer.at_in[p..p + P], &layer.at_out[p..p + P]);
-        let in_row = ai[P - 1] - ai[0] == layer.stride * (P - 1);
+        let (ai, ao, in_row) = group::<P>(layer, p);
         // SAFETY: the caller's contract.
         unsafe {
             match (in_row, layer.stride) {
@@ -533,16 +561,7 @@ impl Block<'_, u32> {
         out: &mut [f32],
     ) {
         use std::arch::x86_64::*;
-        let at: [usize; P] =
-            std::array::from_fn(|j| if S == 0 { at_in[j] } else { at_in[0] + S * j });
-        // SAFETY: `bias` holds BLOCK values.
-        let (b0, b1) = unsafe {
-            (
-                _mm256_loadu_ps(self.bias.as_ptr()),
-                _mm256_loadu_ps(self.bias.as_ptr().add(8)),
-            )
-        };
-        let mut acc = [[b0, b1]; P];
+        let (at, mut acc) = self.start::<P, S>(at_in);
         let (x, w) = (self.input.as_ptr(), self.weights.as_ptr());
         debug_assert!(self.weights.len() >= self.taps.len() * BLOCK);
         for (t, &tap) in self.taps.iter().enumerate() {
@@ -568,8 +587,7 @@ impl Block<'_, u32> {
 #[cfg(target_arch = "x86_64")]
 impl Block<'_, f32> {
     /// The `P` output positions from `p` of `layer`: as one run along a row where they lie in
-    /// one (their windows then `stride` apart, so one address serves all six loads — the general
-    /// form keeps six offsets in registers and spills), else each at its own offset.
+    /// one ([`group`]), else each at its own offset.
     ///
     /// # Safety
     /// As [`Self::run`].
@@ -577,8 +595,7 @@ impl Block<'_, f32> {
     #[inline]
     #[allow(unsafe_code)]
     unsafe fn positions<const P: usize>(&self, layer: &Conv3x3, p: usize, out: &mut [f32]) {
-        let (ai, ao) = (&layer.at_in[p..p + P], &layer.at_out[p..p + P]);
-        let in_row = ai[P - 1] - ai[0] == layer.stride * (P - 1);
+        let (ai, ao, in_row) = group::<P>(layer, p);
         // SAFETY: the caller's contract.
         unsafe {
             match (in_row, layer.stride) {
@@ -606,16 +623,7 @@ impl Block<'_, f32> {
         out: &mut [f32],
     ) {
         use std::arch::x86_64::*;
-        let at: [usize; P] =
-            std::array::from_fn(|j| if S == 0 { at_in[j] } else { at_in[0] + S * j });
-        // SAFETY: `bias` holds BLOCK values.
-        let (b0, b1) = unsafe {
-            (
-                _mm256_loadu_ps(self.bias.as_ptr()),
-                _mm256_loadu_ps(self.bias.as_ptr().add(8)),
-            )
-        };
-        let mut acc = [[b0, b1]; P];
+        let (at, mut acc) = self.start::<P, S>(at_in);
         let (x, w) = (self.input.as_ptr(), self.weights.as_ptr());
         debug_assert!(self.weights.len() >= self.taps.len() * BLOCK);
         for (t, &tap) in self.taps.iter().enumerate() {
