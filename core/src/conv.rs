@@ -86,9 +86,9 @@ struct Pairs {
     input: Vec<u32>,
 }
 
-/// Runs `$block.$method::<P>($layer, p, $out)` over a layer's output positions: groups of
-/// [`POSITIONS`], then the remainder. For the `unsafe` kernels of [`Block`]: the caller has their
-/// CPU features and the layer's offsets.
+/// Runs the kernel `$block.$method::<P, S>` (`Block::run` or `Block::run_bf16`) over a layer's
+/// output positions: groups of [`POSITIONS`], then the remainder. For the `unsafe` kernels of
+/// [`Block`]: the caller has their CPU features and the layer's offsets.
 #[cfg(target_arch = "x86_64")]
 macro_rules! each_group {
     ($block:ident . $method:ident, $layer:expr, $out:expr) => {{
@@ -98,17 +98,34 @@ macro_rules! each_group {
         // SAFETY: the caller's features; offsets from the layer, as `Block` needs.
         unsafe {
             while p + POSITIONS <= n {
-                $block.$method::<POSITIONS>($layer, p, $out);
+                group!($block.$method, $layer, p, $out, POSITIONS);
                 p += POSITIONS;
             }
             match n - p {
                 0 => {}
-                1 => $block.$method::<1>($layer, p, $out),
-                2 => $block.$method::<2>($layer, p, $out),
-                3 => $block.$method::<3>($layer, p, $out),
-                4 => $block.$method::<4>($layer, p, $out),
-                _ => $block.$method::<5>($layer, p, $out),
+                1 => group!($block.$method, $layer, p, $out, 1),
+                2 => group!($block.$method, $layer, p, $out, 2),
+                3 => group!($block.$method, $layer, p, $out, 3),
+                4 => group!($block.$method, $layer, p, $out, 4),
+                _ => group!($block.$method, $layer, p, $out, 5),
             }
+        }
+    }};
+}
+
+/// The kernel on the `$n` positions from `$p`: as one run along a row where they lie in one (their
+/// windows then `stride` apart, so one address serves all their loads — the general form keeps
+/// `$n` offsets in registers and spills), else each at its own offset. Inside [`each_group`]'s
+/// `unsafe` block.
+#[cfg(target_arch = "x86_64")]
+macro_rules! group {
+    ($block:ident . $method:ident, $layer:expr, $p:expr, $out:expr, $n:expr) => {{
+        let (ai, ao) = (&$layer.at_in[$p..$p + $n], &$layer.at_out[$p..$p + $n]);
+        let in_row = ai[$n - 1] - ai[0] == $layer.stride * ($n - 1);
+        match (in_row, $layer.stride) {
+            (true, 1) => $block.$method::<{ $n }, 1>(ai, ao, $out),
+            (true, 2) => $block.$method::<{ $n }, 2>(ai, ao, $out),
+            _ => $block.$method::<{ $n }, 0>(ai, ao, $out),
         }
     }};
 }
@@ -136,23 +153,12 @@ impl Conv3x3 {
         let side = |n: usize| if n == 0 { 0 } else { (n - 1) / s + 1 };
         let (out_h, out_w) = (side(in_h), side(in_w));
         let (pw, qw) = (in_w + 2, out_w + 2 * out_pad);
+        let in_plane = (in_h + 2) * pw;
         let k = 9 * cin;
-        let blocks = cout.div_ceil(BLOCK);
-        let mut packed = vec![0.0; blocks * k * BLOCK];
-        for co in 0..cout {
-            let (b, lane) = (co / BLOCK, co % BLOCK);
-            for t in 0..k {
-                packed[(b * k + t) * BLOCK + lane] = weights.kernel[co * k + t];
-            }
-        }
+        let packed = pack(cout, k, 0.0, |co, t| weights.kernel[co * k + t]);
         let mut bias = weights.bias.clone();
-        bias.resize(blocks * BLOCK, 0.0);
-        let taps = (0..k)
-            .map(|t| {
-                let (c, dy, dx) = (t / 9, t % 9 / 3, t % 3);
-                c * (in_h + 2) * pw + dy * pw + dx
-            })
-            .collect();
+        bias.resize(cout.div_ceil(BLOCK) * BLOCK, 0.0);
+        let taps = tap_offsets(cin, in_plane, pw);
         let (mut at_in, mut at_out) = (Vec::new(), Vec::new());
         for y in 0..out_h {
             for x in 0..out_w {
@@ -160,34 +166,21 @@ impl Conv3x3 {
                 at_out.push((y + out_pad) * qw + x + out_pad);
             }
         }
-        let in_plane = (in_h + 2) * pw;
         // One input channel gains nothing from pairing (half of each pair would be zero).
         let pairs = (cin >= 2 && bf16_available()).then(|| {
             let cp = cin.div_ceil(2);
-            let k2 = 9 * cp;
-            let mut packed = vec![0u32; blocks * k2 * BLOCK];
-            for co in 0..cout {
-                let (b, lane) = (co / BLOCK, co % BLOCK);
-                for t in 0..k2 {
-                    let (pair, tap) = (t / 9, t % 9);
-                    let half = |c: usize| {
-                        (c < cin)
-                            .then(|| weights.kernel[(co * cin + c) * 9 + tap])
-                            .map_or(0, bf16_bits)
-                    };
-                    packed[(b * k2 + t) * BLOCK + lane] =
-                        half(2 * pair) | (half(2 * pair + 1) << 16);
-                }
-            }
-            let taps = (0..k2)
-                .map(|t| {
-                    let (pair, dy, dx) = (t / 9, t % 9 / 3, t % 3);
-                    pair * in_plane + dy * pw + dx
-                })
-                .collect();
+            let packed = pack(cout, 9 * cp, 0, |co, t| {
+                let (pair, tap) = (t / 9, t % 9);
+                let half = |c: usize| {
+                    (c < cin)
+                        .then(|| weights.kernel[(co * cin + c) * 9 + tap])
+                        .map_or(0, bf16_bits)
+                };
+                half(2 * pair) | (half(2 * pair + 1) << 16)
+            });
             Pairs {
                 packed,
-                taps,
+                taps: tap_offsets(cp, in_plane, pw),
                 input: vec![0; batch * cp * in_plane],
             }
         });
@@ -272,7 +265,7 @@ impl Conv3x3 {
             &self.taps,
             out,
             |block, out| {
-                each_group!(block.positions, self, out);
+                each_group!(block.run, self, out);
             },
         );
     }
@@ -354,10 +347,34 @@ impl Conv3x3 {
             &pairs.taps,
             out,
             |block, out| {
-                each_group!(block.positions_bf16, self, out);
+                each_group!(block.run_bf16, self, out);
             },
         );
     }
+}
+
+/// Weights packed for the kernel: per block of [`BLOCK`] output channels, for each of the `k`
+/// taps the block's values `weight(channel, tap)`, `zero` past `cout`.
+fn pack<T: Copy>(cout: usize, k: usize, zero: T, weight: impl Fn(usize, usize) -> T) -> Vec<T> {
+    let mut packed = vec![zero; cout.div_ceil(BLOCK) * k * BLOCK];
+    for co in 0..cout {
+        let (b, lane) = (co / BLOCK, co % BLOCK);
+        for t in 0..k {
+            packed[(b * k + t) * BLOCK + lane] = weight(co, t);
+        }
+    }
+    packed
+}
+
+/// Offset of each tap (plane, row, column; `planes × 9` of them) from a window's top-left value
+/// in an input of padded planes `plane` long with rows `row` long.
+fn tap_offsets(planes: usize, plane: usize, row: usize) -> Vec<usize> {
+    (0..9 * planes)
+        .map(|t| {
+            let (c, dy, dx) = (t / 9, t % 9 / 3, t % 3);
+            c * plane + dy * row + dx
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -449,19 +466,9 @@ pub(crate) fn available() -> bool {
     return false;
 }
 
-/// The input and output offsets of `layer`'s `P` output positions from `p`, and whether they lie
-/// in one row (their windows then `stride` apart, so one address serves all their loads — the
-/// general form keeps `P` offsets in registers and spills).
+/// One block of output channels of one batch slot. `T`: f32 values, or bf16 pairs as words
+/// ([`Pairs`]).
 #[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn group<const P: usize>(layer: &Conv3x3, p: usize) -> (&[usize], &[usize], bool) {
-    let (ai, ao) = (&layer.at_in[p..p + P], &layer.at_out[p..p + P]);
-    (ai, ao, ai[P - 1] - ai[0] == layer.stride * (P - 1))
-}
-
-/// One block of output channels of one batch slot.
-#[cfg(target_arch = "x86_64")]
-/// `T`: f32 values, or bf16 pairs as words ([`Pairs`]).
 struct Block<'a, T> {
     input: &'a [T],
     /// `taps.len() × BLOCK` weights.
@@ -527,25 +534,6 @@ impl<T> Block<'_, T> {
 
 #[cfg(target_arch = "x86_64")]
 impl Block<'_, u32> {
-    /// [`Block::positions`] in bf16.
-    ///
-    /// # Safety
-    /// As [`Self::run_bf16`].
-    #[target_feature(enable = "avx2,fma,avx512f,avx512vl,avx512bf16")]
-    #[inline]
-    #[allow(unsafe_code)]
-    unsafe fn positions_bf16<const P: usize>(&self, layer: &Conv3x3, p: usize, out: &mut [f32]) {
-        let (ai, ao, in_row) = group::<P>(layer, p);
-        // SAFETY: the caller's contract.
-        unsafe {
-            match (in_row, layer.stride) {
-                (true, 1) => self.run_bf16::<P, 1>(ai, ao, out),
-                (true, 2) => self.run_bf16::<P, 2>(ai, ao, out),
-                _ => self.run_bf16::<P, 0>(ai, ao, out),
-            }
-        }
-    }
-
     /// [`Block::run`] on bf16 pairs: per pair tap one broadcast word, two `vdpbf16ps`.
     ///
     /// # Safety
@@ -586,26 +574,6 @@ impl Block<'_, u32> {
 
 #[cfg(target_arch = "x86_64")]
 impl Block<'_, f32> {
-    /// The `P` output positions from `p` of `layer`: as one run along a row where they lie in
-    /// one ([`group`]), else each at its own offset.
-    ///
-    /// # Safety
-    /// As [`Self::run`].
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    #[allow(unsafe_code)]
-    unsafe fn positions<const P: usize>(&self, layer: &Conv3x3, p: usize, out: &mut [f32]) {
-        let (ai, ao, in_row) = group::<P>(layer, p);
-        // SAFETY: the caller's contract.
-        unsafe {
-            match (in_row, layer.stride) {
-                (true, 1) => self.run::<P, 1>(ai, ao, out),
-                (true, 2) => self.run::<P, 2>(ai, ao, out),
-                _ => self.run::<P, 0>(ai, ao, out),
-            }
-        }
-    }
-
     /// `P` output positions: window offsets `at_in[..P]` (with `S` > 0, `at_in[0] + S·j`),
     /// output offsets `at_out[..P]` (within a plane of `out`, whose plane `c` is the block's
     /// channel `c`).
