@@ -387,6 +387,11 @@ def ema_models(model):
     return [AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(d), use_buffers=True) for d in EMA_DECAYS]
 
 
+def export_tags():
+    """File-name tags of what `finals` returns: "" for the last weights, then ".ema<decay>"."""
+    return [""] + [f".ema{d}" for d in EMA_DECAYS]
+
+
 def finals(model, emas):
     """The last weights, then each EMA's (in EMA_DECAYS order)."""
     return [model.cpu().eval()] + [e.module.cpu().eval() for e in emas]
@@ -496,7 +501,7 @@ def main():
     steps = {k: int(v * a.steps_scale) for k, v in STEPS.items()}
     if "level1" in only:
         log(fh, f"level1 hard negatives: {data.mine_hard_negatives()} detector false positives on the training images")
-        for tag, m in zip([""] + [f".ema{d}" for d in EMA_DECAYS], train_level1(data, steps["level1"], fh)):
+        for tag, m in zip(export_tags(), train_level1(data, steps["level1"], fh)):
             export(m, os.path.join(OUT, f"level1{tag}.onnx"), ["image"], [(1, 1, 64, 64)], ["landmarks", "yaw_logits", "face_logit"])
     zones = [n for n in ("face", "mouth", "brows", "mouth_fine", "nose", "eye") if n in only]  # longest first
     if a.jobs > 1 and len(zones) > 1:
@@ -508,7 +513,7 @@ def main():
         if genki is not None:
             log(fh, f"GENKI-4K train crops for the mouth smile head: {len(genki)}")
         outs = ["landmarks"] + (["gaze"] if z.get("gaze") else ["gesture_logits"] if z.get("gestures") else [])
-        for tag, m in zip([""] + [f".ema{d}" for d in EMA_DECAYS], train_zone(name, data, steps[name], fh, genki)):
+        for tag, m in zip(export_tags(), train_zone(name, data, steps[name], fh, genki)):
             export(m, os.path.join(OUT, f"{name}{tag}.onnx"), ["patch", "yaw"], [(1, 1, z["height"], z["width"]), (1, 5)], outs)
     write_config()
     # The label-convention offset and shape prior (calibrate_m3.py) depend on every net: fitted once they all exist.
