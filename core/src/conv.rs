@@ -10,7 +10,7 @@
 //! multiplies straight from it: sixteen output channels in two registers, six output positions at
 //! a time, each input value broadcast from where it lies, so nothing is gathered or copied.
 //!
-//! Where the CPU also has AVX-512 BF16 (with VL: AMD Zen 4, Intel Cooper Lake and later), layers of
+//! Where the CPU also has AVX-512 BF16 (with VL: e.g. AMD Zen 4, Intel Cooper Lake and Sapphire Rapids), layers of
 //! more than one input channel multiply in bf16: inputs and weights rounded to 8 significant bits,
 //! products summed in f32 by `vdpbf16ps`, which does twice the multiply-adds of an f32 FMA per
 //! instruction. The input channels go in pairs (each position's two values in one 32-bit word, so
