@@ -382,11 +382,20 @@ thread_local! {
     static F32_PRODUCTS: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-/// Runs `f` with the layers it builds on this thread in f32 products, bf16 or not: for the tests
-/// that hold a network to tract's f32 run at float rounding.
+/// The forms of the layers a test holds a network to: f32 products (`false`), and bf16 (`true`)
+/// where the CPU has them.
 #[cfg(test)]
-pub(crate) fn with_f32_products<R>(f: impl FnOnce() -> R) -> R {
-    F32_PRODUCTS.set(true);
+pub(crate) fn product_forms() -> impl Iterator<Item = bool> + Clone {
+    [false, true]
+        .into_iter()
+        .filter(|&b| !b || bf16_available())
+}
+
+/// Runs `f` with the layers it builds on this thread in bf16 products where `bf16` (and the CPU
+/// has them), else in f32 products: for the tests that hold a network to tract's f32 run.
+#[cfg(test)]
+pub(crate) fn building<R>(bf16: bool, f: impl FnOnce() -> R) -> R {
+    F32_PRODUCTS.set(!bf16);
     let r = f();
     F32_PRODUCTS.set(false);
     r
@@ -394,7 +403,7 @@ pub(crate) fn with_f32_products<R>(f: impl FnOnce() -> R) -> R {
 
 /// Whether the CPU multiplies bf16 pairs (AVX-512 BF16 with VL, and AVX2 + FMA): then the layers
 /// of more than one input channel run in bf16.
-pub(crate) fn bf16_available() -> bool {
+fn bf16_available() -> bool {
     #[cfg(test)]
     if F32_PRODUCTS.get() {
         return false;

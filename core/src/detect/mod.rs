@@ -681,23 +681,16 @@ mod tests {
             .model_for_read(&mut std::io::Cursor::new(MODEL_ONNX))
             .unwrap();
         // Both forms of the layers here where the CPU has bf16 products (`conv`), f32 elsewhere.
-        let forms = [false, true]
-            .into_iter()
-            .filter(|&b| !b || crate::conv::bf16_available());
         for ((h, w), bf16) in [(96, 128), (75, 101)]
             .into_iter()
-            .flat_map(|s| forms.clone().map(move |b| (s, b)))
+            .flat_map(|s| crate::conv::product_forms().map(move |b| (s, b)))
         {
             let mut det = FaceDetector::new().unwrap();
             assert!(det.stem.is_some(), "first layer not taken as a stem");
             let input: Vec<f32> = (0..h * w)
                 .map(|i| ((i * 7919) % 251) as f32 / 250.0)
                 .collect();
-            let idx = if bf16 {
-                det.plan_for(h, w).unwrap()
-            } else {
-                crate::conv::with_f32_products(|| det.plan_for(h, w).unwrap())
-            };
+            let idx = crate::conv::building(bf16, || det.plan_for(h, w).unwrap());
             // Where `conv` runs, the three full 3×3 layers after the first (the fourth is
             // depthwise and stays in tract).
             let after_first = det.plans[idx].stem.as_ref().unwrap().layers_after_first();

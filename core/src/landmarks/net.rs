@@ -203,20 +203,13 @@ mod tests {
     #[test]
     fn shipped_networks_run_their_first_layer_as_a_stem_with_the_same_outputs() {
         // Both forms of the layers here where the CPU has bf16 products (`conv`), f32 elsewhere.
-        let forms = [false, true]
-            .into_iter()
-            .filter(|&b| !b || crate::conv::bf16_available());
-        for bf16 in forms {
+        for bf16 in crate::conv::product_forms() {
             for (name, bytes) in EMBEDDED_FILES.iter().filter(|(n, _)| n.ends_with(".onnx")) {
                 let shapes = shipped_inputs(name);
                 let inputs: Vec<(&str, &[usize])> =
                     shapes.iter().map(|(n, s)| (*n, s.as_slice())).collect();
-                let load = || Net::load(name, bytes, &inputs, &[]).unwrap();
-                let mut with = if bf16 {
-                    load()
-                } else {
-                    crate::conv::with_f32_products(load)
-                };
+                let mut with =
+                    crate::conv::building(bf16, || Net::load(name, bytes, &inputs, &[]).unwrap());
                 let mut without = Net::load_with_stem(name, bytes, &inputs, &[], false).unwrap();
                 assert!(
                     with.stem.is_some(),
