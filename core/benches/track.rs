@@ -1,7 +1,8 @@
 //! Measures the fast tracker's image stages on 640×480 frames: the NCC region search (template of a
 //! 180×200 face region decimated to ~32 px, ±50 % search window), the image pyramid, and pyramidal
 //! Lucas–Kanade on 68 points (11×11 window, 3 levels) — the optical-flow filter's cost per face;
-//! the pyramid also at 1280×720 (the shared video's frames).
+//! the pyramid also at 1280×720 (the shared video's frames), whole and around one face as the
+//! tracker builds it.
 //! Frames: a smooth synthetic texture moved by (6.5, −4.25) px between the two frames.
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -70,6 +71,14 @@ fn bench(c: &mut Criterion) {
     let mut p_hd = Pyramid::new();
     c.bench_function("pyramid_3_levels_1280x720", |b| {
         b.iter(|| p_hd.build(black_box(&hd), 3))
+    });
+    // What the tracker builds for one 300 px face in that frame: the face's box widened by a
+    // quarter of its side plus the coarsest level's window (`track::flow_region`).
+    let face = Rect::new(490.0, 210.0, 300.0, 300.0);
+    let m = 0.25 * 300.0 + 28.0;
+    let around = Rect::new(face.x - m, face.y - m, face.w + 2.0 * m, face.h + 2.0 * m);
+    c.bench_function("pyramid_3_levels_1280x720_300px_face_region", |b| {
+        b.iter(|| p_hd.build_region(black_box(&hd), 3, &around))
     });
 
     let from = landmarks();

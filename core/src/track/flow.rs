@@ -14,7 +14,7 @@
 //! decimation that corner convention scales exactly: level l's coordinates are level 0's / 2^l.
 
 use crate::error::{Error, Result};
-use crate::image::GrayImage;
+use crate::image::{GrayImage, Rect};
 use serde::{Deserialize, Serialize};
 
 /// Smallest side a pyramid level may have; coarser levels carry too few pixels for a window.
@@ -90,11 +90,20 @@ impl LkConfig {
     }
 }
 
-/// An image pyramid: level 0 is a copy of the image, each next level the 2×2 mean of the one before.
+/// An image pyramid: level 0 is a copy of the image, or of a region of it, each next level the 2×2
+/// mean of the one before.
+///
+/// A region pyramid holds exactly the full pyramid's pixels inside the region: its origin is a
+/// multiple of 2^(levels − 1) so every 2×2 block is the full pyramid's block. Points stay in the
+/// frame's level-0 pixels; [`Pyramid::origin`] maps them into the stored levels.
 #[derive(Debug, Clone, Default)]
 pub struct Pyramid {
     levels: Vec<GrayImage>,
     n: usize,
+    /// Level 0's top-left pixel in the frame.
+    origin: [usize; 2],
+    /// The frame's size.
+    frame: (usize, usize),
 }
 
 impl Pyramid {
@@ -103,30 +112,80 @@ impl Pyramid {
         Self::default()
     }
 
+    /// Rebuilds from the whole of `image` with up to `levels` levels (fewer when a level would get
+    /// smaller than [`MIN_LEVEL_SIDE`]), reusing the buffers.
+    pub fn build(&mut self, image: &GrayImage, levels: usize) {
+        let (w, h) = (image.width(), image.height());
+        self.build_region(image, levels, &Rect::new(0.0, 0.0, w as f32, h as f32));
+    }
+
+    /// Rebuilds like [`Pyramid::build`] but stores only the pixels around `region` (frame pixels;
+    /// widened to the level grid and to [`MIN_LEVEL_SIDE`] at the coarsest level, clipped to the
+    /// frame). The number of levels is the whole frame's, so pyramids of one frame size always
+    /// match. Why: the flow reads only windows around the face, and copying and halving a 1280×720
+    /// frame cost more than the face's part of it (`pyramid_*` benches).
+    pub fn build_region(&mut self, image: &GrayImage, levels: usize, region: &Rect) {
+        let (w, h) = (image.width(), image.height());
+        let levels = levels.max(1);
+        let mut n = 1;
+        while n < levels && (w >> n) >= MIN_LEVEL_SIDE && (h >> n) >= MIN_LEVEL_SIDE {
+            n += 1;
+        }
+        let a = 1usize << (n - 1);
+        let span = |lo: f32, len: f32, full: usize| -> (usize, usize) {
+            let need = (MIN_LEVEL_SIDE * a).min(full);
+            let lo = if lo.is_finite() {
+                lo.floor().max(0.0)
+            } else {
+                0.0
+            };
+            let hi = if (lo + len).is_finite() {
+                (lo + len).ceil().max(0.0)
+            } else {
+                full as f32
+            };
+            let (mut lo, mut hi) = ((lo as usize).min(full), (hi as usize).min(full));
+            if hi < lo + need {
+                // Centre the minimum span on the region, inside the frame.
+                let mid = (lo + hi) / 2;
+                lo = mid.saturating_sub(need / 2).min(full - need);
+                hi = lo + need;
+            }
+            let lo = lo / a * a;
+            let hi = hi.next_multiple_of(a).min(full);
+            (lo, hi)
+        };
+        let (x0, x1) = span(region.x, region.w, w);
+        let (y0, y1) = span(region.y, region.h, h);
+        self.origin = [x0, y0];
+        self.frame = (w, h);
+        self.halve(image, n, [x0, y0, x1, y1]);
+    }
+
     crate::cpu::with_avx2_copy! {
-        /// Rebuilds from `image` with up to `levels` levels (fewer when a level would get smaller
-        /// than [`MIN_LEVEL_SIDE`]), reusing the buffers.
-        pub fn build / build_avx2 (&mut self, image: &GrayImage, levels: usize) => build_body
+        /// Copies the frame's `[x0, y0, x1, y1)` into level 0 and halves it `n − 1` times.
+        fn halve / halve_avx2 (&mut self, image: &GrayImage, n: usize, roi: [usize; 4]) => halve_body
     }
 
     #[inline(always)]
-    fn build_body(&mut self, image: &GrayImage, levels: usize) {
-        let levels = levels.max(1);
-        while self.levels.len() < levels {
+    fn halve_body(&mut self, image: &GrayImage, n: usize, [x0, y0, x1, y1]: [usize; 4]) {
+        while self.levels.len() < n {
             self.levels.push(GrayImage::default());
         }
+        let (rw, rh) = (x1 - x0, y1 - y0);
         let l0 = &mut self.levels[0];
-        l0.resize(image.width(), image.height());
-        l0.data_mut().copy_from_slice(image.data());
+        l0.resize(rw, rh);
+        let iw = image.width();
+        for (y, row) in l0.data_mut().chunks_exact_mut(rw.max(1)).enumerate() {
+            let at = (y0 + y) * iw + x0;
+            row.copy_from_slice(&image.data()[at..at + rw]);
+        }
         self.n = 1;
-        for l in 1..levels {
+        for l in 1..n {
             let (w, h) = (
                 self.levels[l - 1].width() / 2,
                 self.levels[l - 1].height() / 2,
             );
-            if w < MIN_LEVEL_SIDE || h < MIN_LEVEL_SIDE {
-                break;
-            }
             let (lo, hi) = self.levels.split_at_mut(l);
             let src = &lo[l - 1];
             let dst = &mut hi[0];
@@ -148,6 +207,11 @@ impl Pyramid {
         }
     }
 
+    /// Level 0's top-left pixel in the frame (level l's is this / 2^l, exactly).
+    pub fn origin(&self) -> [usize; 2] {
+        self.origin
+    }
+
     /// Number of built levels.
     pub fn len(&self) -> usize {
         self.n
@@ -163,13 +227,9 @@ impl Pyramid {
         &self.levels[..self.n]
     }
 
-    /// Full-resolution size (0, 0 when empty).
+    /// The frame's full-resolution size (0, 0 when empty).
     pub fn size(&self) -> (usize, usize) {
-        if self.n == 0 {
-            (0, 0)
-        } else {
-            (self.levels[0].width(), self.levels[0].height())
-        }
+        if self.n == 0 { (0, 0) } else { self.frame }
     }
 }
 
@@ -342,12 +402,20 @@ impl PyramidalLk {
         }
         let mut g = [0.0f32; 2];
         let mut d = [0.0f32; 2];
+        let (po, no) = (prev.origin(), next.origin());
         for l in (0..prev.len()).rev() {
             let scale = 1.0 / (1u32 << l) as f32;
             let (pi, ni) = (&prev.levels()[l], &next.levels()[l]);
-            // Window centre in pixel-index coordinates (corner convention → subtract 0.5).
-            let cx = p[0] * scale - 0.5;
-            let cy = p[1] * scale - 0.5;
+            // Window centre in the frame's pixel-index coordinates at this level (corner
+            // convention → subtract 0.5), then in each stored region's.
+            let fx = p[0] * scale - 0.5;
+            let fy = p[1] * scale - 0.5;
+            let (cx, cy) = (fx - (po[0] >> l) as f32, fy - (po[1] >> l) as f32);
+            // The next pyramid's region starts elsewhere: its window moves by the difference.
+            let (ox, oy) = (
+                (po[0] >> l) as f32 - (no[0] >> l) as f32,
+                (po[1] >> l) as f32 - (no[1] >> l) as f32,
+            );
             self.sample(pi, cx - hw as f32 - 1.0, cy - hw as f32 - 1.0, n + 2, true);
             let [gxx, gxy, gyy] = self.gradients(n);
             let det = gxx * gyy - gxy * gxy;
@@ -360,8 +428,8 @@ impl PyramidalLk {
             for _ in 0..cfg.max_iterations {
                 let [bx, by] = self.mismatch(
                     ni,
-                    cx + g[0] + d[0] - hw as f32,
-                    cy + g[1] + d[1] - hw as f32,
+                    cx + ox + g[0] + d[0] - hw as f32,
+                    cy + oy + g[1] + d[1] - hw as f32,
                 );
                 let ux = (gyy * bx - gxy * by) * inv_det;
                 let uy = (gxx * by - gxy * bx) * inv_det;
@@ -798,11 +866,13 @@ mod tests {
         let mut pyramids = Vec::new();
         for img in [&img0, &img1] {
             let (mut base, mut avx2) = (Pyramid::new(), Pyramid::new());
-            base.build_body(img, 3);
+            base.build(img, 3);
+            base.halve_body(img, 3, [0, 0, 640, 480]);
+            avx2.build(img, 3);
             #[allow(unsafe_code)]
             // SAFETY: the CPU has AVX2 and FMA (checked above).
             unsafe {
-                avx2.build_avx2(img, 3)
+                avx2.halve_avx2(img, 3, [0, 0, 640, 480])
             };
             assert_eq!(base.len(), avx2.len());
             for (a, b) in base.levels().iter().zip(avx2.levels()) {
@@ -913,6 +983,94 @@ mod tests {
         let cap = p.levels()[0].data().as_ptr();
         p.build(&img, 4);
         assert_eq!(cap, p.levels()[0].data().as_ptr());
+    }
+
+    /// Level `l` of `p` as frame-level pixels: the value at (x, y) of level l's frame grid.
+    fn at(p: &Pyramid, l: usize, x: usize, y: usize) -> u8 {
+        let o = p.origin();
+        p.levels()[l].get(x - (o[0] >> l), y - (o[1] >> l))
+    }
+
+    #[test]
+    fn region_pyramids_hold_the_full_pyramids_pixels() {
+        let img = warped([[1.02, 0.03], [-0.02, 0.99]], [3.3, -2.1]);
+        let mut full = Pyramid::new();
+        full.build(&img, 3);
+        let regions = [
+            Rect::new(101.3, 57.8, 180.0, 203.5),
+            // At the frame's corners (clipped) and tiny (widened to the coarsest level's minimum).
+            Rect::new(-40.0, 300.0, 120.0, 400.0),
+            Rect::new(630.0, 2.0, 3.0, 3.0),
+            Rect::new(f32::NAN, 10.0, 20.0, 20.0),
+        ];
+        for r in regions {
+            let mut p = Pyramid::new();
+            p.build_region(&img, 3, &r);
+            assert_eq!(p.len(), full.len());
+            assert_eq!(p.size(), (640, 480));
+            let o = p.origin();
+            assert_eq!((o[0] % 4, o[1] % 4), (0, 0), "{r:?}: origin {o:?}");
+            for l in 0..p.len() {
+                let lv = &p.levels()[l];
+                assert!(lv.width() >= MIN_LEVEL_SIDE && lv.height() >= MIN_LEVEL_SIDE);
+                assert!((o[0] >> l) + lv.width() <= full.levels()[l].width());
+                assert!((o[1] >> l) + lv.height() <= full.levels()[l].height());
+                for y in 0..lv.height() {
+                    for x in 0..lv.width() {
+                        let (fx, fy) = (x + (o[0] >> l), y + (o[1] >> l));
+                        assert_eq!(
+                            lv.get(x, y),
+                            full.levels()[l].get(fx, fy),
+                            "{r:?} level {l}"
+                        );
+                    }
+                }
+            }
+            // The region asked for is inside (where the frame has it).
+            if r.x.is_finite() {
+                let x0 = r.x.max(0.0) as usize;
+                let y0 = r.y.max(0.0) as usize;
+                let x1 = ((r.x + r.w) as usize).min(640);
+                let y1 = ((r.y + r.h) as usize).min(480);
+                assert!(o[0] <= x0 && o[1] <= y0, "{r:?}");
+                assert!(o[0] + p.levels()[0].width() >= x1, "{r:?}");
+                assert!(o[1] + p.levels()[0].height() >= y1, "{r:?}");
+                assert_eq!(at(&p, 0, x0, y0), img.get(x0, y0));
+            }
+        }
+    }
+
+    #[test]
+    fn flow_between_region_pyramids_equals_the_full_frames() {
+        let id = [[1.0, 0.0], [0.0, 1.0]];
+        let (img0, img1) = (warped(id, [0.0, 0.0]), warped(id, [6.6, -3.9]));
+        let (mut f0, mut f1) = (Pyramid::new(), Pyramid::new());
+        f0.build(&img0, 3);
+        f1.build(&img1, 3);
+        // Each frame's region around its own face position, as the tracker builds them.
+        let (mut r0, mut r1) = (Pyramid::new(), Pyramid::new());
+        r0.build_region(&img0, 3, &Rect::new(150.0, 110.0, 300.0, 250.0));
+        r1.build_region(&img1, 3, &Rect::new(157.0, 105.0, 300.0, 250.0));
+        assert_ne!(r0.origin(), r1.origin());
+        let from: Vec<[f32; 2]> = (0..40)
+            .map(|i| [200.0 + 5.3 * i as f32, 160.0 + 3.7 * (i % 13) as f32])
+            .collect();
+        let run = |a: &Pyramid, b: &Pyramid| {
+            let n = from.len();
+            let (mut to, mut st, mut err) = (vec![[0.0; 2]; n], vec![false; n], vec![0.0; n]);
+            let mut lk = PyramidalLk::new(LkConfig::default()).unwrap();
+            lk.track(a, b, &from, &mut to, &mut st, &mut err).unwrap();
+            (to, st, err)
+        };
+        let (full, region) = (run(&f0, &f1), run(&r0, &r1));
+        assert!(full.1.iter().filter(|&&s| s).count() > 35);
+        assert_eq!(full.1, region.1);
+        for (a, b) in full.0.iter().zip(&region.0) {
+            assert!(
+                (a[0] - b[0]).abs() < 1e-3 && (a[1] - b[1]).abs() < 1e-3,
+                "{a:?} {b:?}"
+            );
+        }
     }
 
     #[test]

@@ -814,7 +814,13 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         let use_flow = video && self.config.flow_filter;
         if use_flow {
             let t = Instant::now();
-            self.pyr_cur.build(image, self.config.lk.levels);
+            // Only around the faces: the flow reads windows near their landmarks, in this frame
+            // (as the next image) and in the next (as the previous one). Without faces nothing is
+            // built: a new track resets its filter, so no flow reads this frame's pyramid.
+            if let Some(region) = flow_region(&self.slots, &self.config.lk) {
+                self.pyr_cur
+                    .build_region(image, self.config.lk.levels, &region);
+            }
             timings.flow_us += us(t);
         }
 
@@ -929,6 +935,29 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         self.frame_index += 1;
         Ok(())
     }
+}
+
+/// The part of the frame the flow filter reads for the active faces: the union of their regions,
+/// each widened by a quarter of its larger side (landmarks outside the box, motion to the next
+/// frame) plus the LK window at the coarsest level. `None` without an active face.
+fn flow_region(slots: &[Slot], lk: &LkConfig) -> Option<Rect> {
+    let window = ((lk.half_window + 2) << lk.levels.saturating_sub(1)) as f32;
+    let mut out: Option<[f32; 4]> = None;
+    for s in slots.iter().filter(|s| s.active) {
+        let r = s.rect;
+        let m = 0.25 * r.w.max(r.h) + window;
+        let b = [r.x - m, r.y - m, r.x + r.w + m, r.y + r.h + m];
+        out = Some(match out {
+            None => b,
+            Some(o) => [
+                o[0].min(b[0]),
+                o[1].min(b[1]),
+                o[2].max(b[2]),
+                o[3].max(b[3]),
+            ],
+        });
+    }
+    out.map(|[x0, y0, x1, y1]| Rect::new(x0, y0, x1 - x0, y1 - y0))
 }
 
 /// Larger side of the points' bounding box.
