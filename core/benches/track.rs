@@ -57,6 +57,17 @@ fn bench(c: &mut Criterion) {
     c.bench_function("ncc_template_cut", |b| {
         b.iter(|| ncc.set_template(black_box(&prev), &region))
     });
+    // A 300 px face in a 1280×720 frame (the shared video's size): the same decimated template,
+    // a window of 2.25× the pixels to decimate.
+    let (hd0, hd1) = (
+        frame_sized(1280, 720, [0.0, 0.0]),
+        frame_sized(1280, 720, [9.5, -6.0]),
+    );
+    let mut ncc_hd = NccMatcher::new(32);
+    assert!(ncc_hd.set_template(&hd0, &Rect::new(490.0, 210.0, 300.0, 300.0)));
+    c.bench_function("ncc_search_1280x720_300px_face", |b| {
+        b.iter(|| ncc_hd.search(black_box(&hd1), 0.5).unwrap())
+    });
 
     let mut p0 = Pyramid::new();
     let mut p1 = Pyramid::new();
