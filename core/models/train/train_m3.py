@@ -67,6 +67,11 @@ ZONE_SEED = {"brows": 2, "eye": 3, "mouth": 4, "face": 5, "nose": 6, "mouth_fine
 # Standard deviation of the Gaussian jitter of a zone's two reference points in training, in units of
 # the outer-eye-corner distance (zone_sample): the size of the reference errors the net must absorb.
 REF_NOISE = {"default": 0.045}
+# Probability per net of a lower-face shape warp on a training patch (zone_sample), e.g.
+# --shape-warp face=0.5; none by default. Ranges: widening at the patch bottom, vertical stretch.
+SHAPE_WARP = {}
+SHAPE_WARP_WIDEN = 0.15
+SHAPE_WARP_STRETCH = 0.1
 DEVICE = torch.device("cpu")
 # Weight averaging (exponential moving average of the weights and BN statistics); 0 = the last weights.
 EMA_DECAYS = ()
@@ -211,9 +216,38 @@ def soft_yaw(cls, rng):
     return e / e.sum()
 
 
-def zone_sample(zone, img, pts, rng, ref_noise=0.045, aug=True):
+def lower_face_warp(W, H, y0, a, t):
+    """A smooth change of face shape below the patch's eye line y0: the lower face stretched
+    vertically by t and widened by 1 + a at the patch's bottom (linearly from the eye line).
+    Returns (forward map of patch points, inverse map of patch points)."""
+    def widen(y):
+        return 1.0 + a * np.clip((y - y0) / (H - y0), 0.0, 1.0)
+
+    def forward(x, y):
+        return W / 2 + (x - W / 2) * widen(y), np.where(y > y0, y0 + (y - y0) * t, y)
+
+    def inverse(x, y):
+        yu = np.where(y > y0, y0 + (y - y0) / t, y)
+        return W / 2 + (x - W / 2) / widen(yu), yu
+    return forward, inverse
+
+
+def warped_sample(img, A, W, H, inverse):
+    """D.sample through a non-rigid patch warp (`inverse` maps output patch points to the
+    unwarped patch), in D.sample's pixel convention."""
+    u, v = np.meshgrid(np.arange(W) + 0.5, np.arange(H) + 0.5)
+    x, y = inverse(u, v)
+    X = A[0, 0] * x + A[0, 1] * y + A[0, 2] - 0.5
+    Y = A[1, 0] * x + A[1, 1] * y + A[1, 2] - 0.5
+    return cv2.remap(img, X.astype(np.float32), Y.astype(np.float32), cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)
+
+
+def zone_sample(zone, img, pts, rng, ref_noise=0.045, aug=True, shape_warp=0.0):
     """Patch of a zone from jittered reference points (level-1 errors are a few % of the
-    inter-ocular distance, so the refs move by that much in training)."""
+    inter-ocular distance, so the refs move by that much in training). With probability
+    `shape_warp` the lower face is reshaped (lower_face_warp): new jaw and chin shapes for a zone
+    that otherwise sees 1,079 faces' worth of them."""
     iod = D.outer_eye_distance(pts)
     r0, r1 = pts[zone["ref68"][0]].astype(float), pts[zone["ref68"][1]].astype(float)
     if aug:
@@ -221,12 +255,19 @@ def zone_sample(zone, img, pts, rng, ref_noise=0.045, aug=True):
         r1 = r1 + rng.normal(0, ref_noise * iod, 2)
     A = D.zone_map(zone, r0, r1)
     W, H = zone["width"], zone["height"]
-    patch = D.sample(img, A, W, H)
+    tgt = D.apply(D.invert(A), pts[zone["indices68"]])
+    if aug and shape_warp > 0 and rng.random() < shape_warp:
+        y0 = zone["template"][0][1] * H
+        forward, inverse = lower_face_warp(W, H, y0, rng.uniform(-SHAPE_WARP_WIDEN, SHAPE_WARP_WIDEN),
+                                           rng.uniform(1 - SHAPE_WARP_STRETCH, 1 + SHAPE_WARP_STRETCH))
+        patch = warped_sample(img, A, W, H, inverse)
+        tgt = np.stack(forward(tgt[:, 0], tgt[:, 1]), axis=1)
+    else:
+        patch = D.sample(img, A, W, H)
     if aug:
         patch = photometric(patch, rng, occlude=False)
     patch = D.zone_filter(zone, patch)
-    tgt = D.apply(D.invert(A), pts[zone["indices68"]]) / [W, H]
-    return patch, tgt, A
+    return patch, tgt / [W, H], A
 
 
 def zone_batch(name, data, rng, weights, genki=None):
@@ -254,7 +295,8 @@ def zone_batch(name, data, rng, weights, genki=None):
             continue
         f = data.faces[i]
         patch, tgt, A = zone_sample(zone, data.image(f), f["pts"], rng,
-                                    ref_noise=REF_NOISE.get(name, REF_NOISE["default"]))
+                                    ref_noise=REF_NOISE.get(name, REF_NOISE["default"]),
+                                    shape_warp=SHAPE_WARP.get(name, 0.0))
         X[k, 0] = patch / 255.0
         Y[k] = tgt.reshape(-1)
         YAW[k] = soft_yaw(f["yaw_class"], rng)
@@ -443,6 +485,8 @@ def main():
     ap.add_argument("--pseudo-share", type=float, default=None)
     # e.g. --ref-noise face=0.025,nose=0.025 (default REF_NOISE)
     ap.add_argument("--ref-noise", default=None)
+    # e.g. --shape-warp face=0.5 (default SHAPE_WARP: none)
+    ap.add_argument("--shape-warp", default=None)
     # Another seed for a run-to-run spread check (the shipped weights use SEED)
     ap.add_argument("--seed", type=int, default=None)
     # e.g. --ema 0.999,0.9995: also write NAME.ema0.999.onnx ... (weight averages of the same run)
@@ -460,6 +504,10 @@ def main():
         EMA_DECAYS = tuple(float(d) for d in a.ema.split(","))
     if a.seed is not None:
         SEED = a.seed
+    if a.shape_warp:
+        for item in a.shape_warp.split(","):
+            k, v = item.split("=")
+            SHAPE_WARP[k] = float(v)
     if a.ref_noise:
         for item in a.ref_noise.split(","):
             k, v = item.split("=")
@@ -490,7 +538,8 @@ def main():
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
-            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} ref_noise={REF_NOISE} device={DEVICE}")
+            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} ref_noise={REF_NOISE}"
+            f"{f' shape_warp={SHAPE_WARP}' if SHAPE_WARP else ''} device={DEVICE}")
     pseudo = None
     if any(n in only for n in PSEUDO_NETS):
         pseudo = os.environ.get("MONOTRACK_PSEUDO") or pseudo_genki.default_path()
@@ -531,6 +580,8 @@ def run_zones_in_processes(zones, a, fh):
         base += ["--zone-size", a.zone_size]
     base += ["--pseudo-nets", ",".join(PSEUDO_NETS), "--pseudo-share", str(PSEUDO_SHARE), "--seed", str(SEED),
              "--ref-noise", ",".join(f"{k}={v}" for k, v in REF_NOISE.items())]
+    if SHAPE_WARP:
+        base += ["--shape-warp", ",".join(f"{k}={v}" for k, v in SHAPE_WARP.items())]
     if EMA_DECAYS:
         base += ["--ema", ",".join(str(d) for d in EMA_DECAYS)]
     pending, running = list(zones), []
