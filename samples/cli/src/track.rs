@@ -91,7 +91,7 @@ fn probe(path: &Path) -> Result<(usize, usize, f64, Option<usize>), String> {
             "-select_streams",
             "v:0",
             "-show_entries",
-            "stream=width,height,avg_frame_rate,nb_frames",
+            "stream=width,height,avg_frame_rate,nb_frames,duration",
             "-of",
             "default=noprint_wrappers=1",
         ])
@@ -115,9 +115,12 @@ fn probe(path: &Path) -> Result<(usize, usize, f64, Option<usize>), String> {
         .ok_or_else(|| format!("{}: no video stream", path.display()))
 }
 
-/// Parses ffprobe's `key=value` lines.
+/// Parses ffprobe's `key=value` lines. The frame count is the container's `nb_frames` unless the
+/// stream's duration at its frame rate says otherwise by more than a frame: an edit list that trims
+/// a clip (the shared news video: 158 packets, 55 frames shown, all ffmpeg decodes) leaves
+/// `nb_frames` counting the trimmed packets too.
 fn parse_probe(text: &str) -> Option<(usize, usize, f64, Option<usize>)> {
-    let (mut w, mut h, mut fps, mut n) = (None, None, None, None);
+    let (mut w, mut h, mut fps, mut n, mut duration) = (None, None, None, None, None);
     for line in text.lines() {
         let Some((k, v)) = line.trim().split_once('=') else {
             continue;
@@ -134,10 +137,16 @@ fn parse_probe(text: &str) -> Option<(usize, usize, f64, Option<usize>)> {
                     None => v.parse().ok().filter(|f: &f64| *f > 0.0),
                 }
             }
-            "nb_frames" => n = v.parse().ok(),
+            "nb_frames" => n = v.parse::<usize>().ok(),
+            "duration" => duration = v.parse::<f64>().ok().filter(|d| d.is_finite() && *d > 0.0),
             _ => {}
         }
     }
+    let shown = fps.zip(duration).map(|(f, d)| (f * d).round() as usize);
+    let n = match (n, shown) {
+        (Some(n), Some(s)) if n.abs_diff(s) > 1 => Some(s),
+        (n, s) => n.or(s),
+    };
     Some((w?, h?, fps.unwrap_or(DIR_FPS), n))
 }
 
@@ -849,6 +858,18 @@ mod tests {
         assert_eq!(p, (1280, 720, 25.0, Some(158)));
         let p = parse_probe("width=640\nheight=480\navg_frame_rate=0/0\nnb_frames=N/A\n").unwrap();
         assert_eq!(p, (640, 480, DIR_FPS, None));
+        // An edit-listed clip: the duration's frames, not the packets; within a frame the count.
+        let clip =
+            "width=1280\nheight=720\navg_frame_rate=25/1\nduration=2.186044\nnb_frames=158\n";
+        assert_eq!(parse_probe(clip).unwrap(), (1280, 720, 25.0, Some(55)));
+        let p =
+            parse_probe("width=8\nheight=8\navg_frame_rate=30/1\nduration=9.99\nnb_frames=300\n");
+        assert_eq!(p.unwrap().3, Some(300));
+        let p =
+            parse_probe("width=8\nheight=8\navg_frame_rate=30/1\nduration=2.0\nnb_frames=N/A\n");
+        assert_eq!(p.unwrap().3, Some(60));
+        let p = parse_probe("width=8\nheight=8\navg_frame_rate=30/1\nduration=N/A\nnb_frames=12\n");
+        assert_eq!(p.unwrap().3, Some(12));
         assert!(parse_probe("").is_none());
         assert_eq!(
             Progress::line(Some(10), 5, 1.0),
