@@ -586,37 +586,32 @@ impl Bands {
 
     #[inline(always)]
     fn decimate_body(&mut self, image: &GrayImage, cells: Cells, pad: Padded, out: &mut Vec<f32>) {
-        decimate(image, cells, pad, self, out);
-    }
-}
-
-/// [`Bands::decimate`]'s body.
-#[inline(always)]
-fn decimate(image: &GrayImage, cells: Cells, pad: Padded, bands: &mut Bands, out: &mut Vec<f32>) {
-    let (cols, f, stride) = (cells.cols, cells.f, pad.stride);
-    assert!(stride >= cols && pad.rows >= cells.rows);
-    out.clear();
-    out.resize(stride * pad.rows, 0.0);
-    if f == 1 {
-        for r in 0..cells.rows {
-            let src = &image.row(cells.y0 + r)[cells.x0..cells.x0 + cols];
-            for (o, &s) in out[r * stride..r * stride + cols].iter_mut().zip(src) {
-                *o = f32::from(s);
+        let (cols, f, stride) = (cells.cols, cells.f, pad.stride);
+        assert!(stride >= cols && pad.rows >= cells.rows);
+        out.clear();
+        out.resize(stride * pad.rows, 0.0);
+        if f == 1 {
+            for r in 0..cells.rows {
+                let src = &image.row(cells.y0 + r)[cells.x0..cells.x0 + cols];
+                for (o, &s) in out[r * stride..r * stride + cols].iter_mut().zip(src) {
+                    *o = f32::from(s);
+                }
             }
+            return;
         }
-        return;
-    }
-    // Column sums of each band of `f` rows first (wide integer adds the compiler vectorises), then
-    // the `f`-wide groups of each band: summing `f`-pixel chunks row by row instead measured 2×
-    // slower for the whole search. u16 holds a band's column sum while `f · 255` fits.
-    if f * 255 <= usize::from(u16::MAX) {
-        decimate_bands(image, cells, stride, &mut bands.narrow, out);
-    } else {
-        decimate_bands(image, cells, stride, &mut bands.wide, out);
+        // Column sums of each band of `f` rows first (wide integer adds the compiler vectorises),
+        // then the `f`-wide groups of each band: summing `f`-pixel chunks row by row instead
+        // measured 2× slower for the whole search. u16 holds a band's column sum while `f · 255`
+        // fits.
+        if f * 255 <= usize::from(u16::MAX) {
+            decimate_bands(image, cells, stride, &mut self.narrow, out);
+        } else {
+            decimate_bands(image, cells, stride, &mut self.wide, out);
+        }
     }
 }
 
-/// [`decimate`] for `f > 1` (rows `stride` apart), column sums of each band of rows in `T` (see
+/// [`Bands::decimate`] for `f > 1` (rows `stride` apart), column sums of each band of rows in `T` (see
 /// there).
 #[inline(always)]
 fn decimate_bands<T>(
