@@ -134,15 +134,17 @@ impl Pyramid {
         let a = 1usize << (n - 1);
         let span = |lo: f32, len: f32, full: usize| -> (usize, usize) {
             let need = (MIN_LEVEL_SIDE * a).min(full);
-            let lo = if lo.is_finite() {
-                lo.floor().max(0.0)
-            } else {
-                0.0
-            };
+            // The end from the region's own start: ceil(x + w), not floor(x) + w, which could
+            // stop a pixel short of a fractional region.
             let hi = if (lo + len).is_finite() {
                 (lo + len).ceil().max(0.0)
             } else {
                 full as f32
+            };
+            let lo = if lo.is_finite() {
+                lo.floor().max(0.0)
+            } else {
+                0.0
             };
             let (mut lo, mut hi) = ((lo as usize).min(full), (hi as usize).min(full));
             if hi < lo + need {
@@ -998,6 +1000,9 @@ mod tests {
         full.build(&img, 3);
         let regions = [
             Rect::new(101.3, 57.8, 180.0, 203.5),
+            // Ends just past a multiple of the level grid: the region's last pixel column and row
+            // (280 and 240) must be stored.
+            Rect::new(100.5, 40.5, 180.0, 200.0),
             // At the frame's corners (clipped) and tiny (widened to the coarsest level's minimum).
             Rect::new(-40.0, 300.0, 120.0, 400.0),
             Rect::new(630.0, 2.0, 3.0, 3.0),
@@ -1030,8 +1035,8 @@ mod tests {
             if r.x.is_finite() {
                 let x0 = r.x.max(0.0) as usize;
                 let y0 = r.y.max(0.0) as usize;
-                let x1 = ((r.x + r.w) as usize).min(640);
-                let y1 = ((r.y + r.h) as usize).min(480);
+                let x1 = ((r.x + r.w).ceil() as usize).min(640);
+                let y1 = ((r.y + r.h).ceil() as usize).min(480);
                 assert!(o[0] <= x0 && o[1] <= y0, "{r:?}");
                 assert!(o[0] + p.levels()[0].width() >= x1, "{r:?}");
                 assert!(o[1] + p.levels()[0].height() >= y1, "{r:?}");
