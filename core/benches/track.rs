@@ -78,10 +78,10 @@ fn bench(c: &mut Criterion) {
         b.iter(|| p1.build(black_box(&next), 3))
     });
     // The shared video's frame size.
-    let hd = frame_sized(1280, 720, [0.0, 0.0]);
+    let hd = &hd0;
     let mut p_hd = Pyramid::new();
     c.bench_function("pyramid_3_levels_1280x720", |b| {
-        b.iter(|| p_hd.build(black_box(&hd), 3))
+        b.iter(|| p_hd.build(black_box(hd), 3))
     });
     // What the tracker builds for one 300 px face in that frame: the face's box widened by a
     // quarter of its side plus the coarsest level's window (`track::flow_region`).
@@ -89,7 +89,7 @@ fn bench(c: &mut Criterion) {
     let m = 0.25 * 300.0 + 28.0;
     let around = Rect::new(face.x - m, face.y - m, face.w + 2.0 * m, face.h + 2.0 * m);
     c.bench_function("pyramid_3_levels_1280x720_300px_face_region", |b| {
-        b.iter(|| p_hd.build_region(black_box(&hd), 3, &around))
+        b.iter(|| p_hd.build_region(black_box(hd), 3, &around))
     });
 
     let from = landmarks();
