@@ -94,7 +94,7 @@ struct Level {
     th: usize,
     /// √Σ template².
     norm: f64,
-    /// Window cells `ww × wh`, rows `ws` apart, zero past them (layout: [`Level::padded`]), so the
+    /// Window cells `ww × wh`, rows `ws` apart, zero past them (layout: [`Level::set_window`]), so the
     /// correlation's blocks of outputs read past the window's end without checks.
     window: Vec<f32>,
     ww: usize,
@@ -110,7 +110,7 @@ struct Level {
 impl Level {
     /// Sets the window size (cells) and returns the buffer layout the correlation needs: rows
     /// `WINDOW_PAD` cells longer and the rows of offsets rounded up to `ROWS`.
-    fn padded(&mut self, ww: usize, wh: usize) -> Padded {
+    fn set_window(&mut self, ww: usize, wh: usize) -> Padded {
         self.ww = ww;
         self.wh = wh;
         self.ws = ww + WINDOW_PAD;
@@ -241,7 +241,7 @@ impl Level {
     ) -> (f64, usize, usize) {
         let (_, ny) = self.offsets();
         debug_assert!(xs.len() <= BLOCK && ys.len() <= ROWS && xs.end <= self.offsets().0);
-        // The kernel's rows of offsets must stay within the window's padded rows (`padded`):
+        // The kernel's rows of offsets must stay within the window's padded rows (`set_window`):
         // start higher where the range ends near them.
         let y0 = ys.start.min(ny.next_multiple_of(ROWS) - ROWS);
         self.correlate([xs.start, y0], 1, ROWS);
@@ -294,7 +294,7 @@ impl Level {
         self.nxp = nxp;
         self.num.clear();
         self.num.resize(nxp * rows, 0.0);
-        // The reads stay inside the window's rows of `ws` cells (`padded`).
+        // The reads stay inside the window's rows of `ws` cells (`set_window`).
         assert!(ws >= x0 + nxp + tw - 1 && self.window.len() >= (y0 + rows + th - 1) * ws);
         assert!(rows.is_multiple_of(ROWS) && self.template.len() == tw * th);
         for j in (0..rows).step_by(ROWS) {
@@ -472,7 +472,7 @@ impl NccMatcher {
             rows: wh,
             f,
         };
-        let pad = self.fine.padded(ww, wh);
+        let pad = self.fine.set_window(ww, wh);
         self.bands
             .decimate(image, cells, pad, &mut self.fine.window);
         self.fine.integrals();
@@ -481,7 +481,7 @@ impl NccMatcher {
         let coarse = self.coarse_to_fine && ww / 2 >= self.coarse.tw && wh / 2 >= self.coarse.th;
         let (peak, bi, bj) = if coarse {
             let c = &mut self.coarse;
-            let pad = c.padded(ww / 2, wh / 2);
+            let pad = c.set_window(ww / 2, wh / 2);
             halve(&self.fine.window, ww, wh, self.fine.ws, pad, &mut c.window);
             c.integrals();
             c.correlate_all();
