@@ -551,7 +551,7 @@ impl NccMatcher {
     }
 }
 
-/// Column sums of a band of rows, kept across frames ([`decimate`]).
+/// Column sums of a band of rows, kept across frames ([`Bands::decimate`]).
 #[derive(Debug, Clone, Default)]
 struct Bands {
     narrow: Vec<u16>,
