@@ -42,6 +42,11 @@ pub fn embedded_file(name: &str) -> Option<&'static [u8]> {
 
 /// Number of level-1 landmarks (`M3_IO.md`).
 const N_LEVEL1: usize = 32;
+
+/// How far the 68-point box's top lies above the level-1 points' box, as a fraction of the latter's
+/// height: the median over the faces68 training split's annotations (0.164; 10th–90th percentile
+/// 0.03–0.22, with pitch and brow shape). [`M3::level1_box`] uses it.
+pub const LEVEL1_BOX_TOP: f32 = 0.164;
 /// Largest crop or patch side accepted from `m3.json`: far above any sensible network input, it
 /// only stops a corrupt configuration from asking for huge buffers.
 const MAX_INPUT_SIDE: usize = 1024;
@@ -950,6 +955,35 @@ impl M3 {
         Ok(l1.face_prob)
     }
 
+    /// The face's box in the M3 convention (the tight box of the 68 landmarks), estimated from the
+    /// level-1 points [`M3::level1`] left in `out`: their tight box, raised at the top by
+    /// [`LEVEL1_BOX_TOP`] of its height for the brows level 1 does not give. `None` when a point is
+    /// not finite or the box is empty. The detection cascade (`crate::track`) checks a detection
+    /// again on this box: the detector's boxes of small faces are off by enough to cost the
+    /// face check and the IoU (`models/MODEL_CARD.md`).
+    pub fn level1_box(&self, out: &FaceLandmarks) -> Option<Rect> {
+        let (mut x0, mut y0) = (f32::INFINITY, f32::INFINITY);
+        let (mut x1, mut y1) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
+        for &i in &self.cfg.level1.indices68 {
+            let [x, y] = out.points[i];
+            if !(x.is_finite() && y.is_finite()) {
+                return None;
+            }
+            x0 = x0.min(x);
+            y0 = y0.min(y);
+            x1 = x1.max(x);
+            y1 = y1.max(y);
+        }
+        let h = y1 - y0;
+        let rect = Rect::new(
+            x0,
+            y0 - LEVEL1_BOX_TOP * h,
+            x1 - x0,
+            h * (1.0 + LEVEL1_BOX_TOP),
+        );
+        rect.is_valid().then_some(rect)
+    }
+
     /// Level 2 on a face whose level-1 outputs are in `out` (from [`M3::level1`] on the same
     /// image): the zone landmarks replace level 1's in their zones, and the gestures and gaze are
     /// filled in.
@@ -1216,6 +1250,28 @@ mod tests {
         assert_eq!(a, b);
         let conf = m3.face_confidence(&img, &face).unwrap();
         assert_eq!(conf, a.face_prob);
+    }
+
+    #[test]
+    fn level1_box_bounds_the_level1_points_and_adds_the_brows() {
+        let mut m3 = M3::new().unwrap();
+        let img = image();
+        let mut lm = FaceLandmarks::default();
+        m3.level1(&img, &test_face(), &mut lm).unwrap();
+        let b = m3.level1_box(&lm).unwrap();
+        let idx = &m3.cfg.level1.indices68;
+        let ys = idx.iter().map(|&i| lm.points[i][1]);
+        let (top, bottom) = ys.fold((f32::MAX, f32::MIN), |(a, c), y| (a.min(y), c.max(y)));
+        for &i in idx {
+            let [x, y] = lm.points[i];
+            assert!(x >= b.x - 1e-3 && x <= b.x + b.w + 1e-3, "{i}");
+            assert!(y >= b.y && y <= b.y + b.h + 1e-3, "{i}");
+        }
+        let h = bottom - top;
+        assert!((top - b.y - LEVEL1_BOX_TOP * h).abs() < 1e-3);
+        assert!((b.y + b.h - bottom).abs() < 1e-3);
+        lm.points[idx[3]][0] = f32::NAN;
+        assert_eq!(m3.level1_box(&lm), None);
     }
 
     #[test]

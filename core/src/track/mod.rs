@@ -43,11 +43,24 @@ use std::time::Instant;
 pub const MAX_FACES_LIMIT: usize = 16;
 
 /// Default [`TrackerConfig::min_detection_score`]: detector candidates down to this go to M3's
-/// face check. With [`DEFAULT_MIN_DETECTION_CONFIDENCE`] and the detector's default min face, the
-/// highest faces68 validation recall at < 0.05 false positives per image (0.3 finds the same faces
-/// at more false positives: 0.047 against 0.028 per image; `models/train/detector/eval_peers.py`,
-/// `models/MODEL_CARD.md`).
+/// face check ([`check_detections`]). With [`DEFAULT_MIN_DETECTION_CONFIDENCE`] and the detector's
+/// default min face: 123 of the 128 faces68 validation faces at 0.009 false positives per image;
+/// 0.25 finds one more (124) at 0.019 for about 1.5× the face checks
+/// (`models/train/detector/eval_peers.py`, `models/MODEL_CARD.md`).
 pub const DEFAULT_MIN_DETECTION_SCORE: f32 = 0.4;
+
+/// The small-faces operating point: detector min face (pixels) at which the SDK's detection
+/// ([`check_detections`] with [`SMALL_FACES_MIN_DETECTION_SCORE`] and
+/// [`DEFAULT_MIN_DETECTION_CONFIDENCE`]) finds 127 of the 128 faces68 validation faces at 0.028
+/// false positives per image (`models/MODEL_CARD.md`, face detector), against 123 for the default
+/// min face, which skips the 17–23 px faces of group photos. It costs about twice the detector
+/// time of the default (a 640×480 frame runs at 400×300) and more face checks, so the video
+/// defaults keep the faster point; `monotrack landmarks` detects still images at this one. Apps
+/// choose it through `DetectorConfig::min_face_px` and [`TrackerConfig::min_detection_score`].
+pub const SMALL_FACES_MIN_FACE_PX: f32 = 16.0;
+
+/// The detector score of the small-faces operating point (see [`SMALL_FACES_MIN_FACE_PX`]).
+pub const SMALL_FACES_MIN_DETECTION_SCORE: f32 = 0.25;
 
 /// Default [`TrackerConfig::min_detection_confidence`] (see [`DEFAULT_MIN_DETECTION_SCORE`]).
 pub const DEFAULT_MIN_DETECTION_CONFIDENCE: f32 = 0.95;
@@ -97,6 +110,83 @@ pub trait LandmarkEstimator {
     fn complete(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
         self.estimate(image, face, out)
     }
+
+    /// The face's box in the detector's convention, estimated from what
+    /// [`Self::face_confidence`] just left in `out` (M3: [`crate::landmarks::M3::level1_box`]).
+    /// The detection cascade ([`check_detections`]) checks a detection again on it. The default,
+    /// `None`, keeps the detector's box.
+    fn face_box(&self, out: &FaceLandmarks) -> Option<Rect> {
+        let _ = out;
+        None
+    }
+}
+
+/// A detection whose face check on the detector's box is below this is rejected without the
+/// second check on [`LandmarkEstimator::face_box`]: on the faces68 validation split no face the
+/// cascade finds scores below it on the detector's box, while about half of the candidates do
+/// (`models/MODEL_CARD.md`, face detector), so it halves the second runs.
+pub const MIN_CONFIDENCE_TO_REFINE: f32 = 0.2;
+
+/// Two accepted detections overlapping by more than this are one face (the better-ranked one
+/// stays): re-boxed on the face, two candidates of one face can land on nearly the same box. The
+/// detector's own NMS default.
+pub const CASCADE_NMS_IOU: f32 = 0.4;
+
+/// The SDK's detection cascade: every candidate in `candidates` (box, detector score) gets
+/// `estimator`'s face check ([`LandmarkEstimator::face_confidence`]). Where the estimator gives a
+/// box of its own for the face ([`LandmarkEstimator::face_box`]) and the first check reaches
+/// [`MIN_CONFIDENCE_TO_REFINE`], the face is checked again on that box, which becomes the
+/// detection's box: the compact detector's boxes of small faces are too small and off-centre, which
+/// costs both the face check and the box's overlap with the face (on the faces68 validation split,
+/// `models/MODEL_CARD.md`). Detections whose (last) check reaches `min_confidence` go to `out` as
+/// (box, detector score, face confidence, what the check left for
+/// [`LandmarkEstimator::complete`]), ranked by detector score × confidence (the compact detector
+/// scores some face-like clutter and oversized boxes above the real face, and the confidence alone
+/// saturates near 1 on small clutter, so neither ranks well alone), with those overlapping a
+/// better-ranked one by more than [`CASCADE_NMS_IOU`] dropped. `candidates` is sorted by score
+/// (best first) on the way, so equal products keep the detector's order; `scratch` is working
+/// space. Allocates only when `out` must grow.
+///
+/// # Errors
+/// Whatever the estimator reports.
+pub fn check_detections<L: LandmarkEstimator>(
+    estimator: &mut L,
+    image: &GrayImage,
+    candidates: &mut [(Rect, f32)],
+    min_confidence: f32,
+    scratch: &mut FaceLandmarks,
+    out: &mut Vec<(Rect, f32, f32, FaceLandmarks)>,
+) -> Result<()> {
+    out.clear();
+    candidates.sort_by(|a, b| b.1.total_cmp(&a.1));
+    for &(rect, score) in candidates.iter() {
+        let mut rect = rect;
+        let mut conf = estimator.face_confidence(image, &rect, scratch)?;
+        if conf >= MIN_CONFIDENCE_TO_REFINE
+            && let Some(better) = estimator.face_box(scratch)
+        {
+            rect = better;
+            conf = estimator.face_confidence(image, &rect, scratch)?;
+        }
+        if conf >= min_confidence {
+            out.push((rect, score, conf, *scratch));
+        }
+    }
+    out.sort_by(|a, b| (b.1 * b.2).total_cmp(&(a.1 * a.2)));
+    let mut k = 0;
+    while k < out.len() {
+        let rect = out[k].0;
+        let mut j = k + 1;
+        while j < out.len() {
+            if out[j].0.iou(&rect) > CASCADE_NMS_IOU {
+                out.remove(j);
+            } else {
+                j += 1;
+            }
+        }
+        k += 1;
+    }
+    Ok(())
 }
 
 /// Processing mode (MediaPipe-like).
@@ -739,24 +829,17 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 r.is_valid() && s.is_finite() && *s >= self.config.min_detection_score
             });
             // Every detection must pass the classifier tracked windows are checked with (M3's
-            // face confidence). They are ranked by detector score × confidence: the compact
-            // detector scores some face-like clutter and oversized boxes above the real face
-            // (core/models/MODEL_CARD.md), and the confidence alone saturates near 1 on small
-            // clutter too (subtitle characters at 20 px pass at 0.99-1.0 while the real face
-            // scores 0.95 / 0.99), so neither ranks well alone. Detector score order first, so
-            // equal products keep it (the sort below is stable).
-            self.detections.sort_by(|a, b| b.1.total_cmp(&a.1));
-            self.ranked.clear();
-            for &(rect, score) in &self.detections {
-                let conf = self
-                    .estimator
-                    .face_confidence(image, &rect, &mut self.checked)?;
-                if conf >= self.config.min_detection_confidence {
-                    self.ranked.push((rect, score, conf, self.checked));
-                }
-            }
-            self.ranked
-                .sort_by(|a, b| (b.1 * b.2).total_cmp(&(a.1 * a.2)));
+            // face confidence), on the face's own box; ranked by detector score × confidence
+            // (subtitle characters at 20 px pass at 0.99-1.0 while the real face scores 0.95 /
+            // 0.99, so the confidence alone ranks badly).
+            check_detections(
+                &mut self.estimator,
+                image,
+                &mut self.detections,
+                self.config.min_detection_confidence,
+                &mut self.checked,
+                &mut self.ranked,
+            )?;
             for k in 0..self.ranked.len() {
                 let (rect, score, _, checked) = self.ranked[k];
                 // The track this detection belongs to, by overlap with its region this frame
@@ -1304,6 +1387,76 @@ mod tests {
             assert_eq!(r.faces.len(), 1);
             let b = tight(&truth.borrow().faces[want].0);
             assert!(r.faces[0].rect.iou(&b) > 0.5, "{scores:?} {confidence:?}");
+        }
+    }
+
+    /// An estimator that knows one face box: its check gives 0.99 on boxes overlapping the face
+    /// by IoU ≥ 0.7, 0.5 on IoU ≥ 0.3 (a detector box of a small face: off), 0.05 elsewhere, and
+    /// (with `reboxes`) its face box is the true one whenever the last check overlapped it.
+    struct BoxEst {
+        face: Rect,
+        reboxes: bool,
+        last_iou: f32,
+        checks: usize,
+    }
+
+    impl LandmarkEstimator for BoxEst {
+        fn estimate(&mut self, _: &GrayImage, _: &Rect, _: &mut FaceLandmarks) -> Result<()> {
+            Ok(())
+        }
+
+        fn face_confidence(
+            &mut self,
+            _: &GrayImage,
+            face: &Rect,
+            out: &mut FaceLandmarks,
+        ) -> Result<f32> {
+            self.checks += 1;
+            self.last_iou = face.iou(&self.face);
+            out.points[0] = [face.x, face.y];
+            Ok(match self.last_iou {
+                v if v >= 0.7 => 0.99,
+                v if v >= 0.3 => 0.5,
+                _ => 0.05,
+            })
+        }
+
+        fn face_box(&self, _: &FaceLandmarks) -> Option<Rect> {
+            (self.reboxes && self.last_iou >= 0.3).then_some(self.face)
+        }
+    }
+
+    #[test]
+    fn the_cascade_reboxes_detections_on_the_face_and_merges_them() {
+        let face = Rect::new(100.0, 100.0, 20.0, 20.0);
+        let img = GrayImage::new(8, 8);
+        // Two off boxes of the one face (IoU 0.51 and 0.64: checked at 0.5, re-boxed), clutter.
+        let candidates = [
+            (Rect::new(104.0, 106.0, 15.0, 15.0), 0.3),
+            (Rect::new(102.0, 104.0, 16.0, 16.0), 0.45),
+            (Rect::new(300.0, 40.0, 20.0, 20.0), 0.9),
+        ];
+        for (reboxes, want) in [(true, 1), (false, 0)] {
+            let mut est = BoxEst {
+                face,
+                reboxes,
+                last_iou: 0.0,
+                checks: 0,
+            };
+            let mut cands = candidates.to_vec();
+            let (mut scratch, mut out) = (FaceLandmarks::default(), Vec::new());
+            check_detections(&mut est, &img, &mut cands, 0.95, &mut scratch, &mut out).unwrap();
+            assert_eq!(out.len(), want, "reboxes {reboxes}");
+            if reboxes {
+                let (rect, score, conf, checked) = out[0];
+                assert_eq!((rect, score, conf), (face, 0.45, 0.99));
+                // What the check on the new box left, for `complete`.
+                assert_eq!(checked.points[0], [face.x, face.y]);
+                // Clutter (0.05 < MIN_CONFIDENCE_TO_REFINE) is checked once, each face box twice.
+                assert_eq!(est.checks, 5);
+            }
+            // Best detector score first.
+            assert_eq!(cands[0].1, 0.9);
         }
     }
 

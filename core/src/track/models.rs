@@ -25,6 +25,10 @@ impl LandmarkEstimator for M3 {
     fn complete(&mut self, image: &GrayImage, _face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
         M3::refine(self, image, out)
     }
+
+    fn face_box(&self, out: &FaceLandmarks) -> Option<Rect> {
+        M3::level1_box(self, out)
+    }
 }
 
 /// [`FaceDetector`] as the tracker's [`RegionDetector`], with its detections buffer kept between

@@ -1,6 +1,8 @@
 //! `monotrack landmarks IN.jsonl [--out OUT.jsonl]`: M3 landmarks, gestures, gaze and the MSBP
 //! fit for every face of every image (CONTRACT.md). With `faces` boxes in a line, M3 runs on those
-//! boxes only (no detection); without, the SDK's face detector finds them. One output line per input line; a bad line yields
+//! boxes only (no detection); without, the SDK's detection finds them (the tracker's defaults, or
+//! with `--small-faces` its small-faces operating point, `track::SMALL_FACES_MIN_FACE_PX`). One
+//! output line per input line; a bad line yields
 //! `{"line": N, "error": "..."}` in its place, a message on stderr, and exit status 1 at the end.
 
 use crate::json::{CameraJson, intrinsics, put_fit};
@@ -9,7 +11,10 @@ use monotrack_core::detect::{Detection, DetectorConfig, FaceDetector};
 use monotrack_core::fit::{Msbp, MsbpConfig};
 use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::{BROW_GESTURES, FaceLandmarks, M3, MOUTH_GESTURES, N_POINTS};
-use monotrack_core::track::{DEFAULT_MIN_DETECTION_CONFIDENCE, TrackerConfig, detector_config_for};
+use monotrack_core::track::{
+    DEFAULT_MIN_DETECTION_CONFIDENCE, SMALL_FACES_MIN_DETECTION_SCORE, SMALL_FACES_MIN_FACE_PX,
+    TrackerConfig, check_detections, detector_config_for,
+};
 use serde::Deserialize;
 use serde_json::{Map, Value, json};
 use std::path::{Path, PathBuf};
@@ -41,6 +46,10 @@ struct Pipeline {
     /// Created on the first line without boxes (lines with boxes never pay for it).
     detector: Option<FaceDetector>,
     found: Vec<Detection>,
+    candidates: Vec<(Rect, f32)>,
+    accepted: Vec<(Rect, f32, f32, FaceLandmarks)>,
+    /// Detect at the small-faces operating point.
+    small_faces: bool,
 }
 
 impl Pipeline {
@@ -49,27 +58,48 @@ impl Pipeline {
     fn detect(&mut self) -> Result<Vec<FaceToDo>, String> {
         if self.detector.is_none() {
             // The tracker's cascade: candidates down to its detection score, accepted by M3's
-            // face check at its detection confidence.
-            let config = detector_config_for(&TrackerConfig::default(), DetectorConfig::default());
+            // face check at its detection confidence; the defaults or the small-faces point.
+            let (tracker, detector) = if self.small_faces {
+                (
+                    TrackerConfig {
+                        min_detection_score: SMALL_FACES_MIN_DETECTION_SCORE,
+                        ..Default::default()
+                    },
+                    DetectorConfig {
+                        min_face_px: SMALL_FACES_MIN_FACE_PX,
+                        ..Default::default()
+                    },
+                )
+            } else {
+                (TrackerConfig::default(), DetectorConfig::default())
+            };
+            let config = detector_config_for(&tracker, detector);
             self.detector = Some(FaceDetector::with_config(config).map_err(|e| e.to_string())?);
         }
         let det = self.detector.as_mut().ok_or("detector unavailable")?;
         det.detect(&self.gray, &mut self.found)
             .map_err(|e| e.to_string())?;
         // As in the tracker: a detection must also pass M3's face classifier, which rejects the
-        // face-like clutter the compact detector scores high (core/models/MODEL_CARD.md).
-        // The check is level 1 on the face's box: its output is kept, so an accepted face only
+        // face-like clutter the compact detector scores high (core/models/MODEL_CARD.md), on the
+        // box of level 1's points. The check's level-1 output is kept, so an accepted face only
         // needs level 2 (`M3::refine`), as in the tracker.
-        let mut faces = Vec::with_capacity(self.found.len());
-        for d in &self.found {
-            let p = self
-                .m3
-                .level1(&self.gray, &d.rect, &mut self.lm)
-                .map_err(|e| e.to_string())?;
-            if p >= DEFAULT_MIN_DETECTION_CONFIDENCE {
-                faces.push((d.rect, Some(d.score), Some(self.lm)));
-            }
-        }
+        self.candidates.clear();
+        self.candidates
+            .extend(self.found.iter().map(|d| (d.rect, d.score)));
+        check_detections(
+            &mut self.m3,
+            &self.gray,
+            &mut self.candidates,
+            DEFAULT_MIN_DETECTION_CONFIDENCE,
+            &mut self.lm,
+            &mut self.accepted,
+        )
+        .map_err(|e| e.to_string())?;
+        let faces = self
+            .accepted
+            .iter()
+            .map(|&(rect, score, _, level1)| (rect, Some(score), Some(level1)))
+            .collect();
         Ok(faces)
     }
 }
@@ -199,9 +229,15 @@ fn landmarks_line(text: &str, base: &Path, p: &mut Pipeline) -> Result<Value, St
     }))
 }
 
-/// Runs the subcommand (M3 in mirror-average mode with `mirror_average`); returns whether every
+/// Runs the subcommand (M3 in mirror-average mode with `mirror_average`, detection at the
+/// small-faces operating point with `small_faces`); returns whether every
 /// line succeeded.
-pub fn run(input: &Path, out: Option<&Path>, mirror_average: bool) -> Result<bool, String> {
+pub fn run(
+    input: &Path,
+    out: Option<&Path>,
+    mirror_average: bool,
+    small_faces: bool,
+) -> Result<bool, String> {
     let lines = read_lines(input)?;
     let base = input
         .parent()
@@ -215,6 +251,9 @@ pub fn run(input: &Path, out: Option<&Path>, mirror_average: bool) -> Result<boo
         lm: FaceLandmarks::default(),
         detector: None,
         found: Vec::new(),
+        candidates: Vec::new(),
+        accepted: Vec::new(),
+        small_faces,
     };
     p.m3.set_mirror_average(mirror_average);
     let mut ok = true;

@@ -50,6 +50,11 @@ enum Command {
         /// mirrored input and average (more accurate, slower; core/models/MODEL_CARD.md).
         #[arg(long)]
         mirror_average: bool,
+        /// Detect at the small-faces operating point (min face 16 px, detector score 0.25: faces
+        /// down to ~17 px, twice the detector time, more false positives on clutter;
+        /// core/models/MODEL_CARD.md) instead of the SDK's default (min face 24 px, score 0.4).
+        #[arg(long)]
+        small_faces: bool,
     },
     /// Detect faces in images with the SDK's detector: {"image": path} lines in, boxes + scores out.
     Detect {
@@ -67,6 +72,11 @@ enum Command {
         /// Also report M3 level 1's face probability of every detection ("face_prob").
         #[arg(long)]
         face_prob: bool,
+        /// Report the faces the SDK's detection cascade accepts (the tracker's and `landmarks`'
+        /// detections): candidates down to --threshold, checked by M3 level 1 (re-boxed on its
+        /// points), kept at face probability >= 0.95; implies --face-prob.
+        #[arg(long)]
+        cascade: bool,
     },
     /// Track faces through a video file (via ffmpeg) or a directory of frames (file-name order).
     Track {
@@ -186,13 +196,15 @@ fn main() -> ExitCode {
             input,
             out,
             mirror_average,
-        } => landmarks::run(&input, out.as_deref(), mirror_average),
+            small_faces,
+        } => landmarks::run(&input, out.as_deref(), mirror_average, small_faces),
         Command::Detect {
             input,
             out,
             min_face,
             threshold,
             face_prob,
+            cascade,
         } => detect::run(
             &input,
             out.as_deref(),
@@ -201,7 +213,13 @@ fn main() -> ExitCode {
                 score_threshold: threshold,
                 ..Default::default()
             },
-            face_prob,
+            if cascade {
+                detect::Check::Cascade
+            } else if face_prob {
+                detect::Check::FaceProb
+            } else {
+                detect::Check::None
+            },
         ),
         Command::Track {
             input,

@@ -71,11 +71,15 @@ def centre_in(d, boxes):
 # (DEFAULT_MIN_DETECTION_SCORE): the cascade's default operating point.
 FACE_CHECK = 0.95
 CASCADE_THRESHOLD = 0.4
+# The small-faces operating point's detector threshold (core::track SMALL_FACES_MIN_DETECTION_SCORE,
+# with SMALL_FACES_MIN_FACE_PX = 16).
+SMALL_FACES_THRESHOLD = 0.25
 
 
 def run_ours(binary, items, min_face, thr, face_check=False):
-    """Our detector through the CLI; with face_check, only the detections M3's face check passes
-    (the cascade `landmarks` and the tracker run)."""
+    """Our detector through the CLI; with face_check, the SDK's detection cascade as `landmarks`
+    and the tracker run it (`monotrack detect --cascade`: candidates down to `thr`, M3's face check
+    on the box of level 1's points, which replaces the detector's box, accepted at FACE_CHECK)."""
     with tempfile.TemporaryDirectory() as tmp:
         man = os.path.join(tmp, "in.jsonl")
         out = os.path.join(tmp, "out.jsonl")
@@ -83,7 +87,7 @@ def run_ours(binary, items, min_face, thr, face_check=False):
             for rel, _ in items:
                 f.write(json.dumps({"image": os.path.join(SHARED, "faces68", rel)}) + "\n")
         subprocess.run([binary, "detect", man, "--out", out, "--min-face", str(min_face),
-                        "--threshold", str(thr)] + (["--face-prob"] if face_check else []), check=True)
+                        "--threshold", str(thr)] + (["--cascade"] if face_check else []), check=True)
         res = []
         with open(out) as f:
             for line in f:
@@ -188,9 +192,13 @@ def main():
         "monotrack (min face 24 px, default)": (lambda it: run_ours(args.bin, it, 24, 0.2), 0.7, sweep01),
         "monotrack (min face 32 px)": (lambda it: run_ours(args.bin, it, 32, 0.2), 0.6, sweep01),
         "monotrack (min face 40 px)": (lambda it: run_ours(args.bin, it, 40, 0.2), 0.6, sweep01),
-        "monotrack + face check (min face 16 px)": (lambda it: run_ours(args.bin, it, 16, 0.2, True), CASCADE_THRESHOLD, sweep01),
-        "monotrack + face check (min face 24 px, the SDK's default)": (lambda it: run_ours(args.bin, it, 24, 0.2, True), CASCADE_THRESHOLD, sweep01),
-        "monotrack + face check (min face 32 px)": (lambda it: run_ours(args.bin, it, 32, 0.2, True), CASCADE_THRESHOLD, sweep01),
+        # The cascade runs at the row's threshold (its overlap merging ranks the accepted faces,
+        # so a run at 0.2 filtered afterwards is not the same); the sweep filters from there up.
+        "monotrack + face check (min face 16 px, small-faces point)": (lambda it: run_ours(args.bin, it, 16, SMALL_FACES_THRESHOLD, True), SMALL_FACES_THRESHOLD, sweep01),
+        "monotrack + face check (min face 16 px)": (lambda it: run_ours(args.bin, it, 16, CASCADE_THRESHOLD, True), CASCADE_THRESHOLD, sweep01),
+        "monotrack + face check (min face 24 px, the SDK's default)": (lambda it: run_ours(args.bin, it, 24, CASCADE_THRESHOLD, True), CASCADE_THRESHOLD, sweep01),
+        "monotrack + face check (min face 24 px, score 0.25)": (lambda it: run_ours(args.bin, it, 24, SMALL_FACES_THRESHOLD, True), SMALL_FACES_THRESHOLD, sweep01),
+        "monotrack + face check (min face 32 px)": (lambda it: run_ours(args.bin, it, 32, CASCADE_THRESHOLD, True), CASCADE_THRESHOLD, sweep01),
         "dlib HOG (upsample 1)": (lambda it: run_dlib(it, 1, -0.5), 0.0, [round(t, 2) for t in np.arange(-0.5, 1.51, 0.1)]),
         "Ultra-Light RFB-320": (lambda it: run_ultralight(it, "version-RFB-320.onnx", (320, 240), 0.2), 0.7, sweep01),
         "Ultra-Light RFB-640": (lambda it: run_ultralight(it, "version-RFB-640.onnx", (640, 480), 0.2), 0.7, sweep01),
