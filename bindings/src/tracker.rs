@@ -29,8 +29,13 @@ pub struct TrackerConfig {
     pub max_faces: u32,
     /// Intrinsics of the upright image, pixels; `None`: fx = fy = 0.9·max side, centred.
     pub camera: Option<CameraIntrinsics>,
-    /// Smallest face the detector looks for, pixels of the upright image (16..=4096).
+    /// Smallest face the detector looks for, pixels of the upright image (16..=4096). Default 24;
+    /// 16 with `min_detection_score` 0.25 is the small-faces operating point (faces down to ~17 px,
+    /// about twice the detection time; `core/models/MODEL_CARD.md`).
     pub min_face_size_px: u32,
+    /// Detector candidates scoring below this (0..=1) are not checked as faces. Default 0.4;
+    /// 0.25 at the small-faces operating point.
+    pub min_detection_score: f32,
     /// Optical-flow landmark filter on or off.
     pub flow_filter: bool,
     /// Frames over which a new track's shape units are estimated before being held (1..=1000).
@@ -49,6 +54,7 @@ pub fn default_tracker_config() -> TrackerConfig {
         max_faces: c.max_faces as u32,
         camera: None,
         min_face_size_px: DetectorConfig::default().min_face_px.round() as u32,
+        min_detection_score: c.min_detection_score,
         flow_filter: c.flow_filter,
         shape_frames: c.shape_frames as u32,
         mirror_average: false,
@@ -86,6 +92,7 @@ fn to_core(
         camera: c.camera.map(Intrinsics::from),
         flow_filter: c.flow_filter,
         shape_frames: c.shape_frames as usize,
+        min_detection_score: c.min_detection_score,
         ..core_track::TrackerConfig::default()
     };
     core.validate()?;

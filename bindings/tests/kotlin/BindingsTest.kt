@@ -266,6 +266,26 @@ class BindingsTest {
         assertThrows(MonotrackException.InvalidConfig::class.java) {
             FaceTracker(defaultTrackerConfig().copy(runningMode = RunningMode.IMAGE, minFaceSizePx = 2u))
         }
+        for (score in listOf(Float.NaN, -0.1f, 1.5f)) {
+            assertThrows(MonotrackException.InvalidConfig::class.java) {
+                FaceTracker(defaultTrackerConfig().copy(minDetectionScore = score))
+            }
+        }
+    }
+
+    @Test
+    fun smallFacesOperatingPointFindsTheSampleFace() {
+        assertEquals(0.4f, defaultTrackerConfig().minDetectionScore)
+        val (buf, stride) = rgbaFrame()
+        val d = desc(PixelFormat.RGBA8, stride, 0)
+        val small = defaultTrackerConfig().copy(minFaceSizePx = 16u, minDetectionScore = 0.25f)
+        FaceTracker(small).use { t ->
+            assertEquals(0.25f, t.config().minDetectionScore)
+            val faces = t.processImage(buf, d).faces
+            assertTrue(faces.isNotEmpty(), "the sample face is found at the small-faces point")
+            // The best-ranked face is the astronaut's (face check and detector score both high).
+            assertTrue(faces[0].bbox.width > 60f, "box ${faces[0].bbox}")
+        }
     }
 
     @Test

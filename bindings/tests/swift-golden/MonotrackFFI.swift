@@ -2987,9 +2987,16 @@ public struct TrackerConfig: Equatable, Hashable {
      */
     public var camera: CameraIntrinsics?
     /**
-     * Smallest face the detector looks for, pixels of the upright image (16..=4096).
+     * Smallest face the detector looks for, pixels of the upright image (16..=4096). Default 24;
+     * 16 with `min_detection_score` 0.25 is the small-faces operating point (faces down to ~17 px,
+     * about twice the detection time; `core/models/MODEL_CARD.md`).
      */
     public var minFaceSizePx: UInt32
+    /**
+     * Detector candidates scoring below this (0..=1) are not checked as faces. Default 0.4;
+     * 0.25 at the small-faces operating point.
+     */
+    public var minDetectionScore: Float
     /**
      * Optical-flow landmark filter on or off.
      */
@@ -3017,8 +3024,14 @@ public struct TrackerConfig: Equatable, Hashable {
          * Intrinsics of the upright image, pixels; `None`: fx = fy = 0.9·max side, centred.
          */camera: CameraIntrinsics?, 
         /**
-         * Smallest face the detector looks for, pixels of the upright image (16..=4096).
+         * Smallest face the detector looks for, pixels of the upright image (16..=4096). Default 24;
+         * 16 with `min_detection_score` 0.25 is the small-faces operating point (faces down to ~17 px,
+         * about twice the detection time; `core/models/MODEL_CARD.md`).
          */minFaceSizePx: UInt32, 
+        /**
+         * Detector candidates scoring below this (0..=1) are not checked as faces. Default 0.4;
+         * 0.25 at the small-faces operating point.
+         */minDetectionScore: Float, 
         /**
          * Optical-flow landmark filter on or off.
          */flowFilter: Bool, 
@@ -3033,6 +3046,7 @@ public struct TrackerConfig: Equatable, Hashable {
         self.maxFaces = maxFaces
         self.camera = camera
         self.minFaceSizePx = minFaceSizePx
+        self.minDetectionScore = minDetectionScore
         self.flowFilter = flowFilter
         self.shapeFrames = shapeFrames
         self.mirrorAverage = mirrorAverage
@@ -3058,6 +3072,7 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
                 maxFaces: FfiConverterUInt32.read(from: &buf), 
                 camera: FfiConverterOptionTypeCameraIntrinsics.read(from: &buf), 
                 minFaceSizePx: FfiConverterUInt32.read(from: &buf), 
+                minDetectionScore: FfiConverterFloat.read(from: &buf), 
                 flowFilter: FfiConverterBool.read(from: &buf), 
                 shapeFrames: FfiConverterUInt32.read(from: &buf), 
                 mirrorAverage: FfiConverterBool.read(from: &buf)
@@ -3069,6 +3084,7 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
         FfiConverterUInt32.write(value.maxFaces, into: &buf)
         FfiConverterOptionTypeCameraIntrinsics.write(value.camera, into: &buf)
         FfiConverterUInt32.write(value.minFaceSizePx, into: &buf)
+        FfiConverterFloat.write(value.minDetectionScore, into: &buf)
         FfiConverterBool.write(value.flowFilter, into: &buf)
         FfiConverterUInt32.write(value.shapeFrames, into: &buf)
         FfiConverterBool.write(value.mirrorAverage, into: &buf)
