@@ -127,6 +127,7 @@ fn frames_and_trackers_never_panic() {
             max_faces: r.small(),
             camera: (r.below(2) == 0).then(|| intrinsics(&mut r)),
             min_face_size_px: r.small(),
+            min_detection_score: r.float(1.5) as f32,
             flow_filter: r.below(2) == 0,
             shape_frames: r.small(),
             mirror_average: r.below(2) == 0,
