@@ -2,11 +2,19 @@
 //! `samples/data/astronaut.jpg` scaled to 320×320 and pasted into a textured gray frame — at the
 //! default config and at min face 16, 24 and 32 px (network inputs 400×300, 267×200, 200×150, plus
 //! the 128×96 second pass below 32 px).
-//! Also `score_window` on that face (the tracker's check).
+//! Also `score_window` on that face (the tracker's check), and the SDK's whole detection (detector +
+//! M3's re-boxed face check, `track::check_detections`) at the default operating point and at the
+//! small-faces point (`track::SMALL_FACES_MIN_FACE_PX`).
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use monotrack_core::Result;
 use monotrack_core::detect::{Detection, DetectorConfig, FaceDetector};
-use monotrack_core::image::GrayImage;
+use monotrack_core::image::{GrayImage, Rect};
+use monotrack_core::landmarks::{FaceLandmarks, M3};
+use monotrack_core::track::{
+    DEFAULT_MIN_DETECTION_CONFIDENCE, DEFAULT_MIN_DETECTION_SCORE, LandmarkEstimator,
+    SMALL_FACES_MIN_DETECTION_SCORE, SMALL_FACES_MIN_FACE_PX, check_detections,
+};
 use std::hint::black_box;
 
 fn frame() -> GrayImage {
@@ -26,6 +34,52 @@ fn frame() -> GrayImage {
         }
     }
     GrayImage::from_vec(w, h, data).unwrap()
+}
+
+/// The SDK's detection as the tracker runs it, with its buffers.
+#[derive(Default)]
+struct Cascade {
+    found: Vec<Detection>,
+    candidates: Vec<(Rect, f32)>,
+    scratch: FaceLandmarks,
+    accepted: Vec<(Rect, f32, f32, FaceLandmarks)>,
+}
+
+/// M3 without [`LandmarkEstimator::face_box`]: the cascade as it ran before re-boxing (the check on
+/// the detector's box alone), to time what re-boxing costs.
+struct NoRebox<'a>(&'a mut M3);
+
+impl LandmarkEstimator for NoRebox<'_> {
+    fn estimate(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
+        self.0.estimate(image, face, out)
+    }
+
+    fn face_confidence(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        out: &mut FaceLandmarks,
+    ) -> Result<f32> {
+        self.0.level1(image, face, out)
+    }
+}
+
+impl Cascade {
+    fn run<L: LandmarkEstimator>(&mut self, det: &mut FaceDetector, m3: &mut L, img: &GrayImage) {
+        det.detect(img, &mut self.found).unwrap();
+        self.candidates.clear();
+        self.candidates
+            .extend(self.found.iter().map(|d| (d.rect, d.score)));
+        check_detections(
+            m3,
+            img,
+            &mut self.candidates,
+            DEFAULT_MIN_DETECTION_CONFIDENCE,
+            &mut self.scratch,
+            &mut self.accepted,
+        )
+        .unwrap();
+    }
 }
 
 fn bench(c: &mut Criterion) {
@@ -51,6 +105,44 @@ fn bench(c: &mut Criterion) {
     c.bench_function("score_window", |b| {
         b.iter(|| det.score_window(black_box(&img), face).unwrap())
     });
+    let mut m3 = M3::new().unwrap();
+    let mut cascade = Cascade::default();
+    for (name, min_face_px, score) in [
+        (
+            "detect_cascade_640x480",
+            DetectorConfig::default().min_face_px,
+            DEFAULT_MIN_DETECTION_SCORE,
+        ),
+        (
+            "detect_cascade_640x480_small_faces",
+            SMALL_FACES_MIN_FACE_PX,
+            SMALL_FACES_MIN_DETECTION_SCORE,
+        ),
+    ] {
+        let mut det = FaceDetector::with_config(DetectorConfig {
+            min_face_px,
+            score_threshold: score,
+            ..DetectorConfig::default()
+        })
+        .unwrap();
+        cascade.run(&mut det, &mut m3, &img);
+        assert!(
+            cascade
+                .accepted
+                .first()
+                .is_some_and(|a| a.0.iou(&face) > 0.5),
+            "{name}: the face is accepted first"
+        );
+        c.bench_function(name, |b| {
+            b.iter(|| cascade.run(&mut det, &mut m3, black_box(&img)))
+        });
+        let checks = cascade.candidates.len();
+        let mut plain = NoRebox(&mut m3);
+        c.bench_function(&format!("{name}_no_rebox"), |b| {
+            b.iter(|| cascade.run(&mut det, &mut plain, black_box(&img)))
+        });
+        eprintln!("{name}: {checks} candidates");
+    }
 }
 
 criterion_group! {
