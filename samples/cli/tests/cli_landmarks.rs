@@ -32,6 +32,19 @@ fn dir_with_astronaut(tag: &str) -> PathBuf {
     dir
 }
 
+/// Whether a FACE's box (`{"box": [x, y, w, h], ...}`) has its centre inside [`ASTRONAUT_BOX`].
+fn centred_on_the_face(face: &serde_json::Value) -> bool {
+    let r: Vec<f64> = face["box"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let (cx, cy) = (r[0] + r[2] / 2.0, r[1] + r[3] / 2.0);
+    let b = ASTRONAUT_BOX;
+    cx > b[0] && cx < b[0] + b[2] && cy > b[1] && cy < b[1] + b[3]
+}
+
 fn norm(v: &serde_json::Value) -> f64 {
     v.as_array()
         .unwrap()
@@ -238,21 +251,13 @@ fn detect_reports_the_face_check_on_request() {
     assert!(plain.iter().all(|f| f.get("face_prob").is_none()));
     // Down to score 0.3, so the detector's clutter is in the list for the check to judge.
     let checked = run(&["--face-prob", "--threshold", "0.3"]);
-    let b = ASTRONAUT_BOX;
     let mut on_face = 0;
     for f in &checked {
         let p = f["face_prob"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&p), "{f}");
-        let r: Vec<f64> = f["box"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
-        let (cx, cy) = (r[0] + r[2] / 2.0, r[1] + r[3] / 2.0);
         // The check as `landmarks` and the tracker apply it to new detections.
         let accept = f64::from(monotrack_core::track::DEFAULT_MIN_DETECTION_CONFIDENCE);
-        if cx > b[0] && cx < b[0] + b[2] && cy > b[1] && cy < b[1] + b[3] {
+        if centred_on_the_face(f) {
             on_face += 1;
             assert!(p >= accept, "the face passes the check: {f}");
         } else {
@@ -266,17 +271,7 @@ fn detect_reports_the_face_check_on_request() {
     assert_eq!(cascade.len(), 1, "{cascade:?}");
     let f = &cascade[0];
     assert!(f["face_prob"].as_f64().unwrap() >= 0.95, "{f}");
-    let r: Vec<f64> = f["box"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    let (cx, cy) = (r[0] + r[2] / 2.0, r[1] + r[3] / 2.0);
-    assert!(
-        cx > b[0] && cx < b[0] + b[2] && cy > b[1] && cy < b[1] + b[3],
-        "{f}"
-    );
+    assert!(centred_on_the_face(f), "{f}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -298,18 +293,7 @@ fn small_faces_detects_the_face_first_and_keeps_the_contract() {
     // patch on the suit (detector 0.38, face check 0.96 on its re-boxed crop) is accepted too:
     // the cost of reaching 17 px faces (core/models/MODEL_CARD.md, face detector).
     assert!(!faces.is_empty() && faces.len() <= 2, "{line}");
-    let b = ASTRONAUT_BOX;
-    let bx: Vec<f64> = faces[0]["box"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    let (cx, cy) = (bx[0] + bx[2] / 2.0, bx[1] + bx[3] / 2.0);
-    assert!(
-        cx > b[0] && cx < b[0] + b[2] && cy > b[1] && cy < b[1] + b[3],
-        "{line}"
-    );
+    assert!(centred_on_the_face(&faces[0]), "{line}");
     assert_eq!(faces[0]["landmarks68"].as_array().unwrap().len(), 68);
     let _ = std::fs::remove_dir_all(&dir);
 }
