@@ -27,8 +27,8 @@ pub(crate) use net::onnx_op_types;
 pub mod warp;
 
 pub use m3::{
-    BilateralConfig, EMBEDDED_FILES, Level1Config, M3, M3Config, RefSource, ZoneConfig,
-    embedded_file,
+    BilateralConfig, EMBEDDED_FILES, LEVEL1_BOX_TOP, Level1Config, M3, M3Config, RefSource,
+    ZoneConfig, embedded_file,
 };
 pub use prior::{PriorZoneConfig, ShapePriorConfig};
 
