@@ -54,9 +54,9 @@ pub const DEFAULT_MIN_DETECTION_SCORE: f32 = 0.4;
 /// [`DEFAULT_MIN_DETECTION_CONFIDENCE`]) finds 127 of the 128 faces68 validation faces at 0.028
 /// false positives per image (`models/MODEL_CARD.md`, face detector), against 123 for the default
 /// min face, which skips the 17–23 px faces of group photos. It costs about twice the detector
-/// time of the default (a 640×480 frame runs at 400×300) and more face checks, so the video
-/// defaults keep the faster point; `monotrack landmarks` detects still images at this one. Apps
-/// choose it through `DetectorConfig::min_face_px` and [`TrackerConfig::min_detection_score`].
+/// time of the default (a 640×480 frame runs at 400×300) and more face checks, so the defaults
+/// keep the faster point; `monotrack landmarks --small-faces` detects at this one. Apps choose it
+/// through `DetectorConfig::min_face_px` and [`TrackerConfig::min_detection_score`].
 pub const SMALL_FACES_MIN_FACE_PX: f32 = 16.0;
 
 /// The detector score of the small-faces operating point (see [`SMALL_FACES_MIN_FACE_PX`]).
