@@ -13,7 +13,8 @@ use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::{FaceLandmarks, M3};
 use monotrack_core::track::{
     DEFAULT_MIN_DETECTION_CONFIDENCE, DEFAULT_MIN_DETECTION_SCORE, LandmarkEstimator,
-    SMALL_FACES_MIN_DETECTION_SCORE, SMALL_FACES_MIN_FACE_PX, check_detections,
+    ModelDetector, RegionDetector, SMALL_FACES_MIN_DETECTION_SCORE, SMALL_FACES_MIN_FACE_PX,
+    check_detections,
 };
 use std::hint::black_box;
 
@@ -39,7 +40,7 @@ fn frame() -> GrayImage {
 /// The SDK's detection as the tracker runs it, with its buffers.
 #[derive(Default)]
 struct Cascade {
-    found: Vec<Detection>,
+    /// The detector's faces (box, score), as the tracker's `RegionDetector` gives them.
     candidates: Vec<(Rect, f32)>,
     scratch: FaceLandmarks,
     accepted: Vec<(Rect, f32, f32, FaceLandmarks)>,
@@ -65,11 +66,8 @@ impl LandmarkEstimator for NoRebox<'_> {
 }
 
 impl Cascade {
-    fn run<L: LandmarkEstimator>(&mut self, det: &mut FaceDetector, m3: &mut L, img: &GrayImage) {
-        det.detect(img, &mut self.found).unwrap();
-        self.candidates.clear();
-        self.candidates
-            .extend(self.found.iter().map(|d| (d.rect, d.score)));
+    fn run<L: LandmarkEstimator>(&mut self, det: &mut ModelDetector, m3: &mut L, img: &GrayImage) {
+        det.detect(img, &mut self.candidates).unwrap();
         check_detections(
             m3,
             img,
@@ -119,7 +117,7 @@ fn bench(c: &mut Criterion) {
             SMALL_FACES_MIN_DETECTION_SCORE,
         ),
     ] {
-        let mut det = FaceDetector::with_config(DetectorConfig {
+        let mut det = ModelDetector::new(DetectorConfig {
             min_face_px,
             score_threshold: score,
             ..DetectorConfig::default()

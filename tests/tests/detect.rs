@@ -23,8 +23,9 @@ use monotrack_core::detect::{DetectorConfig, FaceDetector};
 use monotrack_core::image::{GrayImage, Rect, rgb_to_contract_luma};
 use monotrack_core::landmarks::{FaceLandmarks, M3};
 use monotrack_core::track::{
-    DEFAULT_MIN_DETECTION_CONFIDENCE, DEFAULT_MIN_DETECTION_SCORE, SMALL_FACES_MIN_DETECTION_SCORE,
-    SMALL_FACES_MIN_FACE_PX, TrackerConfig, check_detections, detector_config_for,
+    DEFAULT_MIN_DETECTION_CONFIDENCE, DEFAULT_MIN_DETECTION_SCORE, ModelDetector, RegionDetector,
+    SMALL_FACES_MIN_DETECTION_SCORE, SMALL_FACES_MIN_FACE_PX, TrackerConfig, check_detections,
+    detector_config_for,
 };
 use serde::Deserialize;
 use std::path::Path;
@@ -202,14 +203,13 @@ fn faces68_validation_cascade() {
                 ..Default::default()
             },
         );
-        let mut det = FaceDetector::with_config(config).unwrap();
+        // The detector as the tracker holds it: (box, score) pairs, what the cascade takes.
+        let mut det = ModelDetector::new(config).unwrap();
         let mut m3 = M3::new().unwrap();
-        let (mut found, mut candidates, mut accepted) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut candidates, mut accepted) = (Vec::new(), Vec::new());
         let mut scratch = FaceLandmarks::default();
         let [n_images, n_faces, hits, unmatched] = score_split(&data, |img| {
-            det.detect(img, &mut found).unwrap();
-            candidates.clear();
-            candidates.extend(found.iter().map(|d| (d.rect, d.score)));
+            det.detect(img, &mut candidates).unwrap();
             check_detections(
                 &mut m3,
                 img,

@@ -14,10 +14,12 @@
 //! yields `{"line": N, "error": "..."}`, a message on stderr, and exit status 1 at the end.
 
 use crate::{LineSink, read_lines};
-use monotrack_core::detect::{DetectorConfig, FaceDetector};
+use monotrack_core::detect::DetectorConfig;
 use monotrack_core::image::GrayImage;
 use monotrack_core::landmarks::{FaceLandmarks, M3};
-use monotrack_core::track::{DEFAULT_MIN_DETECTION_CONFIDENCE, check_detections};
+use monotrack_core::track::{
+    DEFAULT_MIN_DETECTION_CONFIDENCE, ModelDetector, RegionDetector, check_detections,
+};
 use serde::Deserialize;
 use serde_json::{Value, json};
 use std::path::Path;
@@ -55,8 +57,8 @@ pub fn run(
     check: Check,
 ) -> Result<bool, String> {
     let mut sink = LineSink::new(out)?;
-    let mut det = FaceDetector::with_config(config).map_err(|e| e.to_string())?;
-    let mut candidates = Vec::new();
+    // The tracker's form of the detector: (box, score) pairs, what the cascade takes.
+    let mut det = ModelDetector::new(config).map_err(|e| e.to_string())?;
     let mut accepted = Vec::new();
     let mut scratch = FaceLandmarks::default();
     let mut m3 = if check != Check::None {
@@ -82,12 +84,10 @@ pub fn run(
             match (check, m3.as_mut()) {
                 (Check::Cascade, Some(m3)) => {
                     let t1 = Instant::now();
-                    candidates.clear();
-                    candidates.extend(found.iter().map(|d| (d.rect, d.score)));
                     check_detections(
                         m3,
                         &img,
-                        &mut candidates,
+                        &mut found,
                         DEFAULT_MIN_DETECTION_CONFIDENCE,
                         &mut scratch,
                         &mut accepted,
@@ -103,15 +103,13 @@ pub fn run(
                     }
                 }
                 (_, mut m3) => {
-                    for d in &found {
+                    for &(r, score) in &found {
                         let mut face = json!({
-                            "box": [round2(d.rect.x), round2(d.rect.y), round2(d.rect.w), round2(d.rect.h)],
-                            "score": round4(d.score),
+                            "box": [round2(r.x), round2(r.y), round2(r.w), round2(r.h)],
+                            "score": round4(score),
                         });
                         if let Some(m3) = m3.as_deref_mut() {
-                            let p = m3
-                                .face_confidence(&img, &d.rect)
-                                .map_err(|e| e.to_string())?;
+                            let p = m3.face_confidence(&img, &r).map_err(|e| e.to_string())?;
                             face["face_prob"] = json!(round4(p));
                         }
                         faces.push(face);

@@ -7,13 +7,14 @@
 
 use crate::json::{CameraJson, intrinsics, put_fit};
 use crate::{LineSink, read_lines};
-use monotrack_core::detect::{Detection, DetectorConfig, FaceDetector};
+use monotrack_core::detect::DetectorConfig;
 use monotrack_core::fit::{Msbp, MsbpConfig};
 use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::{BROW_GESTURES, FaceLandmarks, M3, MOUTH_GESTURES, N_POINTS};
 use monotrack_core::track::{
-    DEFAULT_MIN_DETECTION_CONFIDENCE, SMALL_FACES_MIN_DETECTION_SCORE, SMALL_FACES_MIN_FACE_PX,
-    TrackerConfig, check_detections, detector_config_for,
+    DEFAULT_MIN_DETECTION_CONFIDENCE, ModelDetector, RegionDetector,
+    SMALL_FACES_MIN_DETECTION_SCORE, SMALL_FACES_MIN_FACE_PX, TrackerConfig, check_detections,
+    detector_config_for,
 };
 use serde::Deserialize;
 use serde_json::{Map, Value, json};
@@ -44,8 +45,8 @@ struct Pipeline {
     gray: GrayImage,
     lm: FaceLandmarks,
     /// Created on the first line without boxes (lines with boxes never pay for it).
-    detector: Option<FaceDetector>,
-    found: Vec<Detection>,
+    detector: Option<ModelDetector>,
+    /// The detector's faces (box, score), as the tracker's [`RegionDetector`] gives them.
     candidates: Vec<(Rect, f32)>,
     accepted: Vec<(Rect, f32, f32, FaceLandmarks)>,
     /// Detect at the small-faces operating point.
@@ -74,18 +75,15 @@ impl Pipeline {
                 (TrackerConfig::default(), DetectorConfig::default())
             };
             let config = detector_config_for(&tracker, detector);
-            self.detector = Some(FaceDetector::with_config(config).map_err(|e| e.to_string())?);
+            self.detector = Some(ModelDetector::new(config).map_err(|e| e.to_string())?);
         }
         let det = self.detector.as_mut().ok_or("detector unavailable")?;
-        det.detect(&self.gray, &mut self.found)
+        det.detect(&self.gray, &mut self.candidates)
             .map_err(|e| e.to_string())?;
         // As in the tracker: a detection must also pass M3's face classifier, which rejects the
         // face-like clutter the compact detector scores high (core/models/MODEL_CARD.md), on the
         // box of level 1's points. The check's level-1 output is kept, so an accepted face only
         // needs level 2 (`M3::refine`), as in the tracker.
-        self.candidates.clear();
-        self.candidates
-            .extend(self.found.iter().map(|d| (d.rect, d.score)));
         check_detections(
             &mut self.m3,
             &self.gray,
@@ -250,7 +248,6 @@ pub fn run(
         gray: GrayImage::default(),
         lm: FaceLandmarks::default(),
         detector: None,
-        found: Vec::new(),
         candidates: Vec::new(),
         accepted: Vec::new(),
         small_faces,
