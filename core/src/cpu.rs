@@ -47,6 +47,13 @@ pub fn select_tract_kernels() {
     });
 }
 
+/// Whether the CPU's vendor string is AMD's (`None` where CPUID gives none): which kind of 3×3
+/// layer products pays differs between vendors (`conv`).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn is_amd() -> Option<bool> {
+    x86::cpu_id().map(|(vendor, _, _)| &vendor == b"AuthenticAMD")
+}
+
 #[cfg(target_arch = "x86_64")]
 mod x86 {
     /// CPUID vendor string, family (base + extended, as the vendors define it) and AVX-512F.

@@ -680,17 +680,17 @@ mod tests {
         let whole = tract_onnx::onnx()
             .model_for_read(&mut std::io::Cursor::new(MODEL_ONNX))
             .unwrap();
-        // Both forms of the layers here where the CPU has bf16 products (`conv`), f32 elsewhere.
-        for ((h, w), bf16) in [(96, 128), (75, 101)]
+        // Every form of the layers' products this CPU has (`conv`).
+        for ((h, w), form) in [(96, 128), (75, 101)]
             .into_iter()
-            .flat_map(|s| crate::conv::product_forms().map(move |b| (s, b)))
+            .flat_map(|s| crate::conv::product_forms().map(move |f| (s, f)))
         {
             let mut det = FaceDetector::new().unwrap();
             assert!(det.stem.is_some(), "first layer not taken as a stem");
             let input: Vec<f32> = (0..h * w)
                 .map(|i| ((i * 7919) % 251) as f32 / 250.0)
                 .collect();
-            let idx = crate::conv::building(bf16, || det.plan_for(h, w).unwrap());
+            let idx = crate::conv::building(form, || det.plan_for(h, w).unwrap());
             // Where `conv` runs, the three full 3×3 layers after the first (the fourth is
             // depthwise and stays in tract).
             let after_first = det.plans[idx].stem.as_ref().unwrap().layers_after_first();
@@ -712,7 +712,7 @@ mod tests {
                 let a = a.try_as_plain_ram().unwrap();
                 let b = b.try_as_plain_ram().unwrap();
                 let (a, b) = (a.as_slice::<f32>().unwrap(), b.as_slice::<f32>().unwrap());
-                crate::stem::assert_close_to_whole_graph(&format!("{h}x{w}"), a, b, bf16);
+                crate::stem::assert_close_to_whole_graph(&format!("{h}x{w}"), a, b, form.is_bf16());
             }
         }
     }

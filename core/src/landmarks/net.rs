@@ -202,14 +202,14 @@ mod tests {
     /// whole graph to float rounding.
     #[test]
     fn shipped_networks_run_their_first_layer_as_a_stem_with_the_same_outputs() {
-        // Both forms of the layers here where the CPU has bf16 products (`conv`), f32 elsewhere.
-        for bf16 in crate::conv::product_forms() {
+        // Every form of the layers' products this CPU has (`conv`).
+        for form in crate::conv::product_forms() {
             for (name, bytes) in EMBEDDED_FILES.iter().filter(|(n, _)| n.ends_with(".onnx")) {
                 let shapes = shipped_inputs(name);
                 let inputs: Vec<(&str, &[usize])> =
                     shapes.iter().map(|(n, s)| (*n, s.as_slice())).collect();
                 let mut with =
-                    crate::conv::building(bf16, || Net::load(name, bytes, &inputs, &[]).unwrap());
+                    crate::conv::building(form, || Net::load(name, bytes, &inputs, &[]).unwrap());
                 let mut without = Net::load_with_stem(name, bytes, &inputs, &[], false).unwrap();
                 assert!(
                     with.stem.is_some(),
@@ -255,7 +255,7 @@ mod tests {
                             .unwrap()
                             .to_vec()
                     };
-                    assert_close_to_whole_graph(name, &plain(a), &plain(b), bf16);
+                    assert_close_to_whole_graph(name, &plain(a), &plain(b), form.is_bf16());
                 }
             }
         }
