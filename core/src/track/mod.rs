@@ -51,12 +51,14 @@ pub const DEFAULT_MIN_DETECTION_SCORE: f32 = 0.4;
 
 /// The small-faces operating point: detector min face (pixels) at which the SDK's detection
 /// ([`check_detections`] with [`SMALL_FACES_MIN_DETECTION_SCORE`] and
-/// [`DEFAULT_MIN_DETECTION_CONFIDENCE`]) finds 127 of the 128 faces68 validation faces at 0.028
-/// false positives per image (`models/MODEL_CARD.md`, face detector), against 123 for the default
-/// min face, which skips the 17–23 px faces of group photos. It costs about twice the detector
-/// time of the default (a 640×480 frame runs at 400×300) and more face checks, so the defaults
-/// keep the faster point; `monotrack landmarks --small-faces` detects at this one. Apps choose it
-/// through `DetectorConfig::min_face_px` and [`TrackerConfig::min_detection_score`].
+/// [`DEFAULT_MIN_DETECTION_CONFIDENCE`]) finds 127 of the 128 faces68 validation faces at 0.038
+/// false positives per image (`models/MODEL_CARD.md`, face detector), against 123 at 0.009 for the
+/// default min face, which skips the 17–23 px faces of group photos. A 640×480 frame runs at
+/// 400×300, and more candidates get face checks: the whole detection took 4.6–4.7 ms against
+/// 3.2 ms at the default (criterion, an Intel Xeon with AVX-512, stop 31). The defaults keep the
+/// point with fewer false positives and less clutter; `monotrack landmarks --small-faces` detects
+/// at this one. Apps choose it through `DetectorConfig::min_face_px` and
+/// [`TrackerConfig::min_detection_score`].
 pub const SMALL_FACES_MIN_FACE_PX: f32 = 16.0;
 
 /// The detector score of the small-faces operating point (see [`SMALL_FACES_MIN_FACE_PX`]).
