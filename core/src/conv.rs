@@ -235,7 +235,7 @@ macro_rules! group {
     }};
 }
 
-/// [`each_group`] for the AVX-512 kernel [`Wide::run`] over `$nb` blocks: groups of
+/// [`each_group`] for the AVX-512 kernel [`Block::run_wide`] over `$nb` blocks: groups of
 /// [`POSITIONS_512`], then the remainder.
 #[cfg(target_arch = "x86_64")]
 macro_rules! each_group_wide {
@@ -243,21 +243,21 @@ macro_rules! each_group_wide {
         let n = $layer.at_in.len();
         let mut p = 0;
         #[allow(unsafe_code)]
-        // SAFETY: the caller's features; offsets from the layer, as `Wide` needs.
+        // SAFETY: the caller's features; offsets from the layer, as `Block::run_wide` needs.
         unsafe {
             while p + POSITIONS_512 <= n {
-                group!($wide.run, $layer, p, $out, POSITIONS_512, $nb);
+                group!($wide.run_wide, $layer, p, $out, POSITIONS_512, $nb);
                 p += POSITIONS_512;
             }
             match n - p {
                 0 => {}
-                1 => group!($wide.run, $layer, p, $out, 1, $nb),
-                2 => group!($wide.run, $layer, p, $out, 2, $nb),
-                3 => group!($wide.run, $layer, p, $out, 3, $nb),
-                4 => group!($wide.run, $layer, p, $out, 4, $nb),
-                5 => group!($wide.run, $layer, p, $out, 5, $nb),
-                6 => group!($wide.run, $layer, p, $out, 6, $nb),
-                _ => group!($wide.run, $layer, p, $out, 7, $nb),
+                1 => group!($wide.run_wide, $layer, p, $out, 1, $nb),
+                2 => group!($wide.run_wide, $layer, p, $out, 2, $nb),
+                3 => group!($wide.run_wide, $layer, p, $out, 3, $nb),
+                4 => group!($wide.run_wide, $layer, p, $out, 4, $nb),
+                5 => group!($wide.run_wide, $layer, p, $out, 5, $nb),
+                6 => group!($wide.run_wide, $layer, p, $out, 6, $nb),
+                _ => group!($wide.run_wide, $layer, p, $out, 7, $nb),
             }
         }
     }};
@@ -431,7 +431,7 @@ impl Conv3x3 {
             while blk < blocks {
                 let two = blk + 1 < blocks;
                 let n = if two { 2 } else { 1 };
-                let wide = Wide {
+                let wide = Block {
                     input,
                     weights: &self.packed[blk * k * BLOCK..][..n * k * BLOCK],
                     bias: &self.bias[blk * BLOCK..][..n * BLOCK],
@@ -645,7 +645,7 @@ pub(crate) fn available() -> bool {
 #[cfg(target_arch = "x86_64")]
 struct Block<'a, T> {
     input: &'a [T],
-    /// `taps.len() × BLOCK` weights.
+    /// `taps.len() × BLOCK` weights per block: one block, or `NB` for [`Block::run_wide`].
     weights: &'a [T],
     bias: &'a [f32],
     taps: &'a [usize],
@@ -785,26 +785,12 @@ impl Block<'_, f32> {
     }
 }
 
-/// One or two ([`Wide::run`]'s `NB`) consecutive blocks of output channels of one batch slot, for
-/// the AVX-512 kernel.
 #[cfg(target_arch = "x86_64")]
-struct Wide<'a> {
-    input: &'a [f32],
-    /// The blocks' packed weights, `NB × taps.len() × BLOCK` (each block's as [`pack`] lays them).
-    weights: &'a [f32],
-    /// `NB × BLOCK` biases.
-    bias: &'a [f32],
-    taps: &'a [usize],
-    /// Channels of the blocks that exist (the rest of the lanes are not stored).
-    channels: usize,
-    plane: usize,
-}
-
-#[cfg(target_arch = "x86_64")]
-impl Wide<'_> {
-    /// `P` output positions of `NB` blocks (as [`Block::run`]: window offsets `at_in[..P]`, or
-    /// with `S` > 0 `at_in[0] + S·j`; output offsets `at_out[..P]` within a plane of `out`, whose
-    /// plane `c` is channel `c` of the first block).
+impl Block<'_, f32> {
+    /// [`Block::run`] on 512-bit registers over `NB` consecutive blocks (`weights` and `bias`
+    /// holding all of theirs, `channels` counting them): `P` output positions, window offsets
+    /// `at_in[..P]` (with `S` > 0, `at_in[0] + S·j`), output offsets `at_out[..P]` within a plane
+    /// of `out`, whose plane `c` is channel `c` of the first block.
     ///
     /// # Safety
     /// AVX-512F + AVX2 + FMA; every `at_in[j] + taps[t]` lies inside `input` (the layer's
@@ -812,7 +798,7 @@ impl Wide<'_> {
     #[target_feature(enable = "avx512f,avx2,fma")]
     #[inline]
     #[allow(unsafe_code)]
-    unsafe fn run<const NB: usize, const P: usize, const S: usize>(
+    unsafe fn run_wide<const NB: usize, const P: usize, const S: usize>(
         &self,
         at_in: &[usize],
         at_out: &[usize],
