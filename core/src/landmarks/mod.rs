@@ -18,6 +18,7 @@
 //! network's one-channel first layer runs outside tract (`crate::stem`, found in the graph at load).
 //! One face = one call; run one `M3` per thread (it is `Send`).
 
+mod dense;
 pub mod filter;
 mod m3;
 mod net;

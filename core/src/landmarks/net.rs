@@ -4,6 +4,7 @@
 //! tract runs single-threaded unless its `multithread-mm` feature is enabled and an executor is
 //! installed; the core enables neither, so each network runs on the calling thread.
 
+use super::dense::Dense;
 use crate::error::{Error, Result};
 use crate::stem::{Stem, StemWeights, with_f32_slice};
 use std::sync::Arc;
@@ -12,7 +13,10 @@ use tract_onnx::prelude::*;
 /// A loaded network with named outputs and reusable inputs.
 #[derive(Debug)]
 pub(crate) struct Net {
-    state: TypedSimpleState,
+    /// tract's plan for what the stem and the dense heads leave (`None` when they take it all).
+    state: Option<TypedSimpleState>,
+    /// The fully connected heads, where they run outside tract ([`Dense`]).
+    dense: Option<Dense>,
     /// The first layer when computed outside tract ([`Stem`]); tract's input 0 is then its output.
     stem: Option<Stem>,
     inputs: Vec<Arc<Tensor>>,
@@ -30,23 +34,26 @@ impl Net {
     /// order) and outputs looked up by name. `what` names the network in errors.
     ///
     /// A first layer of the form [`Stem`] computes (`StemWeights::split_from`) runs outside
-    /// tract; the caller sees the same inputs either way.
+    /// tract, and after a trunk taken that way the fully connected heads too ([`Dense`]); the
+    /// caller sees the same inputs and outputs either way.
     pub(crate) fn load(
         what: &str,
         bytes: &[u8],
         inputs: &[(&str, &[usize])],
         outputs: &[&str],
     ) -> Result<Self> {
-        Self::load_with_stem(what, bytes, inputs, outputs, true)
+        Self::load_with(what, bytes, inputs, outputs, true, true)
     }
 
-    /// [`Self::load`], with the first layer left to tract unless `use_stem`.
-    fn load_with_stem(
+    /// [`Self::load`], with the first layer left to tract unless `use_stem` and the heads unless
+    /// `use_dense`.
+    fn load_with(
         what: &str,
         bytes: &[u8],
         inputs: &[(&str, &[usize])],
         outputs: &[&str],
         use_stem: bool,
+        use_dense: bool,
     ) -> Result<Self> {
         crate::cpu::select_tract_kernels();
         let onnx = tract_onnx::onnx();
@@ -64,6 +71,38 @@ impl Net {
             shapes[0] = stem.output_shape().to_vec();
             stem
         });
+        let want: Vec<&str> = inputs.iter().map(|(n, _)| *n).collect();
+        let input_names: Vec<&str> = proto
+            .graph
+            .as_ref()
+            .map(|g| g.input.iter().map(|i| i.name.as_str()).collect())
+            .unwrap_or_default();
+        // Only after a stem took the trunk is what is left the heads alone.
+        let dense = if stem.is_some() && use_dense && input_names == want {
+            Dense::from_proto(&onnx, &proto, &shapes).map_err(load_err(what))?
+        } else {
+            None
+        };
+        if let Some(dense) = dense {
+            let output_slots = outputs
+                .iter()
+                .map(|name| {
+                    dense.output_index(name).ok_or_else(|| {
+                        Error::ModelLoad(format!(
+                            "{what}: no output named {name:?} (models/M3_IO.md)"
+                        ))
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?;
+            return Ok(Self {
+                state: None,
+                dense: Some(dense),
+                stem,
+                inputs: zero_inputs(&shapes).map_err(load_err(what))?,
+                output_slots,
+                outputs: tvec![],
+            });
+        }
         let mut model = onnx.model_for_proto_model(&proto).map_err(load_err(what))?;
         let names: Vec<String> = model
             .input_outlets()
@@ -71,7 +110,6 @@ impl Net {
             .iter()
             .map(|o| model.node(o.node).name.clone())
             .collect();
-        let want: Vec<&str> = inputs.iter().map(|(n, _)| *n).collect();
         if names != want {
             return Err(Error::ModelLoad(format!(
                 "{what}: inputs {names:?}, expected {want:?} (models/M3_IO.md)"
@@ -100,16 +138,11 @@ impl Net {
         }
         let plan = model.into_runnable().map_err(load_err(what))?;
         let state = plan.spawn().map_err(load_err(what))?;
-        // Zeros: with a stem, input 0's border is the second layer's padding and stays zero.
-        let inputs = shapes
-            .iter()
-            .map(|shape| Tensor::zero::<f32>(shape).map(Arc::new))
-            .collect::<TractResult<Vec<_>>>()
-            .map_err(load_err(what))?;
         Ok(Self {
-            state,
+            state: Some(state),
+            dense: None,
             stem,
-            inputs,
+            inputs: zero_inputs(&shapes).map_err(load_err(what))?,
             output_slots,
             outputs: tvec![],
         })
@@ -129,13 +162,28 @@ impl Net {
         if let Some(stem) = &mut self.stem {
             with_input_slice(&mut self.inputs[0], |s| stem.run(s))?;
         }
+        if let Some(dense) = &mut self.dense {
+            let slices = self
+                .inputs
+                .iter()
+                .map(|t| {
+                    t.try_as_plain_ram()
+                        .and_then(|v| v.as_slice::<f32>())
+                        .map_err(|e| Error::Internal(format!("input tensor: {e:#}")))
+                })
+                .collect::<Result<TVec<&[f32]>>>()?;
+            dense.run(&slices);
+            return Ok(());
+        }
+        let Some(state) = &mut self.state else {
+            return Err(Error::Internal("network without a plan".into()));
+        };
         let inputs: TVec<TValue> = self
             .inputs
             .iter()
             .map(|t| TValue::from_const(Arc::clone(t)))
             .collect();
-        let outputs = self
-            .state
+        let outputs = state
             .run(inputs)
             .map_err(|e| Error::Internal(format!("network run: {e:#}")));
         crate::cpu::clear_upper_vector_state();
@@ -145,6 +193,9 @@ impl Net {
 
     /// Output `k` (in the order the outputs were requested at load) of the last run.
     pub(crate) fn output(&self, k: usize) -> Result<&[f32]> {
+        if let Some(dense) = &self.dense {
+            return Ok(dense.output(self.output_slots[k]));
+        }
         let t = self
             .outputs
             .get(self.output_slots[k])
@@ -156,12 +207,36 @@ impl Net {
 }
 
 /// [`with_f32_slice`] on an input tensor.
+/// Zero input tensors of `shapes`, which the runs then reuse. With a stem, input 0's border is
+/// the second layer's padding and stays zero.
+fn zero_inputs(shapes: &[Vec<usize>]) -> TractResult<Vec<Arc<Tensor>>> {
+    shapes
+        .iter()
+        .map(|shape| Tensor::zero::<f32>(shape).map(Arc::new))
+        .collect()
+}
+
 fn with_input_slice(t: &mut Arc<Tensor>, f: impl FnOnce(&mut [f32])) -> Result<()> {
     with_f32_slice(t, f).map_err(|e| Error::Internal(format!("input tensor: {e:#}")))
 }
 
 /// Op types of the nodes of an ONNX graph, as stored (for the tests that check how the shipped
 /// networks are written).
+/// The graph output names of an ONNX file, in order.
+#[cfg(test)]
+fn onnx_output_names(bytes: &[u8]) -> Vec<String> {
+    let proto = tract_onnx::onnx()
+        .proto_model_for_read(&mut &*bytes)
+        .unwrap();
+    proto
+        .graph
+        .unwrap()
+        .output
+        .into_iter()
+        .map(|o| o.name)
+        .collect()
+}
+
 #[cfg(test)]
 pub(crate) fn onnx_op_types(bytes: &[u8]) -> Vec<String> {
     let proto = tract_onnx::onnx()
@@ -208,14 +283,30 @@ mod tests {
                 let shapes = shipped_inputs(name);
                 let inputs: Vec<(&str, &[usize])> =
                     shapes.iter().map(|(n, s)| (*n, s.as_slice())).collect();
-                let mut with =
-                    crate::conv::building(form, || Net::load(name, bytes, &inputs, &[]).unwrap());
-                let mut without = Net::load_with_stem(name, bytes, &inputs, &[], false).unwrap();
+                let names = onnx_output_names(bytes);
+                let outputs: Vec<&str> = names.iter().map(String::as_str).collect();
+                let mut with = crate::conv::building(form, || {
+                    Net::load(name, bytes, &inputs, &outputs).unwrap()
+                });
+                // The stem, with the heads left to tract.
+                let mut tract_heads = crate::conv::building(form, || {
+                    Net::load_with(name, bytes, &inputs, &outputs, true, false).unwrap()
+                });
+                let mut without =
+                    Net::load_with(name, bytes, &inputs, &outputs, false, false).unwrap();
                 assert!(
                     with.stem.is_some(),
                     "{name}: first layer not taken as a stem"
                 );
                 assert!(without.stem.is_none());
+                // Where the trunk runs outside tract, the heads do too (all the shipped heads'
+                // nodes are of `Dense`'s forms).
+                assert_eq!(
+                    with.dense.is_some(),
+                    crate::conv::available(),
+                    "{name}: heads outside tract"
+                );
+                assert!(tract_heads.dense.is_none() && without.dense.is_none());
                 // Where `conv` runs, every 3×3 layer after the first (all the shipped trunks' layers).
                 let convs = op_types(bytes).iter().filter(|o| *o == "Conv").count();
                 let after_first = with.stem.as_ref().map_or(0, Stem::layers_after_first);
@@ -228,7 +319,7 @@ mod tests {
                     after_first, want,
                     "{name}: layers after the first run outside tract"
                 );
-                for net in [&mut with, &mut without] {
+                for net in [&mut with, &mut tract_heads, &mut without] {
                     // A varied image in 0..1 and a yaw distribution (the networks' input ranges).
                     net.fill_input(0, |x| {
                         x.iter_mut()
@@ -246,16 +337,17 @@ mod tests {
                     }
                     net.run().unwrap();
                 }
-                assert_eq!(with.outputs.len(), without.outputs.len());
-                for (a, b) in with.outputs.iter().zip(&without.outputs) {
-                    let plain = |t: &TValue| {
-                        t.try_as_plain_ram()
-                            .unwrap()
-                            .as_slice::<f32>()
-                            .unwrap()
-                            .to_vec()
-                    };
-                    assert_close_to_whole_graph(name, &plain(a), &plain(b), form.is_bf16());
+                for (k, output) in outputs.iter().enumerate() {
+                    let want = without.output(k).unwrap();
+                    for net in [&with, &tract_heads] {
+                        let what = format!("{name} {output} (dense {})", net.dense.is_some());
+                        assert_close_to_whole_graph(
+                            &what,
+                            net.output(k).unwrap(),
+                            want,
+                            form.is_bf16(),
+                        );
+                    }
                 }
             }
         }

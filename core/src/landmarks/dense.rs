@@ -1,0 +1,414 @@
+//! The fully connected heads of the M3 networks, computed here instead of by tract where the
+//! trunk already runs outside it ([`crate::stem`]).
+//!
+//! Why: after the trunks moved to [`crate::conv`], tract's part of `m3_per_face` was the heads —
+//! `perf` on an Intel Xeon (stop 31) put its matrix–vector kernels at 12 % of the per-face time and
+//! its per-run bookkeeping (plan walk, tensor allocation, copies) at several % more, for about
+//! 0.35 M multiply-adds per face. Here each layer is one pass over its weights, stored input-major
+//! so the outputs are the vector lanes, in buffers allocated once.
+//!
+//! What a graph may hold after its trunk was cut: `Flatten` of the trunk's output, `Gemm` (α = β =
+//! 1, `transA` 0, either `transB`) with a bias, `Relu` or `LeakyRelu` with α = 0, `Concat` along
+//! axis 1 of values and graph inputs, `Identity`, and the nodes that only make weights
+//! (`DequantizeLinear`, `Constant`, initializers); anything else leaves the graph to tract.
+
+use tract_onnx::pb::{ModelProto, NodeProto};
+use tract_onnx::prelude::*;
+
+/// Outputs of a layer accumulated together: four 256-bit registers, which stay in registers
+/// over the whole input (accumulating in the output buffer instead made every product a load and
+/// a store: the heads took 17 % of `m3_per_face_mirror_average`).
+const CHUNK: usize = 32;
+
+/// One step over the value buffers (indices into [`Dense::values`]).
+#[derive(Debug, Clone)]
+enum Op {
+    /// `values[dst] = weights · values[src] + bias`, optionally through a ReLU.
+    Linear {
+        src: usize,
+        dst: usize,
+        /// `k × n'` with `n'` the outputs rounded up to whole [`CHUNK`]s (zero columns past `n`):
+        /// input-major, so one input's weights for a chunk of outputs are contiguous.
+        weights: Vec<f32>,
+        /// `n'` values, zero past `n`.
+        bias: Vec<f32>,
+        relu: bool,
+    },
+    /// `values[dst]` = the concatenation of `srcs`.
+    Concat { srcs: Vec<usize>, dst: usize },
+}
+
+/// A network's heads as a list of steps over owned buffers.
+#[derive(Debug, Clone)]
+pub(crate) struct Dense {
+    ops: Vec<Op>,
+    /// Every value's buffer: the graph inputs first (in order), then one per node output kept.
+    values: Vec<Vec<f32>>,
+    /// The value of each graph output, in the graph's output order.
+    outputs: Vec<usize>,
+    /// The graph outputs' names, in order.
+    output_names: Vec<String>,
+}
+
+fn attr<'a>(node: &'a NodeProto, name: &str) -> Option<&'a tract_onnx::pb::AttributeProto> {
+    node.attribute.iter().find(|a| a.name == name)
+}
+
+/// The names of the values that are weights — initializers, and the outputs of `Constant`,
+/// `DequantizeLinear` and `Cast` nodes fed by weights alone (evaluated by tract once, at load) —
+/// and whether each node is such a weight maker.
+fn weights_of(graph: &tract_onnx::pb::GraphProto) -> (Vec<String>, Vec<bool>) {
+    let mut names: Vec<String> = graph.initializer.iter().map(|t| t.name.clone()).collect();
+    let mut makers = Vec::with_capacity(graph.node.len());
+    for n in &graph.node {
+        let maker = matches!(n.op_type.as_str(), "DequantizeLinear" | "Cast" | "Constant")
+            && n.input.iter().all(|i| i.is_empty() || names.contains(i));
+        if maker {
+            names.extend(n.output.iter().cloned());
+        }
+        makers.push(maker);
+    }
+    (names, makers)
+}
+
+/// A `Gemm` of the form the heads use: `Y = A · B(ᵀ) + C` with a bias `C`.
+fn plain_gemm(node: &NodeProto) -> bool {
+    node.op_type == "Gemm"
+        && node.input.len() == 3
+        && attr(node, "alpha").is_none_or(|a| a.f == 1.0)
+        && attr(node, "beta").is_none_or(|a| a.f == 1.0)
+        && attr(node, "transA").is_none_or(|a| a.i == 0)
+}
+
+fn relu(node: &NodeProto) -> bool {
+    node.op_type == "Relu"
+        || (node.op_type == "LeakyRelu" && attr(node, "alpha").is_some_and(|a| a.f == 0.0))
+}
+
+impl Dense {
+    /// The heads of `proto` — a graph whose first input is the trunk's output, of shape
+    /// `shapes[0]`, other inputs of `shapes[1..]` — when every node has a form listed in the module
+    /// notes; `Ok(None)` otherwise (tract then runs the graph). Weights are read through tract
+    /// (`onnx`), so any weight storage it reads works.
+    pub(crate) fn from_proto(
+        onnx: &tract_onnx::Onnx,
+        proto: &ModelProto,
+        shapes: &[Vec<usize>],
+    ) -> TractResult<Option<Self>> {
+        let Some(graph) = proto.graph.as_ref() else {
+            return Ok(None);
+        };
+        if graph.input.len() != shapes.len() || shapes.iter().any(|s| s.first() != Some(&1)) {
+            return Ok(None);
+        }
+        let (weight_names, makers) = weights_of(graph);
+        let is_weight = |name: &str| weight_names.iter().any(|w| w == name);
+        // Value names → (buffer index, length), the graph inputs first.
+        let mut names: Vec<(String, usize)> = Vec::new();
+        let mut lens: Vec<usize> = Vec::new();
+        for (input, shape) in graph.input.iter().zip(shapes) {
+            names.push((input.name.clone(), lens.len()));
+            lens.push(shape.iter().product());
+        }
+        let find = |names: &[(String, usize)], n: &str| {
+            names.iter().find(|(m, _)| m == n).map(|&(_, i)| i)
+        };
+        // First pass: the structure, with each Gemm's weight names and shape to read.
+        enum Pending {
+            Linear {
+                src: usize,
+                dst: usize,
+                b: String,
+                c: String,
+                trans_b: bool,
+                relu: bool,
+            },
+            Concat {
+                srcs: Vec<usize>,
+                dst: usize,
+            },
+        }
+        let mut pending: Vec<Pending> = Vec::new();
+        let nodes: Vec<&NodeProto> = graph
+            .node
+            .iter()
+            .zip(&makers)
+            .filter(|(_, m)| !**m)
+            .map(|(n, _)| n)
+            .collect();
+        let mut i = 0;
+        while i < nodes.len() {
+            let n = nodes[i];
+            if n.output.len() != 1 {
+                return Ok(None);
+            }
+            let alias = |names: &mut Vec<(String, usize)>, src: usize| {
+                names.push((n.output[0].clone(), src));
+            };
+            match n.op_type.as_str() {
+                "Flatten" | "Identity" if n.input.len() == 1 => {
+                    // Flatten from axis 1 keeps a batch of one as it is laid out.
+                    if n.op_type == "Flatten" && attr(n, "axis").is_some_and(|a| a.i != 1) {
+                        return Ok(None);
+                    }
+                    let Some(src) = find(&names, &n.input[0]) else {
+                        return Ok(None);
+                    };
+                    alias(&mut names, src);
+                }
+                "Concat" if attr(n, "axis").is_some_and(|a| a.i == 1 || a.i == -1) => {
+                    let Some(srcs) = n
+                        .input
+                        .iter()
+                        .map(|s| find(&names, s))
+                        .collect::<Option<Vec<_>>>()
+                    else {
+                        return Ok(None);
+                    };
+                    // Axis −1 is axis 1 only for the flat (batch × features) values it joins.
+                    let dst = lens.len();
+                    lens.push(0); // summed once the Gemms' sizes are read
+                    names.push((n.output[0].clone(), dst));
+                    pending.push(Pending::Concat { srcs, dst });
+                }
+                _ if plain_gemm(n) && is_weight(&n.input[1]) && is_weight(&n.input[2]) => {
+                    let Some(src) = find(&names, &n.input[0]) else {
+                        return Ok(None);
+                    };
+                    // A ReLU that is the Gemm's only reader folds into it.
+                    let next = nodes.get(i + 1).filter(|r| {
+                        relu(r)
+                            && r.input.len() == 1
+                            && r.input[0] == n.output[0]
+                            && r.output.len() == 1
+                            && nodes
+                                .iter()
+                                .filter(|m| m.input.contains(&n.output[0]))
+                                .count()
+                                == 1
+                            && !graph.output.iter().any(|o| o.name == n.output[0])
+                    });
+                    let dst = lens.len();
+                    lens.push(0); // known once the weights are read
+                    let out = next.map_or(&n.output[0], |r| &r.output[0]);
+                    names.push((out.clone(), dst));
+                    pending.push(Pending::Linear {
+                        src,
+                        dst,
+                        b: n.input[1].clone(),
+                        c: n.input[2].clone(),
+                        trans_b: attr(n, "transB").is_some_and(|a| a.i != 0),
+                        relu: next.is_some(),
+                    });
+                    if next.is_some() {
+                        i += 1;
+                    }
+                }
+                _ => return Ok(None),
+            }
+            i += 1;
+        }
+        let Some(outputs) = graph
+            .output
+            .iter()
+            .map(|o| find(&names, &o.name))
+            .collect::<Option<Vec<_>>>()
+        else {
+            return Ok(None);
+        };
+        // The weights as tract computes them (int8 or float16 storage dequantised).
+        let wanted: Vec<&str> = pending
+            .iter()
+            .flat_map(|p| match p {
+                Pending::Linear { b, c, .. } => vec![b.as_str(), c.as_str()],
+                Pending::Concat { .. } => vec![],
+            })
+            .collect();
+        let mut model = onnx.model_for_proto_model(proto)?;
+        if model.input_outlets()?.len() != shapes.len() {
+            return Ok(None);
+        }
+        for (k, shape) in shapes.iter().enumerate() {
+            model.set_input_fact(k, f32::fact(shape).into())?;
+        }
+        model.select_outputs_by_name(wanted.iter())?;
+        let plan = model.into_optimized()?.into_runnable()?;
+        let zeros = shapes
+            .iter()
+            .map(|s| Tensor::zero::<f32>(s).map(TValue::from))
+            .collect::<TractResult<TVec<_>>>()?;
+        let tensors = plan.run(zeros)?;
+        let mut tensors = tensors.iter();
+        let mut ops = Vec::with_capacity(pending.len());
+        for p in pending {
+            match p {
+                Pending::Concat { srcs, dst } => {
+                    lens[dst] = srcs.iter().map(|&s| lens[s]).sum();
+                    ops.push(Op::Concat { srcs, dst });
+                }
+                Pending::Linear {
+                    src,
+                    dst,
+                    trans_b,
+                    relu,
+                    ..
+                } => {
+                    let (Some(b), Some(c)) = (tensors.next(), tensors.next()) else {
+                        tract_onnx::tract_core::internal::bail!("weights missing");
+                    };
+                    let (bv, cv) = (
+                        b.try_as_plain_ram()?.as_slice::<f32>()?,
+                        c.try_as_plain_ram()?.as_slice::<f32>()?,
+                    );
+                    let &[r, s] = b.shape() else {
+                        return Ok(None);
+                    };
+                    // ONNX: B is k × n, or n × k with transB.
+                    let (k, n) = if trans_b { (s, r) } else { (r, s) };
+                    if k != lens[src] || cv.len() != n {
+                        return Ok(None);
+                    }
+                    let np = n.div_ceil(CHUNK) * CHUNK;
+                    let mut weights = vec![0.0; k * np];
+                    for (t, w) in weights.iter_mut().enumerate() {
+                        let (row, col) = (t / np, t % np);
+                        if col < n {
+                            *w = if trans_b {
+                                bv[col * k + row]
+                            } else {
+                                bv[row * n + col]
+                            };
+                        }
+                    }
+                    let mut bias = cv.to_vec();
+                    bias.resize(np, 0.0);
+                    lens[dst] = n;
+                    ops.push(Op::Linear {
+                        src,
+                        dst,
+                        weights,
+                        bias,
+                        relu,
+                    });
+                }
+            }
+        }
+        Ok(Some(Self {
+            ops,
+            values: lens.iter().map(|&l| vec![0.0; l]).collect(),
+            outputs,
+            output_names: graph.output.iter().map(|o| o.name.clone()).collect(),
+        }))
+    }
+
+    /// The index of the graph output named `name`.
+    pub(crate) fn output_index(&self, name: &str) -> Option<usize> {
+        self.output_names.iter().position(|n| n == name)
+    }
+
+    /// Runs the heads on the graph inputs `inputs` (each of the length its shape gives).
+    ///
+    /// # Panics
+    /// When an input's length differs from its shape's.
+    pub(crate) fn run(&mut self, inputs: &[&[f32]]) {
+        for (dst, src) in self.values.iter_mut().zip(inputs) {
+            dst.copy_from_slice(src);
+        }
+        for op in &self.ops {
+            match op {
+                Op::Concat { srcs, dst } => {
+                    let mut out = std::mem::take(&mut self.values[*dst]);
+                    let mut at = 0;
+                    for &s in srcs {
+                        let v = &self.values[s];
+                        out[at..at + v.len()].copy_from_slice(v);
+                        at += v.len();
+                    }
+                    self.values[*dst] = out;
+                }
+                Op::Linear {
+                    src,
+                    dst,
+                    weights,
+                    bias,
+                    relu,
+                } => {
+                    let mut out = std::mem::take(&mut self.values[*dst]);
+                    linear(&self.values[*src], weights, bias, *relu, &mut out);
+                    self.values[*dst] = out;
+                }
+            }
+        }
+    }
+
+    /// Graph output `k` after [`Dense::run`].
+    pub(crate) fn output(&self, k: usize) -> &[f32] {
+        &self.values[self.outputs[k]]
+    }
+}
+
+/// `out = weights · x + bias` (`weights` input-major, `x.len()` rows of `bias.len()`, a whole
+/// number of [`CHUNK`]s; `out` the first of those outputs), through a ReLU if `relu`.
+fn linear(x: &[f32], weights: &[f32], bias: &[f32], relu: bool, out: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if crate::cpu::has_avx2_fma() {
+        #[allow(unsafe_code)]
+        // SAFETY: the CPU has AVX2 and FMA.
+        unsafe {
+            linear_avx2(x, weights, bias, relu, out)
+        };
+        return;
+    }
+    linear_body(x, weights, bias, relu, out);
+}
+
+/// [`linear_body`] compiled for AVX2 + FMA (the same operations on wider vectors).
+///
+/// # Safety
+/// The CPU has AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(unsafe_code)]
+unsafe fn linear_avx2(x: &[f32], weights: &[f32], bias: &[f32], relu: bool, out: &mut [f32]) {
+    linear_body(x, weights, bias, relu, out);
+}
+
+#[inline(always)]
+fn linear_body(x: &[f32], weights: &[f32], bias: &[f32], relu: bool, out: &mut [f32]) {
+    let np = bias.len();
+    debug_assert!(np.is_multiple_of(CHUNK) && weights.len() == x.len() * np && out.len() <= np);
+    let chunk = |row: &[f32], c: usize| -> [f32; CHUNK] {
+        row[c * CHUNK..][..CHUNK]
+            .try_into()
+            .expect("a chunk of weights")
+    };
+    for (c, (b, dst)) in bias
+        .chunks_exact(CHUNK)
+        .zip(out.chunks_mut(CHUNK))
+        .enumerate()
+    {
+        // Two sums over alternate inputs: each register's chain of fused multiply-adds then
+        // waits on itself every other input, so the adds overlap (one sum was bound by the add
+        // latency, 4 cycles per input).
+        let mut even: [f32; CHUNK] = b.try_into().expect("a chunk of biases");
+        let mut odd = [0f32; CHUNK];
+        let mut rows = x.iter().zip(weights.chunks_exact(np));
+        while let (Some((&v0, r0)), Some((&v1, r1))) = (rows.next(), rows.next()) {
+            let (w0, w1) = (chunk(r0, c), chunk(r1, c));
+            for j in 0..CHUNK {
+                even[j] = v0.mul_add(w0[j], even[j]);
+                odd[j] = v1.mul_add(w1[j], odd[j]);
+            }
+        }
+        if x.len() % 2 == 1 {
+            let (v, w) = (x[x.len() - 1], chunk(&weights[(x.len() - 1) * np..], c));
+            for j in 0..CHUNK {
+                even[j] = v.mul_add(w[j], even[j]);
+            }
+        }
+        for ((d, &e), &o) in dst.iter_mut().zip(&even).zip(&odd) {
+            let a = e + o;
+            *d = if relu { a.max(0.0) } else { a };
+        }
+    }
+}
