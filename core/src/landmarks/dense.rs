@@ -20,6 +20,52 @@ use tract_onnx::prelude::*;
 /// a store: the heads took 17 % of `m3_per_face_mirror_average`).
 const CHUNK: usize = 32;
 
+/// A layer's weights as stored here.
+#[derive(Debug, Clone)]
+enum Weights {
+    F32(Vec<f32>),
+    /// Per output column `o` the weights are `q[k][o] · scale[o]`: the form the shipped networks'
+    /// int8 storage gives them (`models/train/onnx_q8.py`, one symmetric scale per output), a
+    /// quarter of the bytes to stream — the f32 matrices (about 2 MB per face in mirror average)
+    /// did not stay in the cache, and their reading was the heads' time.
+    I8 {
+        q: Vec<i8>,
+        scale: Vec<f32>,
+    },
+}
+
+impl Weights {
+    /// `w` (`k × np`, input-major) as int8 times a scale per column where every value is one to
+    /// within 1e-6 of its column's largest magnitude, else as it is.
+    fn compact(w: Vec<f32>, np: usize) -> Self {
+        let k = w.len() / np.max(1);
+        let scale: Vec<f32> = (0..np)
+            .map(|o| (0..k).fold(0f32, |m, r| m.max(w[r * np + o].abs())) / 127.0)
+            .collect();
+        let q: Vec<i8> = w
+            .iter()
+            .enumerate()
+            .map(|(t, &v)| {
+                let s = scale[t % np];
+                if s > 0.0 {
+                    (v / s).round().clamp(-127.0, 127.0) as i8
+                } else {
+                    0
+                }
+            })
+            .collect();
+        let exact = w.iter().zip(&q).enumerate().all(|(t, (&v, &q))| {
+            let s = scale[t % np];
+            (f32::from(q) * s - v).abs() <= 1e-6 * 127.0 * s
+        });
+        if exact {
+            Weights::I8 { q, scale }
+        } else {
+            Weights::F32(w)
+        }
+    }
+}
+
 /// One step over the value buffers (indices into [`Dense::values`]).
 #[derive(Debug, Clone)]
 enum Op {
@@ -29,7 +75,7 @@ enum Op {
         dst: usize,
         /// `k × n'` with `n'` the outputs rounded up to whole [`CHUNK`]s (zero columns past `n`):
         /// input-major, so one input's weights for a chunk of outputs are contiguous.
-        weights: Vec<f32>,
+        weights: Weights,
         /// `n'` values, zero past `n`.
         bias: Vec<f32>,
         relu: bool,
@@ -286,7 +332,7 @@ impl Dense {
                     ops.push(Op::Linear {
                         src,
                         dst,
-                        weights,
+                        weights: Weights::compact(weights, np),
                         bias,
                         relu,
                     });
@@ -334,11 +380,28 @@ impl Dense {
                     relu,
                 } => {
                     let mut out = std::mem::take(&mut self.values[*dst]);
-                    linear(&self.values[*src], weights, bias, *relu, &mut out);
+                    match weights {
+                        Weights::F32(w) => {
+                            linear(&self.values[*src], w, None, bias, *relu, &mut out)
+                        }
+                        Weights::I8 { q, scale } => {
+                            linear(&self.values[*src], q, Some(scale), bias, *relu, &mut out)
+                        }
+                    }
                     self.values[*dst] = out;
                 }
             }
         }
+    }
+
+    /// How many of the layers keep int8 weights, and how many layers there are.
+    #[cfg(test)]
+    pub(crate) fn int8_layers(&self) -> (usize, usize) {
+        let layers = self.ops.iter().filter_map(|op| match op {
+            Op::Linear { weights, .. } => Some(matches!(weights, Weights::I8 { .. })),
+            Op::Concat { .. } => None,
+        });
+        layers.fold((0, 0), |(i, n), int8| (i + usize::from(int8), n + 1))
     }
 
     /// Graph output `k` after [`Dense::run`].
@@ -347,19 +410,46 @@ impl Dense {
     }
 }
 
-/// `out = weights · x + bias` (`weights` input-major, `x.len()` rows of `bias.len()`, a whole
-/// number of [`CHUNK`]s; `out` the first of those outputs), through a ReLU if `relu`.
-fn linear(x: &[f32], weights: &[f32], bias: &[f32], relu: bool, out: &mut [f32]) {
+/// A weight as the kernel multiplies it.
+trait Weight: Copy {
+    fn value(self) -> f32;
+}
+
+impl Weight for f32 {
+    #[inline(always)]
+    fn value(self) -> f32 {
+        self
+    }
+}
+
+impl Weight for i8 {
+    #[inline(always)]
+    fn value(self) -> f32 {
+        f32::from(self)
+    }
+}
+
+/// `out = scale ⊙ (weights · x) + bias` (`weights` input-major, `x.len()` rows of `bias.len()`, a
+/// whole number of [`CHUNK`]s; `scale` per column, 1 without; `out` the first of those outputs),
+/// through a ReLU if `relu`.
+fn linear<W: Weight>(
+    x: &[f32],
+    weights: &[W],
+    scale: Option<&[f32]>,
+    bias: &[f32],
+    relu: bool,
+    out: &mut [f32],
+) {
     #[cfg(target_arch = "x86_64")]
     if crate::cpu::has_avx2_fma() {
         #[allow(unsafe_code)]
         // SAFETY: the CPU has AVX2 and FMA.
         unsafe {
-            linear_avx2(x, weights, bias, relu, out)
+            linear_avx2(x, weights, scale, bias, relu, out)
         };
         return;
     }
-    linear_body(x, weights, bias, relu, out);
+    linear_body(x, weights, scale, bias, relu, out);
 }
 
 /// [`linear_body`] compiled for AVX2 + FMA (the same operations on wider vectors).
@@ -369,15 +459,29 @@ fn linear(x: &[f32], weights: &[f32], bias: &[f32], relu: bool, out: &mut [f32])
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[allow(unsafe_code)]
-unsafe fn linear_avx2(x: &[f32], weights: &[f32], bias: &[f32], relu: bool, out: &mut [f32]) {
-    linear_body(x, weights, bias, relu, out);
+unsafe fn linear_avx2<W: Weight>(
+    x: &[f32],
+    weights: &[W],
+    scale: Option<&[f32]>,
+    bias: &[f32],
+    relu: bool,
+    out: &mut [f32],
+) {
+    linear_body(x, weights, scale, bias, relu, out);
 }
 
 #[inline(always)]
-fn linear_body(x: &[f32], weights: &[f32], bias: &[f32], relu: bool, out: &mut [f32]) {
+fn linear_body<W: Weight>(
+    x: &[f32],
+    weights: &[W],
+    scale: Option<&[f32]>,
+    bias: &[f32],
+    relu: bool,
+    out: &mut [f32],
+) {
     let np = bias.len();
     debug_assert!(np.is_multiple_of(CHUNK) && weights.len() == x.len() * np && out.len() <= np);
-    let chunk = |row: &[f32], c: usize| -> [f32; CHUNK] {
+    let chunk = |row: &[W], c: usize| -> [W; CHUNK] {
         row[c * CHUNK..][..CHUNK]
             .try_into()
             .expect("a chunk of weights")
@@ -390,25 +494,72 @@ fn linear_body(x: &[f32], weights: &[f32], bias: &[f32], relu: bool, out: &mut [
         // Two sums over alternate inputs: each register's chain of fused multiply-adds then
         // waits on itself every other input, so the adds overlap (one sum was bound by the add
         // latency, 4 cycles per input).
-        let mut even: [f32; CHUNK] = b.try_into().expect("a chunk of biases");
+        let mut even = [0f32; CHUNK];
         let mut odd = [0f32; CHUNK];
         let mut rows = x.iter().zip(weights.chunks_exact(np));
         while let (Some((&v0, r0)), Some((&v1, r1))) = (rows.next(), rows.next()) {
             let (w0, w1) = (chunk(r0, c), chunk(r1, c));
             for j in 0..CHUNK {
-                even[j] = v0.mul_add(w0[j], even[j]);
-                odd[j] = v1.mul_add(w1[j], odd[j]);
+                even[j] = v0.mul_add(w0[j].value(), even[j]);
+                odd[j] = v1.mul_add(w1[j].value(), odd[j]);
             }
         }
         if x.len() % 2 == 1 {
             let (v, w) = (x[x.len() - 1], chunk(&weights[(x.len() - 1) * np..], c));
             for j in 0..CHUNK {
-                even[j] = v.mul_add(w[j], even[j]);
+                even[j] = v.mul_add(w[j].value(), even[j]);
             }
         }
-        for ((d, &e), &o) in dst.iter_mut().zip(&even).zip(&odd) {
-            let a = e + o;
+        let s = scale.map(|s| &s[c * CHUNK..][..CHUNK]);
+        for (j, d) in dst.iter_mut().enumerate() {
+            let sum = even[j] + odd[j];
+            let a = s.map_or(sum, |s| sum * s[j]) + b[j];
             *d = if relu { a.max(0.0) } else { a };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Int8 times a scale per column is kept as int8 and gives the same products; other weights
+    /// stay f32.
+    #[test]
+    fn weights_are_kept_as_int8_only_where_they_are_int8() {
+        let np = CHUNK;
+        let scale: Vec<f32> = (0..np).map(|o| 0.001 * (o + 1) as f32).collect();
+        // As `onnx_q8.py` stores them: each column's largest magnitude is 127 steps.
+        let quantised: Vec<f32> = (0..3 * np)
+            .map(|t| {
+                let q = if t < np {
+                    127.0
+                } else {
+                    (t * 37 % 255) as f32 - 127.0
+                };
+                q * scale[t % np]
+            })
+            .collect();
+        let Weights::I8 { q, scale: s } = Weights::compact(quantised.clone(), np) else {
+            panic!("int8 weights not kept as int8");
+        };
+        for (t, &w) in quantised.iter().enumerate() {
+            assert!((f32::from(q[t]) * s[t % np] - w).abs() <= 1e-6 * w.abs().max(1e-3));
+        }
+        let other: Vec<f32> = (0..3 * np).map(|t| (t as f32 * 0.37).sin()).collect();
+        assert!(matches!(Weights::compact(other, np), Weights::F32(_)));
+        // The kernel on both forms: the same outputs, ReLU and bias included.
+        let x = [0.5f32, -1.0, 2.0];
+        let bias: Vec<f32> = (0..np).map(|o| o as f32 * 0.01 - 0.1).collect();
+        let (mut a, mut b) = (vec![0.0; np - 3], vec![0.0; np - 3]);
+        linear(&x, &quantised, None, &bias, true, &mut a);
+        linear(&x, &q, Some(&s), &bias, true, &mut b);
+        for (o, (a, b)) in a.iter().zip(&b).enumerate() {
+            let want: f32 = bias[o] + (0..3).map(|k| x[k] * quantised[k * np + o]).sum::<f32>();
+            assert!(
+                (a - want.max(0.0)).abs() < 1e-5 && (b - a).abs() < 1e-5,
+                "{o}: {a} {b}"
+            );
         }
     }
 }

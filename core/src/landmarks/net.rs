@@ -307,6 +307,14 @@ mod tests {
                     "{name}: heads outside tract"
                 );
                 assert!(tract_heads.dense.is_none() && without.dense.is_none());
+                // Their weights are int8 times a scale per output (`onnx_q8.py`), kept that way.
+                if let Some(dense) = &with.dense {
+                    let (int8, layers) = dense.int8_layers();
+                    assert!(
+                        layers >= 2 && int8 == layers,
+                        "{name}: {int8} of {layers} int8"
+                    );
+                }
                 // Where `conv` runs, every 3×3 layer after the first (all the shipped trunks' layers).
                 let convs = op_types(bytes).iter().filter(|o| *o == "Conv").count();
                 let after_first = with.stem.as_ref().map_or(0, Stem::layers_after_first);
