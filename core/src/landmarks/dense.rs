@@ -380,13 +380,25 @@ impl Dense {
                     relu,
                 } => {
                     let mut out = std::mem::take(&mut self.values[*dst]);
+                    let x = &self.values[*src];
+                    let (bias, relu) = (bias.as_slice(), *relu);
                     match weights {
-                        Weights::F32(w) => {
-                            linear(&self.values[*src], w, None, bias, *relu, &mut out)
+                        Weights::F32(weights) => Product {
+                            x,
+                            weights,
+                            scale: None,
+                            bias,
+                            relu,
                         }
-                        Weights::I8 { q, scale } => {
-                            linear(&self.values[*src], q, Some(scale), bias, *relu, &mut out)
+                        .run(&mut out),
+                        Weights::I8 { q, scale } => Product {
+                            x,
+                            weights: q,
+                            scale: Some(scale),
+                            bias,
+                            relu,
                         }
+                        .run(&mut out),
                     }
                     self.values[*dst] = out;
                 }
@@ -429,92 +441,69 @@ impl Weight for i8 {
     }
 }
 
-/// `out = scale ⊙ (weights · x) + bias` (`weights` input-major, `x.len()` rows of `bias.len()`, a
-/// whole number of [`CHUNK`]s; `scale` per column, 1 without; `out` the first of those outputs),
-/// through a ReLU if `relu`.
-fn linear<W: Weight>(
-    x: &[f32],
-    weights: &[W],
-    scale: Option<&[f32]>,
-    bias: &[f32],
+/// One layer's product as [`Op::Linear`] runs it: `x`, `weights` input-major (`x.len()` rows of
+/// `bias.len()`, a whole number of [`CHUNK`]s), `scale` per column (1 without), the bias, and
+/// whether a ReLU follows.
+struct Product<'a, W> {
+    x: &'a [f32],
+    weights: &'a [W],
+    scale: Option<&'a [f32]>,
+    bias: &'a [f32],
     relu: bool,
-    out: &mut [f32],
-) {
-    #[cfg(target_arch = "x86_64")]
-    if crate::cpu::has_avx2_fma() {
-        #[allow(unsafe_code)]
-        // SAFETY: the CPU has AVX2 and FMA.
-        unsafe {
-            linear_avx2(x, weights, scale, bias, relu, out)
-        };
-        return;
+}
+
+impl<W: Weight> Product<'_, W> {
+    crate::cpu::with_avx2_copy! {
+        /// `out = scale ⊙ (weights · x) + bias` (`out` the first of the columns' outputs).
+        fn run / run_avx2 (&self, out: &mut [f32]) => run_body
     }
-    linear_body(x, weights, scale, bias, relu, out);
-}
 
-/// [`linear_body`] compiled for AVX2 + FMA (the same operations on wider vectors).
-///
-/// # Safety
-/// The CPU has AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[allow(unsafe_code)]
-unsafe fn linear_avx2<W: Weight>(
-    x: &[f32],
-    weights: &[W],
-    scale: Option<&[f32]>,
-    bias: &[f32],
-    relu: bool,
-    out: &mut [f32],
-) {
-    linear_body(x, weights, scale, bias, relu, out);
-}
-
-#[inline(always)]
-fn linear_body<W: Weight>(
-    x: &[f32],
-    weights: &[W],
-    scale: Option<&[f32]>,
-    bias: &[f32],
-    relu: bool,
-    out: &mut [f32],
-) {
-    let np = bias.len();
-    debug_assert!(np.is_multiple_of(CHUNK) && weights.len() == x.len() * np && out.len() <= np);
-    let chunk = |row: &[W], c: usize| -> [W; CHUNK] {
-        row[c * CHUNK..][..CHUNK]
-            .try_into()
-            .expect("a chunk of weights")
-    };
-    for (c, (b, dst)) in bias
-        .chunks_exact(CHUNK)
-        .zip(out.chunks_mut(CHUNK))
-        .enumerate()
-    {
-        // Two sums over alternate inputs: each register's chain of fused multiply-adds then
-        // waits on itself every other input, so the adds overlap (one sum was bound by the add
-        // latency, 4 cycles per input).
-        let mut even = [0f32; CHUNK];
-        let mut odd = [0f32; CHUNK];
-        let mut rows = x.iter().zip(weights.chunks_exact(np));
-        while let (Some((&v0, r0)), Some((&v1, r1))) = (rows.next(), rows.next()) {
-            let (w0, w1) = (chunk(r0, c), chunk(r1, c));
-            for j in 0..CHUNK {
-                even[j] = v0.mul_add(w0[j].value(), even[j]);
-                odd[j] = v1.mul_add(w1[j].value(), odd[j]);
+    #[inline(always)]
+    fn run_body(&self, out: &mut [f32]) {
+        let Self {
+            x,
+            weights,
+            scale,
+            bias,
+            relu,
+        } = *self;
+        let np = bias.len();
+        debug_assert!(np.is_multiple_of(CHUNK) && weights.len() == x.len() * np && out.len() <= np);
+        let chunk = |row: &[W], c: usize| -> [W; CHUNK] {
+            row[c * CHUNK..][..CHUNK]
+                .try_into()
+                .expect("a chunk of weights")
+        };
+        for (c, (b, dst)) in bias
+            .chunks_exact(CHUNK)
+            .zip(out.chunks_mut(CHUNK))
+            .enumerate()
+        {
+            // Two sums over alternate inputs: each register's chain of fused multiply-adds then
+            // waits on itself every other input, so the adds overlap (one sum was bound by the
+            // add latency, 4 cycles per input).
+            let mut even = [0f32; CHUNK];
+            let mut odd = [0f32; CHUNK];
+            let mut rows = x.iter().zip(weights.chunks_exact(np));
+            while let (Some((&v0, r0)), Some((&v1, r1))) = (rows.next(), rows.next()) {
+                let (w0, w1) = (chunk(r0, c), chunk(r1, c));
+                for j in 0..CHUNK {
+                    even[j] = v0.mul_add(w0[j].value(), even[j]);
+                    odd[j] = v1.mul_add(w1[j].value(), odd[j]);
+                }
             }
-        }
-        if x.len() % 2 == 1 {
-            let (v, w) = (x[x.len() - 1], chunk(&weights[(x.len() - 1) * np..], c));
-            for j in 0..CHUNK {
-                even[j] = v.mul_add(w[j].value(), even[j]);
+            if x.len() % 2 == 1 {
+                let (v, w) = (x[x.len() - 1], chunk(&weights[(x.len() - 1) * np..], c));
+                for j in 0..CHUNK {
+                    even[j] = v.mul_add(w[j].value(), even[j]);
+                }
             }
-        }
-        let s = scale.map(|s| &s[c * CHUNK..][..CHUNK]);
-        for (j, d) in dst.iter_mut().enumerate() {
-            let sum = even[j] + odd[j];
-            let a = s.map_or(sum, |s| sum * s[j]) + b[j];
-            *d = if relu { a.max(0.0) } else { a };
+            let s = scale.map(|s| &s[c * CHUNK..][..CHUNK]);
+            for (j, d) in dst.iter_mut().enumerate() {
+                let sum = even[j] + odd[j];
+                let a = s.map_or(sum, |s| sum * s[j]) + b[j];
+                *d = if relu { a.max(0.0) } else { a };
+            }
         }
     }
 }
@@ -552,8 +541,22 @@ mod tests {
         let x = [0.5f32, -1.0, 2.0];
         let bias: Vec<f32> = (0..np).map(|o| o as f32 * 0.01 - 0.1).collect();
         let (mut a, mut b) = (vec![0.0; np - 3], vec![0.0; np - 3]);
-        linear(&x, &quantised, None, &bias, true, &mut a);
-        linear(&x, &q, Some(&s), &bias, true, &mut b);
+        Product {
+            x: &x,
+            weights: &quantised,
+            scale: None,
+            bias: &bias,
+            relu: true,
+        }
+        .run(&mut a);
+        Product {
+            x: &x,
+            weights: &q,
+            scale: Some(&s),
+            bias: &bias,
+            relu: true,
+        }
+        .run(&mut b);
         for (o, (a, b)) in a.iter().zip(&b).enumerate() {
             let want: f32 = bias[o] + (0..3).map(|k| x[k] * quantised[k * np + o]).sum::<f32>();
             assert!(

@@ -220,31 +220,29 @@ fn with_input_slice(t: &mut Arc<Tensor>, f: impl FnOnce(&mut [f32])) -> Result<(
     with_f32_slice(t, f).map_err(|e| Error::Internal(format!("input tensor: {e:#}")))
 }
 
-/// Op types of the nodes of an ONNX graph, as stored (for the tests that check how the shipped
-/// networks are written).
-/// The graph output names of an ONNX file, in order.
+/// The graph of an ONNX file (for the tests that check how the shipped networks are written).
 #[cfg(test)]
-fn onnx_output_names(bytes: &[u8]) -> Vec<String> {
+fn onnx_graph(bytes: &[u8]) -> tract_onnx::pb::GraphProto {
     let proto = tract_onnx::onnx()
         .proto_model_for_read(&mut &*bytes)
         .unwrap();
-    proto
-        .graph
-        .unwrap()
+    proto.graph.unwrap()
+}
+
+/// The graph output names of an ONNX file, in order.
+#[cfg(test)]
+fn onnx_output_names(bytes: &[u8]) -> Vec<String> {
+    onnx_graph(bytes)
         .output
         .into_iter()
         .map(|o| o.name)
         .collect()
 }
 
+/// Op types of the nodes of an ONNX graph, as stored.
 #[cfg(test)]
 pub(crate) fn onnx_op_types(bytes: &[u8]) -> Vec<String> {
-    let proto = tract_onnx::onnx()
-        .proto_model_for_read(&mut &*bytes)
-        .unwrap();
-    proto
-        .graph
-        .unwrap()
+    onnx_graph(bytes)
         .node
         .into_iter()
         .map(|n| n.op_type)
