@@ -54,8 +54,8 @@ pub const DEFAULT_MIN_DETECTION_SCORE: f32 = 0.4;
 /// [`DEFAULT_MIN_DETECTION_CONFIDENCE`]) finds 127 of the 128 faces68 validation faces at 0.038
 /// false positives per image (`models/MODEL_CARD.md`, face detector), against 123 at 0.009 for the
 /// default min face, which skips the 17–23 px faces of group photos. A 640×480 frame runs at
-/// 400×300, and more candidates get face checks: the whole detection took 4.6–4.7 ms against
-/// 3.2 ms at the default (criterion, an Intel Xeon with AVX-512, stop 31). The defaults keep the
+/// 400×300, and more candidates get face checks: the whole detection took 4.6–5.0 ms against
+/// 3.1–3.2 ms at the default (criterion, an Intel Xeon with AVX-512, stop 31). The defaults keep the
 /// point with fewer false positives and less clutter; `monotrack landmarks --small-faces` detects
 /// at this one. Apps choose it through `DetectorConfig::min_face_px` and
 /// [`TrackerConfig::min_detection_score`].
