@@ -370,12 +370,50 @@ pub(crate) struct StemLayer {
     shift: f32,
 }
 
-fn attr<'a>(node: &'a NodeProto, name: &str) -> Option<&'a AttributeProto> {
+/// The attribute `name` of `node`.
+pub(crate) fn attr<'a>(node: &'a NodeProto, name: &str) -> Option<&'a AttributeProto> {
     node.attribute.iter().find(|a| a.name == name)
 }
 
 fn ints_or<'a>(node: &'a NodeProto, name: &str, default: &'a [i64]) -> &'a [i64] {
     attr(node, name).map_or(default, |a| &a.ints)
+}
+
+/// Whether `node` is a ReLU: `Relu`, or `LeakyRelu` with α = 0 (the form
+/// `models/train/onnx_tract.py` writes).
+pub(crate) fn is_relu(node: &NodeProto) -> bool {
+    node.op_type == "Relu"
+        || (node.op_type == "LeakyRelu" && attr(node, "alpha").is_some_and(|a| a.f == 0.0))
+}
+
+/// The values `names` of `proto` (for inputs of `shapes`) as tract computes them from zero
+/// inputs: the weights of layers run outside tract, whatever storage tract reads them from (int8
+/// with `DequantizeLinear`, float16 with `Cast`).
+pub(crate) fn values_by_name(
+    onnx: &tract_onnx::Onnx,
+    proto: &ModelProto,
+    shapes: &[Vec<usize>],
+    names: &[&str],
+) -> TractResult<TVec<TValue>> {
+    let mut model = onnx.model_for_proto_model(proto)?;
+    // tract's inputs leave out graph inputs that are initializers: check before indexing.
+    if model.input_outlets()?.len() != shapes.len() {
+        tract_onnx::tract_core::internal::bail!(
+            "{} inputs, expected {}",
+            model.input_outlets()?.len(),
+            shapes.len()
+        );
+    }
+    for (i, shape) in shapes.iter().enumerate() {
+        model.set_input_fact(i, f32::fact(shape).into())?;
+    }
+    model.select_outputs_by_name(names.iter())?;
+    let plan = model.into_optimized()?.into_runnable()?;
+    let zeros = shapes
+        .iter()
+        .map(|s| Tensor::zero::<f32>(s).map(TValue::from))
+        .collect::<TractResult<TVec<_>>>()?;
+    plan.run(zeros)
 }
 
 /// Whether `node` is a `Conv` with explicit (not automatic) padding, group 1 and dilation 1.
@@ -475,9 +513,7 @@ impl StemLayer {
         // The ReLU reading a convolution's output alone, and its output.
         let relu_of = |conv: &NodeProto| {
             let (i, r) = only_reader(conv.output.first()?)?;
-            let is_relu = r.op_type == "Relu"
-                || (r.op_type == "LeakyRelu" && attr(r, "alpha").is_some_and(|a| a.f == 0.0));
-            (is_relu && r.output.len() == 1).then_some((i, r.output[0].as_str()))
+            (is_relu(r) && r.output.len() == 1).then_some((i, r.output[0].as_str()))
         };
         // A 3×3, padding-1 convolution with a bias on `value` alone: its stride.
         let conv_3x3 = |n: &NodeProto, value: &str, strides: &[&[i64]]| {
@@ -548,29 +584,15 @@ impl StemLayer {
         let Some(graph) = proto.graph.as_ref() else {
             tract_onnx::tract_core::internal::bail!("no graph");
         };
-        let mut model = onnx.model_for_proto_model(proto)?;
-        // tract's inputs leave out graph inputs that are initializers: check before indexing.
-        if model.input_outlets()?.len() != shapes.len() {
-            tract_onnx::tract_core::internal::bail!(
-                "{} inputs, expected {}",
-                model.input_outlets()?.len(),
-                shapes.len()
-            );
-        }
-        for (i, shape) in shapes.iter().enumerate() {
-            model.set_input_fact(i, f32::fact(shape).into())?;
-        }
         let convs: Vec<&NodeProto> = std::iter::once(self.conv)
             .chain(self.chain.iter().map(|&(i, _)| i))
             .map(|i| &graph.node[i])
             .collect();
-        model.select_outputs_by_name(convs.iter().flat_map(|c| [&c.input[1], &c.input[2]]))?;
-        let plan = model.into_optimized()?.into_runnable()?;
-        let zeros = shapes
+        let names: Vec<&str> = convs
             .iter()
-            .map(|s| Tensor::zero::<f32>(s).map(TValue::from))
-            .collect::<TractResult<TVec<_>>>()?;
-        let out = plan.run(zeros)?;
+            .flat_map(|c| [c.input[1].as_str(), c.input[2].as_str()])
+            .collect();
+        let out = values_by_name(onnx, proto, shapes, &names)?;
         let values = |t: &TValue| -> TractResult<Vec<f32>> {
             Ok(t.try_as_plain_ram()?.as_slice::<f32>()?.to_vec())
         };

@@ -3,15 +3,17 @@
 //!
 //! Why: after the trunks moved to [`crate::conv`], tract's part of `m3_per_face` was the heads —
 //! `perf` on an Intel Xeon (stop 31) put its matrix–vector kernels at 12 % of the per-face time and
-//! its per-run bookkeeping (plan walk, tensor allocation, copies) at several % more, for about
-//! 0.35 M multiply-adds per face. Here each layer is one pass over its weights, stored input-major
-//! so the outputs are the vector lanes, in buffers allocated once.
+//! its per-run bookkeeping (plan walk, tensor allocation, copies) at several % more, for 0.38 M
+//! multiply-adds per face (counted from the shipped graphs). Here each layer is one pass over its
+//! weights, stored input-major so the outputs are the vector lanes, in buffers allocated once.
 //!
 //! What a graph may hold after its trunk was cut: `Flatten` of the trunk's output, `Gemm` (α = β =
 //! 1, `transA` 0, either `transB`) with a bias, `Relu` or `LeakyRelu` with α = 0, `Concat` along
 //! axis 1 of values and graph inputs, `Identity`, and the nodes that only make weights
-//! (`DequantizeLinear`, `Constant`, initializers); anything else leaves the graph to tract.
+//! (`DequantizeLinear`, `Cast` and `Constant` of weights, initializers); anything else leaves the
+//! graph to tract.
 
+use crate::stem::{attr, is_relu, values_by_name};
 use tract_onnx::pb::{ModelProto, NodeProto};
 use tract_onnx::prelude::*;
 
@@ -26,8 +28,9 @@ enum Weights {
     F32(Vec<f32>),
     /// Per output column `o` the weights are `q[k][o] · scale[o]`: the form the shipped networks'
     /// int8 storage gives them (`models/train/onnx_q8.py`, one symmetric scale per output), a
-    /// quarter of the bytes to stream — the f32 matrices (about 2 MB per face in mirror average)
-    /// did not stay in the cache, and their reading was the heads' time.
+    /// quarter of the bytes to stream — the f32 matrices (1.5 MB over the seven networks, 2.9 MB
+    /// read per face in mirror average, counted from the graphs) did not stay in the cache, and
+    /// their reading was the heads' time.
     I8 {
         q: Vec<i8>,
         scale: Vec<f32>,
@@ -88,16 +91,13 @@ enum Op {
 #[derive(Debug, Clone)]
 pub(crate) struct Dense {
     ops: Vec<Op>,
-    /// Every value's buffer: the graph inputs first (in order), then one per node output kept.
+    /// Every value's buffer: the graph inputs first (in order; written through
+    /// [`Dense::input_mut`]), then one per node output kept.
     values: Vec<Vec<f32>>,
     /// The value of each graph output, in the graph's output order.
     outputs: Vec<usize>,
     /// The graph outputs' names, in order.
     output_names: Vec<String>,
-}
-
-fn attr<'a>(node: &'a NodeProto, name: &str) -> Option<&'a tract_onnx::pb::AttributeProto> {
-    node.attribute.iter().find(|a| a.name == name)
 }
 
 /// The names of the values that are weights — initializers, and the outputs of `Constant`,
@@ -126,11 +126,6 @@ fn plain_gemm(node: &NodeProto) -> bool {
         && attr(node, "transA").is_none_or(|a| a.i == 0)
 }
 
-fn relu(node: &NodeProto) -> bool {
-    node.op_type == "Relu"
-        || (node.op_type == "LeakyRelu" && attr(node, "alpha").is_some_and(|a| a.f == 0.0))
-}
-
 impl Dense {
     /// The heads of `proto` — a graph whose first input is the trunk's output, of shape
     /// `shapes[0]`, other inputs of `shapes[1..]` — when every node has a form listed in the module
@@ -144,7 +139,13 @@ impl Dense {
         let Some(graph) = proto.graph.as_ref() else {
             return Ok(None);
         };
-        if graph.input.len() != shapes.len() || shapes.iter().any(|s| s.first() != Some(&1)) {
+        // Inputs as tract counts them (an input that is also an initializer is none) and batches
+        // of one.
+        let initializer = |name: &str| graph.initializer.iter().any(|t| t.name == name);
+        if graph.input.len() != shapes.len()
+            || graph.input.iter().any(|i| initializer(&i.name))
+            || shapes.iter().any(|s| s.first() != Some(&1))
+        {
             return Ok(None);
         }
         let (weight_names, makers) = weights_of(graph);
@@ -188,9 +189,6 @@ impl Dense {
             if n.output.len() != 1 {
                 return Ok(None);
             }
-            let alias = |names: &mut Vec<(String, usize)>, src: usize| {
-                names.push((n.output[0].clone(), src));
-            };
             match n.op_type.as_str() {
                 "Flatten" | "Identity" if n.input.len() == 1 => {
                     // Flatten from axis 1 keeps a batch of one as it is laid out.
@@ -200,7 +198,7 @@ impl Dense {
                     let Some(src) = find(&names, &n.input[0]) else {
                         return Ok(None);
                     };
-                    alias(&mut names, src);
+                    names.push((n.output[0].clone(), src));
                 }
                 "Concat" if attr(n, "axis").is_some_and(|a| a.i == 1 || a.i == -1) => {
                     let Some(srcs) = n
@@ -223,7 +221,7 @@ impl Dense {
                     };
                     // A ReLU that is the Gemm's only reader folds into it.
                     let next = nodes.get(i + 1).filter(|r| {
-                        relu(r)
+                        is_relu(r)
                             && r.input.len() == 1
                             && r.input[0] == n.output[0]
                             && r.output.len() == 1
@@ -270,20 +268,8 @@ impl Dense {
                 Pending::Concat { .. } => vec![],
             })
             .collect();
-        let mut model = onnx.model_for_proto_model(proto)?;
-        if model.input_outlets()?.len() != shapes.len() {
-            return Ok(None);
-        }
-        for (k, shape) in shapes.iter().enumerate() {
-            model.set_input_fact(k, f32::fact(shape).into())?;
-        }
-        model.select_outputs_by_name(wanted.iter())?;
-        let plan = model.into_optimized()?.into_runnable()?;
-        let zeros = shapes
-            .iter()
-            .map(|s| Tensor::zero::<f32>(s).map(TValue::from))
-            .collect::<TractResult<TVec<_>>>()?;
-        let tensors = plan.run(zeros)?;
+        // (The graph's inputs are `shapes`' alone, checked above, as `values_by_name` needs.)
+        let tensors = values_by_name(onnx, proto, shapes, &wanted)?;
         let mut tensors = tensors.iter();
         let mut ops = Vec::with_capacity(pending.len());
         for p in pending {
@@ -352,14 +338,13 @@ impl Dense {
         self.output_names.iter().position(|n| n == name)
     }
 
-    /// Runs the heads on the graph inputs `inputs` (each of the length its shape gives).
-    ///
-    /// # Panics
-    /// When an input's length differs from its shape's.
-    pub(crate) fn run(&mut self, inputs: &[&[f32]]) {
-        for (dst, src) in self.values.iter_mut().zip(inputs) {
-            dst.copy_from_slice(src);
-        }
+    /// Graph input `i`'s buffer (its shape's length, row-major), which [`Dense::run`] reads.
+    pub(crate) fn input_mut(&mut self, i: usize) -> &mut [f32] {
+        &mut self.values[i]
+    }
+
+    /// Runs the heads on the graph inputs as last written.
+    pub(crate) fn run(&mut self) {
         for op in &self.ops {
             match op {
                 Op::Concat { srcs, dst } => {

@@ -13,16 +13,27 @@ use tract_onnx::prelude::*;
 /// A loaded network with named outputs and reusable inputs.
 #[derive(Debug)]
 pub(crate) struct Net {
-    /// tract's plan for what the stem and the dense heads leave (`None` when they take it all).
-    state: Option<TypedSimpleState>,
-    /// The fully connected heads, where they run outside tract ([`Dense`]).
-    dense: Option<Dense>,
-    /// The first layer when computed outside tract ([`Stem`]); tract's input 0 is then its output.
+    /// What runs after the first layer (the whole network when there is no stem).
+    body: Body,
+    /// The first layer when computed outside tract ([`Stem`]); the body's input 0 is then its
+    /// output.
     stem: Option<Stem>,
-    inputs: Vec<Arc<Tensor>>,
     /// Output slot of each requested output name, in request order.
     output_slots: Vec<usize>,
-    outputs: TVec<TValue>,
+}
+
+/// The part of a network after its first layer.
+#[derive(Debug)]
+enum Body {
+    /// tract's plan, its reused input tensors and the last run's outputs.
+    Tract {
+        state: TypedSimpleState,
+        inputs: Vec<Arc<Tensor>>,
+        outputs: TVec<TValue>,
+    },
+    /// The fully connected heads computed here, after a trunk the stem took ([`Dense`]); they
+    /// hold their inputs.
+    Dense(Dense),
 }
 
 fn load_err(what: &str) -> impl Fn(TractError) -> Error + '_ {
@@ -95,12 +106,9 @@ impl Net {
                 })
                 .collect::<Result<Vec<_>>>()?;
             return Ok(Self {
-                state: None,
-                dense: Some(dense),
+                body: Body::Dense(dense),
                 stem,
-                inputs: zero_inputs(&shapes).map_err(load_err(what))?,
                 output_slots,
-                outputs: tvec![],
             });
         }
         let mut model = onnx.model_for_proto_model(&proto).map_err(load_err(what))?;
@@ -138,13 +146,20 @@ impl Net {
         }
         let plan = model.into_runnable().map_err(load_err(what))?;
         let state = plan.spawn().map_err(load_err(what))?;
+        // Zeros: with a stem, input 0's border is the second layer's padding and stays zero.
+        let inputs = shapes
+            .iter()
+            .map(|shape| Tensor::zero::<f32>(shape).map(Arc::new))
+            .collect::<TractResult<Vec<_>>>()
+            .map_err(load_err(what))?;
         Ok(Self {
-            state: Some(state),
-            dense: None,
+            body: Body::Tract {
+                state,
+                inputs,
+                outputs: tvec![],
+            },
             stem,
-            inputs: zero_inputs(&shapes).map_err(load_err(what))?,
             output_slots,
-            outputs: tvec![],
         })
     }
 
@@ -154,68 +169,71 @@ impl Net {
             fill(stem.input_mut());
             return Ok(());
         }
-        with_input_slice(&mut self.inputs[i], fill)
+        match &mut self.body {
+            Body::Tract { inputs, .. } => with_input_slice(&mut inputs[i], fill),
+            Body::Dense(dense) => {
+                fill(dense.input_mut(i));
+                Ok(())
+            }
+        }
     }
 
     /// Runs the network on the current inputs.
     pub(crate) fn run(&mut self) -> Result<()> {
-        if let Some(stem) = &mut self.stem {
-            with_input_slice(&mut self.inputs[0], |s| stem.run(s))?;
-        }
-        if let Some(dense) = &mut self.dense {
-            let slices = self
-                .inputs
-                .iter()
-                .map(|t| {
-                    t.try_as_plain_ram()
-                        .and_then(|v| v.as_slice::<f32>())
-                        .map_err(|e| Error::Internal(format!("input tensor: {e:#}")))
-                })
-                .collect::<Result<TVec<&[f32]>>>()?;
-            dense.run(&slices);
-            return Ok(());
-        }
-        let Some(state) = &mut self.state else {
-            return Err(Error::Internal("network without a plan".into()));
+        let (state, inputs, outputs) = match &mut self.body {
+            Body::Dense(dense) => {
+                if let Some(stem) = &mut self.stem {
+                    stem.run(dense.input_mut(0));
+                }
+                dense.run();
+                return Ok(());
+            }
+            Body::Tract {
+                state,
+                inputs,
+                outputs,
+            } => (state, inputs, outputs),
         };
-        let inputs: TVec<TValue> = self
-            .inputs
+        if let Some(stem) = &mut self.stem {
+            with_input_slice(&mut inputs[0], |s| stem.run(s))?;
+        }
+        let values: TVec<TValue> = inputs
             .iter()
             .map(|t| TValue::from_const(Arc::clone(t)))
             .collect();
-        let outputs = state
-            .run(inputs)
+        let run = state
+            .run(values)
             .map_err(|e| Error::Internal(format!("network run: {e:#}")));
         crate::cpu::clear_upper_vector_state();
-        self.outputs = outputs?;
+        *outputs = run?;
         Ok(())
     }
 
     /// Output `k` (in the order the outputs were requested at load) of the last run.
     pub(crate) fn output(&self, k: usize) -> Result<&[f32]> {
-        if let Some(dense) = &self.dense {
-            return Ok(dense.output(self.output_slots[k]));
-        }
-        let t = self
-            .outputs
+        let outputs = match &self.body {
+            Body::Dense(dense) => return Ok(dense.output(self.output_slots[k])),
+            Body::Tract { outputs, .. } => outputs,
+        };
+        let t = outputs
             .get(self.output_slots[k])
             .ok_or_else(|| Error::Internal("network output missing".into()))?;
         t.try_as_plain_ram()
             .and_then(|v| v.as_slice::<f32>())
             .map_err(|e| Error::Internal(format!("network output: {e:#}")))
     }
+
+    /// The heads when they run outside tract.
+    #[cfg(test)]
+    fn dense(&self) -> Option<&Dense> {
+        match &self.body {
+            Body::Dense(dense) => Some(dense),
+            Body::Tract { .. } => None,
+        }
+    }
 }
 
 /// [`with_f32_slice`] on an input tensor.
-/// Zero input tensors of `shapes`, which the runs then reuse. With a stem, input 0's border is
-/// the second layer's padding and stays zero.
-fn zero_inputs(shapes: &[Vec<usize>]) -> TractResult<Vec<Arc<Tensor>>> {
-    shapes
-        .iter()
-        .map(|shape| Tensor::zero::<f32>(shape).map(Arc::new))
-        .collect()
-}
-
 fn with_input_slice(t: &mut Arc<Tensor>, f: impl FnOnce(&mut [f32])) -> Result<()> {
     with_f32_slice(t, f).map_err(|e| Error::Internal(format!("input tensor: {e:#}")))
 }
@@ -300,13 +318,13 @@ mod tests {
                 // Where the trunk runs outside tract, the heads do too (all the shipped heads'
                 // nodes are of `Dense`'s forms).
                 assert_eq!(
-                    with.dense.is_some(),
+                    with.dense().is_some(),
                     crate::conv::available(),
                     "{name}: heads outside tract"
                 );
-                assert!(tract_heads.dense.is_none() && without.dense.is_none());
+                assert!(tract_heads.dense().is_none() && without.dense().is_none());
                 // Their weights are int8 times a scale per output (`onnx_q8.py`), kept that way.
-                if let Some(dense) = &with.dense {
+                if let Some(dense) = with.dense() {
                     let (int8, layers) = dense.int8_layers();
                     assert!(
                         layers >= 2 && int8 == layers,
@@ -346,7 +364,7 @@ mod tests {
                 for (k, output) in outputs.iter().enumerate() {
                     let want = without.output(k).unwrap();
                     for net in [&with, &tract_heads] {
-                        let what = format!("{name} {output} (dense {})", net.dense.is_some());
+                        let what = format!("{name} {output} (dense {})", net.dense().is_some());
                         assert_close_to_whole_graph(
                             &what,
                             net.output(k).unwrap(),
