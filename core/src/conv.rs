@@ -402,14 +402,13 @@ impl Conv3x3 {
     #[target_feature(enable = "avx2,fma")]
     #[allow(unsafe_code)]
     unsafe fn run_avx2(&self, input: &[f32], out: &mut [f32]) {
-        let per_slot = self.cin * self.in_plane;
         self.for_each_block(
             input,
-            per_slot,
             &self.packed,
             &self.taps,
             out,
-            |block, out| {
+            |_| 1,
+            |block, _, out| {
                 each_group!(block.run, self, out);
             },
         );
@@ -421,66 +420,56 @@ impl Conv3x3 {
     #[target_feature(enable = "avx512f,avx2,fma")]
     #[allow(unsafe_code)]
     unsafe fn run_avx512(&self, input: &[f32], out: &mut [f32]) {
-        let per_slot = self.cin * self.in_plane;
-        let k = self.taps.len();
-        let blocks = self.cout.div_ceil(BLOCK);
-        for b in 0..self.batch {
-            let input = &input[b * per_slot..][..per_slot];
-            let out = &mut out[b * self.cout * self.out_plane..][..self.cout * self.out_plane];
-            let mut blk = 0;
-            while blk < blocks {
-                let two = blk + 1 < blocks;
-                let n = if two { 2 } else { 1 };
-                let wide = Block {
-                    input,
-                    weights: &self.packed[blk * k * BLOCK..][..n * k * BLOCK],
-                    bias: &self.bias[blk * BLOCK..][..n * BLOCK],
-                    taps: &self.taps,
-                    channels: (n * BLOCK).min(self.cout - blk * BLOCK),
-                    plane: self.out_plane,
-                };
-                let out = &mut out[blk * BLOCK * self.out_plane..];
-                if two {
-                    each_group_wide!(wide, 2, self, out);
+        self.for_each_block(
+            input,
+            &self.packed,
+            &self.taps,
+            out,
+            |rest| rest.min(2),
+            |block, n, out| {
+                if n == 2 {
+                    each_group_wide!(block, 2, self, out);
                 } else {
-                    each_group_wide!(wide, 1, self, out);
+                    each_group_wide!(block, 1, self, out);
                 }
-                blk += n;
-            }
-        }
+            },
+        );
     }
 
-    /// Calls `each` with every block of [`BLOCK`] output channels of every batch slot (`input`
-    /// holding `per_slot` values per slot, `packed` the weights per block as the kernel reads
-    /// them) and that block's part of `out`.
+    /// Calls `each` with every group of consecutive blocks of [`BLOCK`] output channels of every
+    /// batch slot — `group(rest)` blocks at a time, `rest` the blocks left (1 for the 256-bit
+    /// kernels, up to 2 for the 512-bit one) — with their count and their part of `out`
+    /// (`input` holding the batch slots' values one slot after the other, `packed` the weights
+    /// per block as the kernel reads them).
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     fn for_each_block<T>(
         &self,
         input: &[T],
-        per_slot: usize,
         packed: &[T],
         taps: &[usize],
         out: &mut [f32],
-        mut each: impl FnMut(&Block<'_, T>, &mut [f32]),
+        group: impl Fn(usize) -> usize,
+        mut each: impl FnMut(&Block<'_, T>, usize, &mut [f32]),
     ) {
+        let (k, blocks) = (taps.len(), self.cout.div_ceil(BLOCK));
+        let per_slot = input.len() / self.batch.max(1);
         for b in 0..self.batch {
             let input = &input[b * per_slot..][..per_slot];
             let out = &mut out[b * self.cout * self.out_plane..][..self.cout * self.out_plane];
-            for (blk, (weights, bias)) in packed
-                .chunks_exact(taps.len() * BLOCK)
-                .zip(self.bias.chunks_exact(BLOCK))
-                .enumerate()
-            {
+            let mut blk = 0;
+            while blk < blocks {
+                let n = group(blocks - blk);
                 let block = Block {
                     input,
-                    weights,
-                    bias,
+                    weights: &packed[blk * k * BLOCK..][..n * k * BLOCK],
+                    bias: &self.bias[blk * BLOCK..][..n * BLOCK],
                     taps,
-                    channels: BLOCK.min(self.cout - blk * BLOCK),
+                    channels: (n * BLOCK).min(self.cout - blk * BLOCK),
                     plane: self.out_plane,
                 };
-                each(&block, &mut out[blk * BLOCK * self.out_plane..]);
+                each(&block, n, &mut out[blk * BLOCK * self.out_plane..]);
+                blk += n;
             }
         }
     }
@@ -511,14 +500,13 @@ impl Conv3x3 {
                 pair_bf16(even, odd, dst);
             }
         }
-        let per_slot = cp * self.in_plane;
         self.for_each_block(
             &pairs.input,
-            per_slot,
             &pairs.packed,
             &pairs.taps,
             out,
-            |block, out| {
+            |_| 1,
+            |block, _, out| {
                 each_group!(block.run_bf16, self, out);
             },
         );
