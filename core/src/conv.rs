@@ -19,10 +19,9 @@
 //! level-1-shaped layers alone), `m3_per_face` 362 → 299–315 µs and the validation NME moved
 //! 3.979 → 3.980 % (`models/MODEL_CARD.md`). Phones keep tract's f32 kernels.
 //!
-//! Where the CPU has AVX-512F but is not AMD's (Intel's server and workstation parts), the layers
-//! multiply in f32 on 512-bit registers instead: two blocks of sixteen output channels in one
-//! register each, eight output positions at a time. On the Intel Xeon (Sapphire Rapids class, AVX-512
-//! BF16 and AMX) of stop 31 a loop of independent FMAs ran 0.121 ns per 256-bit and 0.130 ns per
+//! Where the CPU has AVX-512F but is not AMD's, the layers multiply in f32 on 512-bit registers
+//! instead: two blocks of sixteen output channels in one register each, eight output positions at
+//! a time. On the Intel Xeon (with AVX-512 BF16, FP16 and AMX) of stop 31 a loop of independent FMAs ran 0.121 ns per 256-bit and 0.130 ns per
 //! 512-bit FMA (two 512-bit FMA units: 66 against 123 GMAC/s), while `vdpbf16ps` took 0.483 ns on
 //! 256 bits (33 GMAC/s, half the f32 rate): there bf16 made `m3_per_face` slower (551 / 573 µs
 //! against 413 µs in f32 on 256 bits). `MONOTRACK_CONV=avx2|avx512|bf16` in the environment
@@ -87,9 +86,10 @@ impl Products {
 }
 
 /// The form for this CPU, decided once: bf16 on AMD CPUs that have it (Zen 4: 1.45–1.65× on the
-/// trunk layers), f32 on 512-bit registers on other CPUs with AVX-512F (Intel, where `vdpbf16ps`
-/// runs at half the FMA's rate and two 512-bit FMA units double the 256-bit rate), else f32 on
-/// 256-bit registers; `MONOTRACK_CONV` overrides it where the CPU has the named form.
+/// trunk layers), f32 on 512-bit registers on other CPUs with AVX-512F (on the Intel Xeon
+/// measured, `vdpbf16ps` ran at half the FMA's rate and two 512-bit FMA units doubled the
+/// 256-bit rate), else f32 on 256-bit registers; `MONOTRACK_CONV` overrides it where the CPU has
+/// the named form.
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 fn chosen_products() -> Products {
     static CHOSEN: std::sync::OnceLock<Products> = std::sync::OnceLock::new();
