@@ -825,13 +825,12 @@ impl Block<'_, f32> {
     }
 
     /// The accumulators of [`Block::run_wide`], with the ReLU, into their offsets `at_out` of the
-    /// block's channel planes in `out`. Eight positions that are consecutive in their output row
-    /// (every group along a row but the last) are transposed in registers and stored as eight
-    /// values per channel; others are scattered, sixteen channels per instruction.
+    /// block's channel planes in `out`: the positions × channels of each block transposed in
+    /// registers, then per channel one masked store per run of positions that are consecutive in
+    /// their output row (one run for a group along a row, two where it wraps to the next).
     ///
     /// Why: storing value by value (a store per channel and position, as the 256-bit kernels
-    /// do) was about a fifth of the 512-bit kernel's time in `perf` (stop 32); the transpose
-    /// takes `m3_per_face` from 309 / 309 to 255–278 µs (alternating runs).
+    /// do) was about a fifth of the 512-bit kernel's time in `perf` (stop 32).
     #[target_feature(enable = "avx512f,avx2,fma")]
     #[inline]
     #[allow(unsafe_code)]
@@ -842,87 +841,85 @@ impl Block<'_, f32> {
         out: &mut [f32],
     ) {
         use std::arch::x86_64::*;
+        const { assert!(P <= 8) };
         let at_out = &at_out[..P];
         let last = at_out.iter().max().map_or(0, |&o| o + 1);
         assert!(
             self.channels <= NB * BLOCK
-                && (self.channels == 0 || out.len() >= (self.channels - 1) * self.plane + last),
+                && (self.channels == 0 || out.len() >= (self.channels - 1) * self.plane + last)
+                && at_out.windows(2).all(|w| w[0] < w[1]),
             "store outside the output"
         );
+        // Runs of consecutive offsets: (first position, its offset, mask of the run's lanes).
+        let mut runs = [(0usize, 0usize, 0u16); 8];
+        let mut n_runs = 0;
+        for (q, &o) in at_out.iter().enumerate() {
+            if q == 0 || o != at_out[q - 1] + 1 {
+                runs[n_runs] = (q, o, 0);
+                n_runs += 1;
+            }
+            runs[n_runs - 1].2 |= 1 << q;
+        }
+        let runs = &runs[..n_runs];
         let zero = _mm512_setzero_ps();
-        if P == 8 && at_out[7] == at_out[0] + 7 {
-            // In 128-bit lane L after two rounds of unpacking, u[k] holds channel 4L + k at
-            // positions 0–3 and u[4 + k] the same channel at positions 4–7; one two-source
-            // permute then gives two channels' eight positions per register.
-            let lo = _mm512_setr_epi32(0, 1, 2, 3, 16, 17, 18, 19, 4, 5, 6, 7, 20, 21, 22, 23);
-            let hi =
-                _mm512_setr_epi32(8, 9, 10, 11, 24, 25, 26, 27, 12, 13, 14, 15, 28, 29, 30, 31);
-            // j picks block j out of every position's accumulators.
-            #[allow(clippy::needless_range_loop)]
-            for j in 0..NB {
-                let p: [__m512; 8] = std::array::from_fn(|q| _mm512_max_ps(acc[q][j], zero));
-                let t: [__m512; 8] = std::array::from_fn(|q| {
-                    let (a, b) = (p[q & !1], p[q | 1]);
-                    if q % 2 == 0 {
-                        _mm512_unpacklo_ps(a, b)
-                    } else {
-                        _mm512_unpackhi_ps(a, b)
-                    }
-                });
-                let u: [__m512; 8] = std::array::from_fn(|q| {
-                    let (h, k) = (q / 4, q % 4);
-                    let a = _mm512_castps_pd(t[4 * h + k / 2]);
-                    let b = _mm512_castps_pd(t[4 * h + 2 + k / 2]);
-                    _mm512_castpd_ps(if k % 2 == 0 {
-                        _mm512_unpacklo_pd(a, b)
-                    } else {
-                        _mm512_unpackhi_pd(a, b)
-                    })
-                });
-                for k in 0..4 {
-                    for (index, c0) in [(lo, k), (hi, 8 + k)] {
-                        let v = _mm512_permutex2var_ps(u[k], index, u[4 + k]);
-                        let halves = [
-                            _mm512_castps512_ps256(v),
-                            _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(v))),
-                        ];
-                        for (h, half) in halves.into_iter().enumerate() {
-                            let c = j * BLOCK + c0 + 4 * h;
-                            if c < self.channels {
-                                // SAFETY: channel c's eight positions end at c·plane + last,
-                                // inside `out` (asserted above).
-                                unsafe {
-                                    _mm256_storeu_ps(
-                                        out.as_mut_ptr().add(c * self.plane + at_out[0]),
-                                        half,
-                                    )
-                                };
-                            }
+        // Lanes 0–7 of `v` below are channel c's positions 0–7, lanes 8–15 channel c + 4's.
+        let lo = _mm512_setr_epi32(0, 1, 2, 3, 16, 17, 18, 19, 4, 5, 6, 7, 20, 21, 22, 23);
+        let hi = _mm512_setr_epi32(8, 9, 10, 11, 24, 25, 26, 27, 12, 13, 14, 15, 28, 29, 30, 31);
+        // j picks block j out of every position's accumulators.
+        #[allow(clippy::needless_range_loop)]
+        for j in 0..NB {
+            let p: [__m512; 8] = std::array::from_fn(|q| {
+                if q < P {
+                    _mm512_max_ps(acc[q][j], zero)
+                } else {
+                    zero
+                }
+            });
+            let t: [__m512; 8] = std::array::from_fn(|q| {
+                let (a, b) = (p[q & !1], p[q | 1]);
+                if q % 2 == 0 {
+                    _mm512_unpacklo_ps(a, b)
+                } else {
+                    _mm512_unpackhi_ps(a, b)
+                }
+            });
+            // In 128-bit lane L, u[k] holds channel 4L + k at positions 0–3 and u[4 + k] the
+            // same channel at positions 4–7.
+            let u: [__m512; 8] = std::array::from_fn(|q| {
+                let (h, k) = (q / 4, q % 4);
+                let a = _mm512_castps_pd(t[4 * h + k / 2]);
+                let b = _mm512_castps_pd(t[4 * h + 2 + k / 2]);
+                _mm512_castpd_ps(if k % 2 == 0 {
+                    _mm512_unpacklo_pd(a, b)
+                } else {
+                    _mm512_unpackhi_pd(a, b)
+                })
+            });
+            for k in 0..4 {
+                for (index, c0) in [(lo, k), (hi, 8 + k)] {
+                    let v = _mm512_permutex2var_ps(u[k], index, u[4 + k]);
+                    for (half, shift) in [(0, 0), (4, 8)] {
+                        let c = j * BLOCK + c0 + half;
+                        if c >= self.channels {
+                            continue;
+                        }
+                        for &(q, o, mask) in runs {
+                            // Lane shift + q holds position q: the store starts shift + q
+                            // values before position q's offset, and writes only its run.
+                            let at = (c * self.plane + o).wrapping_sub(shift + q);
+                            // SAFETY: the stored lanes are the run's positions of channel c,
+                            // inside `out` (asserted above); masked-off lanes are neither
+                            // read nor written, and `wrapping_add` makes no in-bounds claim.
+                            unsafe {
+                                _mm512_mask_storeu_ps(
+                                    out.as_mut_ptr().wrapping_add(at),
+                                    mask << shift,
+                                    v,
+                                )
+                            };
                         }
                     }
                 }
-            }
-            return;
-        }
-        // Lane c of block j goes to plane 16·j + c.
-        let plane = i32::try_from(self.plane).expect("an output plane under 2³¹ values");
-        let lanes = _mm512_mullo_epi32(
-            _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
-            _mm512_set1_epi32(plane),
-        );
-        for (acc, &o) in acc.iter().zip(at_out) {
-            for (j, a) in acc.iter().enumerate() {
-                let n = self.channels.saturating_sub(j * BLOCK).min(BLOCK);
-                // SAFETY: lane c < n writes out[(16·j + c)·plane + o], inside `out` (asserted
-                // above).
-                unsafe {
-                    _mm512_mask_i32scatter_ps::<4>(
-                        out.as_mut_ptr().add(j * BLOCK * self.plane + o),
-                        ((1u32 << n) - 1) as u16,
-                        lanes,
-                        _mm512_max_ps(*a, zero),
-                    )
-                };
             }
         }
     }
