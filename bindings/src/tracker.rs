@@ -40,9 +40,11 @@ pub struct TrackerConfig {
     pub flow_filter: bool,
     /// Frames over which a new track's shape units are estimated before being held (1..=1000).
     pub shape_frames: u32,
-    /// Landmarks in M3's mirror-average mode: more accurate, slower (the landmark nets but the
-    /// eyes' run twice; `core/models/MODEL_CARD.md`).
-    pub mirror_average: bool,
+    /// Landmarks in M3's mirror-average mode: more accurate on still images, slower (the
+    /// landmark nets but the eyes' run twice; `core/models/MODEL_CARD.md`). `None` (the
+    /// default): on for stills (`process_image`, image running mode), off in video mode, where it
+    /// gains nothing.
+    pub mirror_average: Option<bool>,
 }
 
 /// The default settings: video mode, one face, default intrinsics, filter on.
@@ -57,7 +59,7 @@ pub fn default_tracker_config() -> TrackerConfig {
         min_detection_score: c.min_detection_score,
         flow_filter: c.flow_filter,
         shape_frames: c.shape_frames as u32,
-        mirror_average: false,
+        mirror_average: None,
     }
 }
 
@@ -67,8 +69,11 @@ fn build_tracker(config: &TrackerConfig, stills: bool) -> Result<Tracker, Monotr
     if stills {
         core.mode = core_track::Mode::Image;
     }
+    // The core's choice by mode unless the caller made one.
     let mut t = Tracker::with_detector_config(core, det)?;
-    t.estimator_mut().set_mirror_average(config.mirror_average);
+    if let Some(on) = config.mirror_average {
+        t.estimator_mut().set_mirror_average(on);
+    }
     Ok(t)
 }
 

@@ -130,7 +130,7 @@ fn frames_and_trackers_never_panic() {
             min_detection_score: r.float(1.5) as f32,
             flow_filter: r.below(2) == 0,
             shape_frames: r.small(),
-            mirror_average: r.below(2) == 0,
+            mirror_average: [None, Some(false), Some(true)][r.below(3) as usize],
         };
         no_panic("FaceTracker::new", case, || {
             let _ = FaceTracker::new(cfg);

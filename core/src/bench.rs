@@ -102,6 +102,9 @@ pub fn run_benchmark(
         mode: Mode::Image,
         ..*config
     })?;
+    // The same landmark work on both paths, so that their ratio is the region's cost; what mirror
+    // average (image mode's default) adds is the `tracking_mirror_average` stages' difference.
+    image.estimator_mut().set_mirror_average(false);
     let mut mirrored = Tracker::with_default_models(TrackerConfig {
         mode: Mode::Video,
         ..*config

@@ -244,14 +244,20 @@ class BindingsTest {
     }
 
     @Test
-    fun mirrorAverageModeIsATrackerSetting() {
-        assertEquals(false, defaultTrackerConfig().mirrorAverage)
+    fun mirrorAverageIsTheStillsDefaultAndATrackerSetting() {
+        assertEquals(null, defaultTrackerConfig().mirrorAverage)
         val (buf, stride) = rgbaFrame()
         val d = desc(PixelFormat.RGBA8, stride, 0)
-        val plain = FaceTracker(defaultTrackerConfig()).use { it.processImage(buf, d).faces[0].landmarks }
+        val byDefault = FaceTracker(defaultTrackerConfig()).use { it.processImage(buf, d).faces[0].landmarks }
+        val plain = FaceTracker(defaultTrackerConfig().copy(mirrorAverage = false)).use {
+            assertEquals(false, it.config().mirrorAverage)
+            it.processImage(buf, d).faces[0].landmarks
+        }
         FaceTracker(defaultTrackerConfig().copy(mirrorAverage = true)).use { t ->
             assertEquals(true, t.config().mirrorAverage)
             val averaged = t.processImage(buf, d).faces[0].landmarks
+            // Stills are mirror-averaged unless the config says otherwise.
+            assertEquals(averaged, byDefault)
             val moved = plain.zip(averaged).maxOf { (a, b) -> kotlin.math.hypot(a.x - b.x, a.y - b.y) }
             // The mode moves points, by less than the nets' own error on a ~100 px face.
             assertTrue(moved > 0.01f && moved < 10f, "largest move $moved px")

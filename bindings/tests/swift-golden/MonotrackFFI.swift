@@ -3006,10 +3006,12 @@ public struct TrackerConfig: Equatable, Hashable {
      */
     public var shapeFrames: UInt32
     /**
-     * Landmarks in M3's mirror-average mode: more accurate, slower (the landmark nets but the
-     * eyes' run twice; `core/models/MODEL_CARD.md`).
+     * Landmarks in M3's mirror-average mode: more accurate on still images, slower (the
+     * landmark nets but the eyes' run twice; `core/models/MODEL_CARD.md`). `None` (the
+     * default): on for stills (`process_image`, image running mode), off in video mode, where it
+     * gains nothing.
      */
-    public var mirrorAverage: Bool
+    public var mirrorAverage: Bool?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -3039,9 +3041,11 @@ public struct TrackerConfig: Equatable, Hashable {
          * Frames over which a new track's shape units are estimated before being held (1..=1000).
          */shapeFrames: UInt32, 
         /**
-         * Landmarks in M3's mirror-average mode: more accurate, slower (the landmark nets but the
-         * eyes' run twice; `core/models/MODEL_CARD.md`).
-         */mirrorAverage: Bool) {
+         * Landmarks in M3's mirror-average mode: more accurate on still images, slower (the
+         * landmark nets but the eyes' run twice; `core/models/MODEL_CARD.md`). `None` (the
+         * default): on for stills (`process_image`, image running mode), off in video mode, where it
+         * gains nothing.
+         */mirrorAverage: Bool?) {
         self.runningMode = runningMode
         self.maxFaces = maxFaces
         self.camera = camera
@@ -3075,7 +3079,7 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
                 minDetectionScore: FfiConverterFloat.read(from: &buf), 
                 flowFilter: FfiConverterBool.read(from: &buf), 
                 shapeFrames: FfiConverterUInt32.read(from: &buf), 
-                mirrorAverage: FfiConverterBool.read(from: &buf)
+                mirrorAverage: FfiConverterOptionBool.read(from: &buf)
         )
     }
 
@@ -3087,7 +3091,7 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
         FfiConverterFloat.write(value.minDetectionScore, into: &buf)
         FfiConverterBool.write(value.flowFilter, into: &buf)
         FfiConverterUInt32.write(value.shapeFrames, into: &buf)
-        FfiConverterBool.write(value.mirrorAverage, into: &buf)
+        FfiConverterOptionBool.write(value.mirrorAverage, into: &buf)
     }
 }
 
@@ -4037,6 +4041,30 @@ public func FfiConverterTypeRunningMode_lower(_ value: RunningMode) -> RustBuffe
     return FfiConverterTypeRunningMode.lower(value)
 }
 
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionBool: FfiConverterRustBuffer {
+    typealias SwiftType = Bool?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterBool.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterBool.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
 
 #if swift(>=5.8)
 @_documentation(visibility: private)

@@ -6,8 +6,9 @@
 - Faces: the faces68 validation split (M3_IO.md: line i % 10 == 0), boxes = landmark boxes with
   seeded realistic jitter (centre ±5 %, side ±10 % of the box side: a detector's or tracker's box).
 - Ours: the Python reference (m3_reference.py, onnxruntime) and, with --monotrack, the shipped Rust
-  implementation through `monotrack landmarks` (the CLI's own timings); both in the default mode and
-  in mirror-average mode (M3_IO.md; `metrics.json`'s "mirror_average" holds the latter's figures).
+  implementation through `monotrack landmarks` (the CLI's own timings); both in single-pass mode
+  (`--single-pass`, the video tracker's; `metrics.json`'s top level) and in mirror-average mode
+  (M3_IO.md; the CLI's and the image mode's default since stop 32; `metrics.json`'s "mirror_average").
 - Peers (--peers): ../shared/tools/peer_landmarks.py (dlib's 68-point predictor, PFLD) on the same
   manifest; dlib also in its fair setting (boxes from its own HOG detector).
 - NME: CONTRACT.md (mean over 68 points / distance between points 36 and 45), overall and per zone.
@@ -163,7 +164,8 @@ def main():
             fh.write(json.dumps({"image": paths[f["image"]], "faces": [{"box": [float(v) for v in b],
                                  "landmarks68": f["pts"].tolist()}]}) + "\n")
     if a.monotrack:
-        for extra, into in (([], metrics), (["--mirror-average"], metrics["mirror_average"])):
+        metrics["cli_default"] = "mirror_average"
+        for extra, into in ((["--single-pass"], metrics), ([], metrics["mirror_average"])):
             out = manifest + ".ours.jsonl"
             subprocess.run([a.monotrack, "landmarks", manifest, "--out", out] + extra, check=True)
             errs_rs, us = [], []
