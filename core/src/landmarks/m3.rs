@@ -1597,6 +1597,7 @@ mod tests {
             json_with(|v| {
                 v["zones"]["face"]["indices68"][16] = 49.into();
                 v["zones"]["face"]["level1_weight"] = Value::Null;
+                v["zones"]["face"]["mirror_average"] = true.into();
             }),
         ] {
             assert!(

@@ -7,7 +7,15 @@ use std::path::Path;
 
 /// Converts a decoded image into `out` (resized; its allocation reused).
 pub fn to_luma(img: &image::DynamicImage, out: &mut GrayImage) {
-    let rgb = img.to_rgb8();
+    // JPEG and most PNG files decode to RGB8: converted in place, without `to_rgb8`'s copy.
+    let converted;
+    let rgb = match img {
+        image::DynamicImage::ImageRgb8(rgb) => rgb,
+        _ => {
+            converted = img.to_rgb8();
+            &converted
+        }
+    };
     out.resize(rgb.width() as usize, rgb.height() as usize);
     rgb_to_contract_luma(rgb.as_raw(), out.data_mut());
 }
