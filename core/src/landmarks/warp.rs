@@ -182,7 +182,8 @@ fn sample_general(image: &GrayImage, m: &[f64; 6], width: usize, out: &mut [u8])
 ///
 /// Why every placement: faces whose patches reach past the image edge (large faces, faces at the
 /// border) took the f64 loop before (about 20 µs a patch); on the faces68 validation faces M3's
-/// time per face ranged 350–514 µs in mirror average, the slow end being such faces.
+/// time per face in mirror average (each face warm, median of 30 runs) ranged 350–514 µs
+/// before, the slow end being such faces, and 356–436 µs after.
 struct ClampedMap<'a> {
     m: &'a [f64; 6],
 }
