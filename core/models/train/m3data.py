@@ -99,8 +99,9 @@ LEVEL1 = {"input_size": 64, "crop_scale": 1.3}
 # mode; 3.875 % with level 1 and all five other zones; 3.890 % with level 1, brows, mouth and
 # mouth_fine; 3.925 % with the five zones without level 1. Stop 33 (Python reference, eight box
 # jitter seeds): 3.9074 % with all six, 3.9066 % without mouth_fine's second run (the set below: it
-# gains nothing and costs about 14 µs), 3.9167 % without face's too (about 50 µs more saved, kept:
-# the margin over PFLD is a few hundredths of a point).
+# gains nothing; in two warm per-face timing runs it cost 14 µs in one and nothing measurable in the
+# other), 3.9167 % without face's too (58–61 µs less in those runs; kept: the margin over PFLD is a
+# few hundredths of a point).
 MIRROR_AVERAGE = ("level1", "brows", "face", "mouth", "nose")
 
 assert sorted(set(LEVEL1_INDICES) | {i for z in ZONES.values() for i in z["indices68"] + z.get("mirror_indices68", [])}) == list(range(68))
