@@ -24,12 +24,30 @@
 //! a time. On the Intel Xeon (with AVX-512 BF16, FP16 and AMX) of stop 31 a loop of independent FMAs ran 0.121 ns per 256-bit and 0.130 ns per
 //! 512-bit FMA (two 512-bit FMA units: 66 against 123 GMAC/s), while `vdpbf16ps` took 0.483 ns on
 //! 256 bits (33 GMAC/s, half the f32 rate): there bf16 made `m3_per_face` slower (551 / 573 µs
-//! against 413 µs in f32 on 256 bits). `MONOTRACK_CONV=avx2|avx512|bf16` in the environment
-//! overrides the choice (for measurements; a form the CPU lacks is ignored).
+//! against 413 µs in f32 on 256 bits). Where such a CPU also has AVX-512 VNNI (with BW), the
+//! layers of more than one input channel whose weights are int8 per output channel — the
+//! shipped M3 networks' storage — multiply in int8 instead ([`Quads`]): each layer's input
+//! rounded to u8 steps of 1/255 of its largest value, four u8 × i8 products summed in an i32
+//! lane by `vpdpbusd`. On the Intel Xeon of stop 34 a loop of independent 512-bit `vpdpbusd`
+//! ran 0.135 ns each, the rate of the 512-bit FMA (0.133 ns) with four times its multiply-adds
+//! (474 against 120 GMAC/s): `m3_per_face` 236–237 → 164 µs, `m3_per_face_mirror_average`
+//! 356–375 → 244–251 µs in alternating runs, the validation NME 3.865 → 3.867 % in mirror
+//! average and 3.979 → 3.980 % single-pass (the mean over eight box-jitter seeds 3.906 → 3.906 %;
+//! `models/MODEL_CARD.md`). AMD keeps bf16 (int8 not measured there). `MONOTRACK_CONV=avx2|avx512|bf16|vnni` in the
+//! environment overrides the choice (for measurements; a form the CPU lacks is ignored).
 //!
 //! Layout (the ONNX one, batch-major): input `batch × cin × (in_h + 2) × (in_w + 2)` with a zero
 //! border of one, output `batch × cout × (out_h + 2·pad) × (out_w + 2·pad)`, only its interior
 //! written.
+
+/// [`Products::whole_graph_tolerance`] of the int8 form. Each layer's input is rounded to 1/255
+/// of its largest value, so a product is off by up to half of that step times its weight.
+/// Measured on the shipped networks (the tests' inputs): up to 1.24e-2 for the mouth net's
+/// gesture logits, 7.5e-3 for level 1's face logit, up to 2.0e-3 for every other output (the
+/// detector's layers hold f16 weights and stay f32). What this costs in landmarks is measured end
+/// to end (`models/MODEL_CARD.md`).
+#[cfg(test)]
+pub(crate) const INT8_TOLERANCE: f32 = 2e-2;
 
 /// One layer's weights as read from the graph.
 #[derive(Debug, Clone)]
@@ -58,6 +76,10 @@ pub(crate) enum Products {
     Avx512,
     /// bf16 pairs summed in f32 (AVX-512 BF16 + VL), for layers of more than one input channel.
     Bf16,
+    /// u8 inputs times int8 weights, four products summed in an i32 lane by `vpdpbusd` (AVX-512
+    /// VNNI + BW), for layers of more than one input channel whose weights are int8 times a
+    /// scale per output channel ([`Quads`]); 512-bit f32 for the other layers.
+    Vnni,
 }
 
 impl Products {
@@ -72,21 +94,35 @@ impl Products {
                 Products::Avx2 => crate::cpu::has_avx2_fma(),
                 Products::Avx512 => avx512,
                 Products::Bf16 => avx512 && has!("avx512vl") && has!("avx512bf16"),
+                Products::Vnni => avx512 && has!("avx512bw") && has!("avx512vnni"),
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
         false
     }
 
-    /// Whether the products are of bf16-rounded values (the tests' tolerance).
+    /// Whether the products are of bf16-rounded values.
     #[cfg(test)]
     pub(crate) fn is_bf16(self) -> bool {
         self == Products::Bf16
     }
+
+    /// How far a network whose 3×3 layers ran in this form may be from tract's f32 run, as a
+    /// share of its largest output (at least 1): float rounding for the f32 forms,
+    /// [`crate::stem::BF16_TOLERANCE`] and [`INT8_TOLERANCE`] for the others.
+    #[cfg(test)]
+    pub(crate) fn whole_graph_tolerance(self) -> f32 {
+        match self {
+            Products::Avx2 | Products::Avx512 => 1e-4,
+            Products::Bf16 => crate::stem::BF16_TOLERANCE,
+            Products::Vnni => INT8_TOLERANCE,
+        }
+    }
 }
 
 /// The form for this CPU, decided once: bf16 on AMD CPUs that have it (Zen 4: 1.45–1.65× on the
-/// trunk layers), f32 on 512-bit registers on other CPUs with AVX-512F (on the Intel Xeon
+/// trunk layers), int8 on other CPUs with AVX-512 VNNI (on the Intel Xeon measured
+/// on the whole M3: 1.44–1.49×), f32 on 512-bit registers on other CPUs with AVX-512F (on the Intel Xeon
 /// measured, `vdpbf16ps` ran at half the FMA's rate and two 512-bit FMA units doubled the
 /// 256-bit rate), else f32 on 256-bit registers; `MONOTRACK_CONV` overrides it where the CPU has
 /// the named form.
@@ -100,6 +136,7 @@ fn chosen_products() -> Products {
                 "avx2" => Some(Products::Avx2),
                 "avx512" => Some(Products::Avx512),
                 "bf16" => Some(Products::Bf16),
+                "vnni" => Some(Products::Vnni),
                 _ => None,
             });
         if let Some(p) = named.filter(|p| p.supported()) {
@@ -113,15 +150,18 @@ fn chosen_products() -> Products {
             amd,
             Products::Bf16.supported(),
             Products::Avx512.supported(),
+            Products::Vnni.supported(),
         )
     })
 }
 
 /// The policy of [`chosen_products`], from the vendor and the forms the CPU has.
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-fn products_for(amd: bool, has_bf16: bool, has_avx512: bool) -> Products {
+fn products_for(amd: bool, has_bf16: bool, has_avx512: bool, has_vnni: bool) -> Products {
     if amd && has_bf16 {
         Products::Bf16
+    } else if !amd && has_vnni {
+        Products::Vnni
     } else if !amd && has_avx512 {
         Products::Avx512
     } else {
@@ -162,8 +202,58 @@ pub(crate) struct Conv3x3 {
     at_out: Vec<usize>,
     /// The bf16 form of the layer, where it runs in bf16 products ([`Products::Bf16`]).
     pairs: Option<Pairs>,
-    /// Whether the f32 products run on 512-bit registers ([`Products::Avx512`]).
+    /// The int8 form of the layer, where it runs in int8 products ([`Products::Vnni`]).
+    quads: Option<Quads>,
+    /// Whether the f32 products run on 512-bit registers ([`Products::Avx512`], and
+    /// [`Products::Vnni`] for the runs the int8 form does not take).
     wide: bool,
+}
+
+/// A layer in int8 products (`vpdpbusd`: four u8 × i8 products summed into an i32 lane, four
+/// times the multiply-adds per instruction of an f32 FMA, and at the same rate on the Intel Xeon
+/// measured): the input channels taken in fours, each four's values at a position held as one
+/// 32-bit word (byte `k` channel `4q + k`), so one broadcast feeds four products.
+///
+/// The weights are the int8 values the shipped networks store (`models/train/onnx_q8.py`: one
+/// symmetric scale per output channel), so they lose nothing here. The input is quantised per
+/// run: `u8 = round(v · 255 / max)` over the whole input, which holds ReLU outputs (nothing
+/// negative); a run whose input has a negative or non-finite value goes through the f32 kernel.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+#[derive(Debug, Clone)]
+struct Quads {
+    /// Per block of [`BLOCK`] output channels: for each of the `9·⌈cin/4⌉` quad taps (channel
+    /// four, row, column) the block's weight quads (byte `k` the weight of channel `4q + k`),
+    /// zero past `cout` and past `cin`.
+    packed: Vec<u32>,
+    /// Offset of each quad tap in the quantised input from the window's top-left word.
+    taps: Vec<usize>,
+    /// Per output channel its weights' scale, zero past `cout` up to a whole block.
+    scale: Vec<f32>,
+    /// This run's factor per output channel from i32 sums to values: `scale` × the input's
+    /// quantisation step.
+    step: Vec<f32>,
+    /// The input quantised: `batch × ⌈cin/4⌉` padded planes of words.
+    input: Vec<u32>,
+}
+
+/// `kernel` (`cout` rows) as int8 times a scale per row, where every value is one to within
+/// 1e-6 of its row's largest magnitude (the criterion of `landmarks::dense`); `None` otherwise.
+fn int8_rows(kernel: &[f32], cout: usize) -> Option<(Vec<i8>, Vec<f32>)> {
+    let k = kernel.len() / cout.max(1);
+    let mut q = Vec::with_capacity(kernel.len());
+    let mut scale = Vec::with_capacity(cout);
+    for row in kernel.chunks_exact(k.max(1)).take(cout) {
+        let s = row.iter().fold(0f32, |m, v| m.max(v.abs())) / 127.0;
+        for &v in row {
+            let r = if s > 0.0 { (v / s).round() } else { 0.0 };
+            if !(r.abs() <= 127.0 && (r * s - v).abs() <= 1e-6 * 127.0 * s) {
+                return None;
+            }
+            q.push(r as i8);
+        }
+        scale.push(s);
+    }
+    (k > 0 && scale.len() == cout).then_some((q, scale))
 }
 
 /// A layer in bf16 (`vdpbf16ps`: two bf16 products summed into an f32 lane, twice the
@@ -239,25 +329,25 @@ macro_rules! group {
 /// [`POSITIONS_512`], then the remainder.
 #[cfg(target_arch = "x86_64")]
 macro_rules! each_group_wide {
-    ($wide:ident, $nb:literal, $layer:expr, $out:expr) => {{
+    ($wide:ident . $method:ident, $nb:literal, $layer:expr, $out:expr) => {{
         let n = $layer.at_in.len();
         let mut p = 0;
         #[allow(unsafe_code)]
         // SAFETY: the caller's features; offsets from the layer, as `Block::run_wide` needs.
         unsafe {
             while p + POSITIONS_512 <= n {
-                group!($wide.run_wide, $layer, p, $out, POSITIONS_512, $nb);
+                group!($wide.$method, $layer, p, $out, POSITIONS_512, $nb);
                 p += POSITIONS_512;
             }
             match n - p {
                 0 => {}
-                1 => group!($wide.run_wide, $layer, p, $out, 1, $nb),
-                2 => group!($wide.run_wide, $layer, p, $out, 2, $nb),
-                3 => group!($wide.run_wide, $layer, p, $out, 3, $nb),
-                4 => group!($wide.run_wide, $layer, p, $out, 4, $nb),
-                5 => group!($wide.run_wide, $layer, p, $out, 5, $nb),
-                6 => group!($wide.run_wide, $layer, p, $out, 6, $nb),
-                _ => group!($wide.run_wide, $layer, p, $out, 7, $nb),
+                1 => group!($wide.$method, $layer, p, $out, 1, $nb),
+                2 => group!($wide.$method, $layer, p, $out, 2, $nb),
+                3 => group!($wide.$method, $layer, p, $out, 3, $nb),
+                4 => group!($wide.$method, $layer, p, $out, 4, $nb),
+                5 => group!($wide.$method, $layer, p, $out, 5, $nb),
+                6 => group!($wide.$method, $layer, p, $out, 6, $nb),
+                _ => group!($wide.$method, $layer, p, $out, 7, $nb),
             }
         }
     }};
@@ -318,6 +408,32 @@ impl Conv3x3 {
                 input: vec![0; batch * cp * in_plane],
             }
         });
+        let quads = (cin >= 2 && form == Products::Vnni)
+            .then(|| int8_rows(&weights.kernel, cout))
+            .flatten()
+            .map(|(q, mut scale)| {
+                let cq = cin.div_ceil(4);
+                let packed = pack(cout, 9 * cq, 0, |co, t| {
+                    let (four, tap) = (t / 9, t % 9);
+                    (0..4).fold(0u32, |word, b| {
+                        let c = 4 * four + b;
+                        let v = if c < cin {
+                            q[(co * cin + c) * 9 + tap]
+                        } else {
+                            0
+                        };
+                        word | (u32::from(v as u8) << (8 * b))
+                    })
+                });
+                scale.resize(bias.len(), 0.0);
+                Quads {
+                    packed,
+                    taps: tap_offsets(cq, in_plane, pw),
+                    step: vec![0.0; scale.len()],
+                    scale,
+                    input: vec![0; batch * cq * in_plane],
+                }
+            });
         Self {
             batch,
             cin,
@@ -334,7 +450,8 @@ impl Conv3x3 {
             at_in,
             at_out,
             pairs,
-            wide: form == Products::Avx512,
+            quads,
+            wide: matches!(form, Products::Avx512 | Products::Vnni),
         }
     }
 
@@ -363,6 +480,17 @@ impl Conv3x3 {
             self.output_shape().iter().product::<usize>(),
             "conv output length"
         );
+        #[cfg(target_arch = "x86_64")]
+        if let Some(mut quads) = self.quads.take() {
+            #[allow(unsafe_code)]
+            // SAFETY: `quads` exists only where the CPU has AVX-512F, BW and VNNI, AVX2 and FMA
+            // (`Products::Vnni`); the lengths were checked above.
+            let done = unsafe { self.run_vnni(&mut quads, input, out) };
+            self.quads = Some(quads);
+            if done {
+                return;
+            }
+        }
         #[cfg(target_arch = "x86_64")]
         if let Some(mut pairs) = self.pairs.take() {
             #[allow(unsafe_code)]
@@ -406,6 +534,7 @@ impl Conv3x3 {
             input,
             &self.packed,
             &self.taps,
+            &[],
             out,
             |_| 1,
             |block, _, out| {
@@ -424,13 +553,14 @@ impl Conv3x3 {
             input,
             &self.packed,
             &self.taps,
+            &[],
             out,
             |rest| rest.min(2),
             |block, n, out| {
                 if n == 2 {
-                    each_group_wide!(block, 2, self, out);
+                    each_group_wide!(block.run_wide, 2, self, out);
                 } else {
-                    each_group_wide!(block, 1, self, out);
+                    each_group_wide!(block.run_wide, 1, self, out);
                 }
             },
         );
@@ -440,14 +570,16 @@ impl Conv3x3 {
     /// batch slot — `group(rest)` blocks at a time, `rest` the blocks left (1 for the 256-bit
     /// kernels, up to 2 for the 512-bit one) — with their count and their part of `out`
     /// (`input` holding the batch slots' values one slot after the other, `packed` the weights
-    /// per block as the kernel reads them).
+    /// per block as the kernel reads them, `scale` empty or a factor per output channel).
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn for_each_block<T>(
         &self,
         input: &[T],
         packed: &[T],
         taps: &[usize],
+        scale: &[f32],
         out: &mut [f32],
         group: impl Fn(usize) -> usize,
         mut each: impl FnMut(&Block<'_, T>, usize, &mut [f32]),
@@ -464,6 +596,11 @@ impl Conv3x3 {
                     input,
                     weights: &packed[blk * k * BLOCK..][..n * k * BLOCK],
                     bias: &self.bias[blk * BLOCK..][..n * BLOCK],
+                    scale: if scale.is_empty() {
+                        &[]
+                    } else {
+                        &scale[blk * BLOCK..][..n * BLOCK]
+                    },
                     taps,
                     channels: (n * BLOCK).min(self.cout - blk * BLOCK),
                     plane: self.out_plane,
@@ -476,6 +613,60 @@ impl Conv3x3 {
 }
 
 impl Conv3x3 {
+    /// Whether the layer runs in int8 products where its input allows.
+    #[cfg(test)]
+    pub(crate) fn is_int8(&self) -> bool {
+        self.quads.is_some()
+    }
+
+    /// Quantises `input` into `quads.input` and runs the int8 kernel; false (nothing written)
+    /// where the input holds a negative or non-finite value, which u8 cannot carry.
+    ///
+    /// # Safety
+    /// The CPU has AVX-512F, BW and VNNI, AVX2 and FMA; `input` and `out` have the layer's
+    /// lengths and `quads` is the layer's.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512bw,avx512vnni,avx2,fma")]
+    #[allow(unsafe_code)]
+    unsafe fn run_vnni(&self, quads: &mut Quads, input: &[f32], out: &mut [f32]) -> bool {
+        let Some(max) = nonnegative_max(input) else {
+            return false;
+        };
+        // One step of the u8 scale is max / 255 (no step for an all-zero input).
+        let per_step = if max > 0.0 { 255.0 / max } else { 0.0 };
+        for (d, &s) in quads.step.iter_mut().zip(&quads.scale) {
+            *d = s * (max / 255.0);
+        }
+        let cq = self.cin.div_ceil(4);
+        for b in 0..self.batch {
+            let planes = &input[b * self.cin * self.in_plane..][..self.cin * self.in_plane];
+            let words = &mut quads.input[b * cq * self.in_plane..][..cq * self.in_plane];
+            for (four, dst) in words.chunks_exact_mut(self.in_plane).enumerate() {
+                let plane = |k: usize| {
+                    let c = 4 * four + k;
+                    (c < self.cin).then(|| &planes[c * self.in_plane..][..self.in_plane])
+                };
+                quantize_four([plane(0), plane(1), plane(2), plane(3)], per_step, dst);
+            }
+        }
+        self.for_each_block(
+            &quads.input,
+            &quads.packed,
+            &quads.taps,
+            &quads.step,
+            out,
+            |rest| rest.min(2),
+            |block, n, out| {
+                if n == 2 {
+                    each_group_wide!(block.run_vnni, 2, self, out);
+                } else {
+                    each_group_wide!(block.run_vnni, 1, self, out);
+                }
+            },
+        );
+        true
+    }
+
     /// Whether the layer runs in bf16.
     #[cfg(test)]
     pub(crate) fn is_bf16(&self) -> bool {
@@ -504,6 +695,7 @@ impl Conv3x3 {
             &pairs.input,
             &pairs.packed,
             &pairs.taps,
+            &[],
             out,
             |_| 1,
             |block, _, out| {
@@ -546,9 +738,14 @@ thread_local! {
 /// reference.
 #[cfg(test)]
 pub(crate) fn product_forms() -> impl Iterator<Item = Products> + Clone {
-    [Products::Avx2, Products::Avx512, Products::Bf16]
-        .into_iter()
-        .filter(|p| p.supported())
+    [
+        Products::Avx2,
+        Products::Avx512,
+        Products::Bf16,
+        Products::Vnni,
+    ]
+    .into_iter()
+    .filter(|p| p.supported())
 }
 
 /// Runs `f` with the layers it builds on this thread in the products `form`: for the tests that
@@ -618,6 +815,69 @@ fn pair_bf16(even: &[f32], odd: Option<&[f32]>, dst: &mut [u32]) {
     }
 }
 
+/// The largest value of `v`, or `None` where a value is negative or not finite (or `v` is
+/// empty: 0 then).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[allow(unsafe_code)]
+fn nonnegative_max(v: &[f32]) -> Option<f32> {
+    use std::arch::x86_64::*;
+    let (mut hi, mut lo) = (_mm512_setzero_ps(), _mm512_setzero_ps());
+    // Comparisons with NaN are false, so a NaN anywhere clears a bit of `ok`.
+    let mut ok: __mmask16 = 0xffff;
+    let chunks = v.chunks_exact(16);
+    let rest = chunks.remainder();
+    for c in chunks {
+        // SAFETY: the chunk holds 16 values.
+        let x = unsafe { _mm512_loadu_ps(c.as_ptr()) };
+        ok &= _mm512_cmp_ps_mask::<_CMP_LE_OQ>(x, _mm512_set1_ps(f32::MAX));
+        hi = _mm512_max_ps(hi, x);
+        lo = _mm512_min_ps(lo, x);
+    }
+    let mut max = _mm512_reduce_max_ps(hi);
+    let mut min = _mm512_reduce_min_ps(lo);
+    for &x in rest {
+        if !(x <= f32::MAX) {
+            return None;
+        }
+        max = max.max(x);
+        min = min.min(x);
+    }
+    (ok == 0xffff && min >= 0.0).then_some(max)
+}
+
+/// Quantises four planes to u8 (`round(v · per_step)`, ties to even, at most 255) into one word
+/// per position, byte `k` from plane `k` (0 where it is `None`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw")]
+#[allow(unsafe_code)]
+fn quantize_four(planes: [Option<&[f32]>; 4], per_step: f32, dst: &mut [u32]) {
+    use std::arch::x86_64::*;
+    let n = dst.len();
+    assert!(planes.iter().flatten().all(|p| p.len() >= n));
+    let (f, top) = (_mm512_set1_ps(per_step), _mm512_set1_epi32(255));
+    let mut i = 0;
+    while i + 16 <= n {
+        let mut word = _mm512_setzero_si512();
+        for (k, p) in planes.iter().enumerate() {
+            let Some(p) = p else { continue };
+            // SAFETY: `i + 16 <= n` and the plane holds at least `n` values (asserted above).
+            let x = unsafe { _mm512_loadu_ps(p.as_ptr().add(i)) };
+            let q = _mm512_min_epi32(_mm512_cvtps_epi32(_mm512_mul_ps(x, f)), top);
+            word = _mm512_or_si512(word, _mm512_sllv_epi32(q, _mm512_set1_epi32(8 * k as i32)));
+        }
+        // SAFETY: as above, for `dst`.
+        unsafe { _mm512_storeu_si512(dst.as_mut_ptr().add(i).cast(), word) };
+        i += 16;
+    }
+    for (j, d) in dst.iter_mut().enumerate().skip(i) {
+        *d = planes.iter().enumerate().fold(0, |word, (k, p)| {
+            let q = p.map_or(0.0, |p| (p[j] * per_step).round_ties_even().min(255.0));
+            word | ((q as u32) << (8 * k))
+        });
+    }
+}
+
 /// Whether [`Conv3x3::run`] can run on this CPU: x86-64 with AVX2 and FMA. Elsewhere tract keeps
 /// these layers (its hand-written kernels for ARM are what phones run; ours are measured on x86-64
 /// only).
@@ -636,6 +896,9 @@ struct Block<'a, T> {
     /// `taps.len() × BLOCK` weights per block: one block, or `NB` for [`Block::run_wide`].
     weights: &'a [T],
     bias: &'a [f32],
+    /// Per channel the factor from the int8 kernel's i32 sums to values ([`Quads::step`]);
+    /// empty for the other kernels.
+    scale: &'a [f32],
     taps: &'a [usize],
     /// Channels of the block that exist (the rest of the lanes are not stored).
     channels: usize,
@@ -823,7 +1086,69 @@ impl Block<'_, f32> {
         }
         self.store_wide(&acc, at_out, out);
     }
+}
 
+#[cfg(target_arch = "x86_64")]
+impl Block<'_, u32> {
+    /// [`Block::run_wide`] on int8 quads ([`Quads`]): per quad tap `NB` weight loads, and per
+    /// position one broadcast word feeding `NB` `vpdpbusd`; the i32 sums times the channel's
+    /// [`Block::scale`] plus the bias are the outputs.
+    ///
+    /// # Safety
+    /// AVX-512F, BW and VNNI, AVX2 + FMA; every `at_in[j] + taps[t]` lies inside `input`,
+    /// `weights` holds `NB × taps.len() × BLOCK` words and `bias` and `scale` `NB × BLOCK`
+    /// values.
+    #[target_feature(enable = "avx512f,avx512bw,avx512vnni,avx2,fma")]
+    #[inline]
+    #[allow(unsafe_code)]
+    unsafe fn run_vnni<const NB: usize, const P: usize, const S: usize>(
+        &self,
+        at_in: &[usize],
+        at_out: &[usize],
+        out: &mut [f32],
+    ) {
+        use std::arch::x86_64::*;
+        let at: [usize; P] =
+            std::array::from_fn(|j| if S == 0 { at_in[j] } else { at_in[0] + S * j });
+        let k = self.taps.len();
+        assert!(self.scale.len() >= NB * BLOCK && self.bias.len() >= NB * BLOCK);
+        debug_assert!(self.weights.len() >= NB * k * BLOCK);
+        let (x, w) = (self.input.as_ptr(), self.weights.as_ptr());
+        let mut acc = [[_mm512_setzero_si512(); NB]; P];
+        for (t, &tap) in self.taps.iter().enumerate() {
+            let mut wt = [_mm512_setzero_si512(); NB];
+            for (j, wt) in wt.iter_mut().enumerate() {
+                // SAFETY: block j's weights for tap t lie within `weights` (the contract).
+                *wt = unsafe { _mm512_loadu_si512(w.add((j * k + t) * BLOCK).cast()) };
+            }
+            for (acc, &at) in acc.iter_mut().zip(&at) {
+                debug_assert!(at + tap < self.input.len());
+                // SAFETY: the tap lies inside `input` (the contract).
+                let v = unsafe { _mm512_set1_epi32(*x.add(at + tap) as i32) };
+                for (a, &wt) in acc.iter_mut().zip(&wt) {
+                    *a = _mm512_dpbusd_epi32(*a, v, wt);
+                }
+            }
+        }
+        let mut values = [[_mm512_setzero_ps(); NB]; P];
+        for j in 0..NB {
+            // SAFETY: `scale` and `bias` hold NB × BLOCK values (asserted above).
+            let (m, b) = unsafe {
+                (
+                    _mm512_loadu_ps(self.scale.as_ptr().add(j * BLOCK)),
+                    _mm512_loadu_ps(self.bias.as_ptr().add(j * BLOCK)),
+                )
+            };
+            for (v, a) in values.iter_mut().zip(&acc) {
+                v[j] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(a[j]), m, b);
+            }
+        }
+        self.store_wide(&values, at_out, out);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<T> Block<'_, T> {
     /// The accumulators of [`Block::run_wide`], with the ReLU, into their offsets `at_out` of the
     /// block's channel planes in `out`: the positions × channels of each block transposed in
     /// registers, then per channel one masked store per run of positions that are consecutive in
@@ -968,16 +1293,18 @@ mod tests {
         out
     }
 
-    /// bf16 where it was measured faster (AMD Zen 4), 512-bit f32 on the other CPUs with
-    /// AVX-512F (Intel, where bf16 measured slower), 256-bit f32 elsewhere.
+    /// bf16 where it was measured faster (AMD Zen 4), int8 on the other CPUs with AVX-512 VNNI
+    /// (the Intel Xeon measured), 512-bit f32 on the other CPUs with AVX-512F (Intel, where bf16
+    /// measured slower), 256-bit f32 elsewhere.
     #[test]
-    fn the_policy_picks_bf16_on_amd_and_512_bit_f32_on_other_avx512_cpus() {
-        assert_eq!(products_for(true, true, true), Products::Bf16);
-        assert_eq!(products_for(true, false, true), Products::Avx2);
-        assert_eq!(products_for(true, false, false), Products::Avx2);
-        assert_eq!(products_for(false, true, true), Products::Avx512);
-        assert_eq!(products_for(false, false, true), Products::Avx512);
-        assert_eq!(products_for(false, false, false), Products::Avx2);
+    fn the_policy_picks_bf16_on_amd_and_int8_or_512_bit_f32_on_other_avx512_cpus() {
+        assert_eq!(products_for(true, true, true, true), Products::Bf16);
+        assert_eq!(products_for(true, false, true, true), Products::Avx2);
+        assert_eq!(products_for(true, false, false, false), Products::Avx2);
+        assert_eq!(products_for(false, true, true, true), Products::Vnni);
+        assert_eq!(products_for(false, true, true, false), Products::Avx512);
+        assert_eq!(products_for(false, false, true, false), Products::Avx512);
+        assert_eq!(products_for(false, false, false, false), Products::Avx2);
     }
 
     #[test]
@@ -1018,7 +1345,10 @@ mod tests {
             for form in product_forms() {
                 let mut layer = building(form, || Conv3x3::new(batch, cin, h, w, &weights, pad));
                 assert_eq!(layer.is_bf16(), form.is_bf16() && cin >= 2);
-                assert_eq!(layer.wide, form == Products::Avx512);
+                assert_eq!(
+                    layer.wide,
+                    matches!(form, Products::Avx512 | Products::Vnni)
+                );
                 let rel = if layer.is_bf16() { 2f32.powi(-8) } else { 0.0 };
                 // Into the bordered layout; a sentinel in the output's border shows stray writes.
                 let mut input = vec![0.0; layer.input_len()];
@@ -1053,6 +1383,157 @@ mod tests {
                         }
                     }
                 }
+            }
+        }
+    }
+
+    /// Runs `layer` on `maps` (`batch × cin × h × w`, no border) and returns its output's interior
+    /// per batch slot, channel and position, and whether a border value was written.
+    fn run_unbordered(layer: &mut Conv3x3, maps: &[f32], (h, w): (usize, usize)) -> Vec<f32> {
+        let mut input = vec![0.0; layer.input_len()];
+        for (i, &v) in maps.iter().enumerate() {
+            let (x, y, plane) = (i % w, i / w % h, i / (w * h));
+            input[(plane * (h + 2) + y + 1) * (w + 2) + x + 1] = v;
+        }
+        let [nb, nc, ph, pw] = layer.output_shape();
+        let pad = layer.out_pad;
+        let mut out = vec![7.0; nb * nc * ph * pw];
+        layer.run(&input, &mut out);
+        let mut interior = Vec::new();
+        for plane in 0..nb * nc {
+            for y in 0..ph {
+                for x in 0..pw {
+                    let v = out[(plane * ph + y) * pw + x];
+                    if (pad..ph - pad).contains(&y) && (pad..pw - pad).contains(&x) {
+                        interior.push(v);
+                    } else {
+                        assert_eq!(v, 7.0, "border written at plane {plane} ({y},{x})");
+                    }
+                }
+            }
+        }
+        interior
+    }
+
+    /// Layers whose weights are int8 times a scale per output channel run in int8 products
+    /// where the CPU has AVX-512 VNNI: within half a quantisation step of the input per term of
+    /// the definition (the weights are exact); the others, and inputs with a negative value,
+    /// as in f32.
+    #[test]
+    fn int8_layers_match_the_definition_within_the_input_quantisation() {
+        if !Products::Vnni.supported() {
+            eprintln!("skipped: this CPU has no AVX-512 VNNI");
+            return;
+        }
+        // Partial fours of input channels (3, 5, 6), partial and double blocks, both strides,
+        // remainders of eight positions, batches of one and two.
+        let cases = [
+            (1, 2, 8, 10, 16, 2, 1),
+            (2, 5, 7, 5, 24, 2, 0),
+            (1, 16, 4, 4, 32, 1, 1),
+            (1, 3, 9, 7, 48, 1, 1),
+            (2, 6, 5, 5, 40, 2, 1),
+            (1, 8, 13, 11, 8, 1, 0),
+        ];
+        for (batch, cin, h, w, cout, stride, pad) in cases {
+            let k = cin * 9;
+            // Row co: q ∈ [−127, 127] with 127 in it, times a scale of its own.
+            let kernel: Vec<f32> = (0..cout * k)
+                .map(|i| {
+                    let (co, t) = (i / k, i % k);
+                    let q = if t == co % k {
+                        127
+                    } else {
+                        (i * 37 % 255) as i32 - 127
+                    };
+                    q as f32 * (0.001 + co as f32 * 1e-4)
+                })
+                .collect();
+            let weights = ConvWeights {
+                kernel,
+                bias: (0..cout).map(|i| (i as f32 - 3.0) / 10.0).collect(),
+                stride,
+            };
+            let maps: Vec<f32> = (0..batch * cin * h * w)
+                .map(|i| (i * 53 % 29) as f32 / 7.0)
+                .collect();
+            let max = maps.iter().fold(0f32, |m, &v| m.max(v));
+            let mut layer = building(Products::Vnni, || {
+                Conv3x3::new(batch, cin, h, w, &weights, pad)
+            });
+            assert!(
+                layer.is_int8(),
+                "{cin}→{cout}: int8 weights not taken as such"
+            );
+            let got = run_unbordered(&mut layer, &maps, (h, w));
+            let (oh, ow) = ((h - 1) / stride + 1, (w - 1) / stride + 1);
+            for b in 0..batch {
+                let want = direct(
+                    &maps[b * cin * h * w..][..cin * h * w],
+                    (cin, h, w),
+                    &weights,
+                );
+                for c in 0..cout {
+                    let row: f32 = weights.kernel[c * k..][..k].iter().map(|v| v.abs()).sum();
+                    for p in 0..oh * ow {
+                        let g = got[(b * cout + c) * oh * ow + p];
+                        let (v, mag) = want[c * oh * ow + p];
+                        let bound = 1e-5 + 1e-5 * mag + row * max / 510.0;
+                        assert!(
+                            (g - v).abs() <= bound,
+                            "{batch}x{cin}x{h}x{w}→{cout} s{stride}: b{b} c{c} p{p}: {g} vs {v} (bound {bound})"
+                        );
+                    }
+                }
+            }
+            // A negative input value: u8 cannot hold it, the run goes through f32.
+            let mut signed = maps.clone();
+            signed[0] = -1.0;
+            let got = run_unbordered(&mut layer, &signed, (h, w));
+            for b in 0..batch {
+                let want = direct(
+                    &signed[b * cin * h * w..][..cin * h * w],
+                    (cin, h, w),
+                    &weights,
+                );
+                for (i, &(v, mag)) in want.iter().enumerate() {
+                    let g = got[b * cout * oh * ow + i];
+                    assert!(
+                        (g - v).abs() <= 1e-5 + 1e-6 * mag,
+                        "f32 fallback: {g} vs {v}"
+                    );
+                }
+            }
+        }
+        // Weights that are not int8 per row stay f32.
+        let weights = ConvWeights {
+            kernel: (0..16 * 18).map(|i| (i as f32 * 0.37).sin()).collect(),
+            bias: vec![0.0; 16],
+            stride: 1,
+        };
+        let layer = building(Products::Vnni, || Conv3x3::new(1, 2, 4, 4, &weights, 1));
+        assert!(!layer.is_int8());
+    }
+
+    #[test]
+    fn the_input_check_takes_only_finite_nonnegative_inputs() {
+        if !Products::Vnni.supported() {
+            eprintln!("skipped: this CPU has no AVX-512 VNNI");
+            return;
+        }
+        #[allow(unsafe_code)]
+        // SAFETY: the CPU has AVX-512F (VNNI implies it here: `Products::supported`).
+        let max = |v: &[f32]| unsafe { nonnegative_max(v) };
+        let mut v: Vec<f32> = (0..37).map(|i| i as f32 * 0.5).collect();
+        assert_eq!(max(&v), Some(18.0));
+        assert_eq!(max(&[]), Some(0.0));
+        for bad in [-0.5, f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            // In a whole vector of sixteen and in the remainder.
+            for at in [3, 35] {
+                let keep = v[at];
+                v[at] = bad;
+                assert_eq!(max(&v), None, "{bad} at {at}");
+                v[at] = keep;
             }
         }
     }

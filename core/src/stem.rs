@@ -658,15 +658,20 @@ impl StemLayer {
 /// `bf16` (the layers here ran in bf16 products, `conv`), within [`BF16_TOLERANCE`] of it. For
 /// the tests that hold networks run with a [`Stem`] to their whole-graph outputs.
 #[cfg(test)]
-pub(crate) fn assert_close_to_whole_graph(what: &str, got: &[f32], want: &[f32], bf16: bool) {
+pub(crate) fn assert_close_to_whole_graph(
+    what: &str,
+    got: &[f32],
+    want: &[f32],
+    form: crate::conv::Products,
+) {
     assert_eq!(got.len(), want.len(), "{what}: lengths");
     let scale = want.iter().fold(1f32, |m, v| m.max(v.abs()));
-    let tol = if bf16 { BF16_TOLERANCE } else { 1e-4 };
+    let tol = form.whole_graph_tolerance();
     let worst = got
         .iter()
         .zip(want)
         .fold(0f32, |m, (x, y)| m.max((x - y).abs() / scale));
-    assert!(worst <= tol, "{what} (bf16 {bf16}): {worst} of the scale");
+    assert!(worst <= tol, "{what} ({form:?}): {worst} of the scale");
 }
 
 /// How far a network whose 3×3 layers ran in bf16 products may be from tract's f32 run, as a

@@ -712,7 +712,7 @@ mod tests {
                 let a = a.try_as_plain_ram().unwrap();
                 let b = b.try_as_plain_ram().unwrap();
                 let (a, b) = (a.as_slice::<f32>().unwrap(), b.as_slice::<f32>().unwrap());
-                crate::stem::assert_close_to_whole_graph(&format!("{h}x{w}"), a, b, form.is_bf16());
+                crate::stem::assert_close_to_whole_graph(&format!("{h}x{w}"), a, b, form);
             }
         }
     }

@@ -365,12 +365,7 @@ mod tests {
                     let want = without.output(k).unwrap();
                     for net in [&with, &tract_heads] {
                         let what = format!("{name} {output} (dense {})", net.dense().is_some());
-                        assert_close_to_whole_graph(
-                            &what,
-                            net.output(k).unwrap(),
-                            want,
-                            form.is_bf16(),
-                        );
+                        assert_close_to_whole_graph(&what, net.output(k).unwrap(), want, form);
                     }
                 }
             }
