@@ -246,7 +246,8 @@ fn int8_rows(kernel: &[f32], cout: usize) -> Option<(Vec<i8>, Vec<f32>)> {
         let s = row.iter().fold(0f32, |m, v| m.max(v.abs())) / 127.0;
         for &v in row {
             let r = if s > 0.0 { (v / s).round() } else { 0.0 };
-            if !(r.abs() <= 127.0 && (r * s - v).abs() <= 1e-6 * 127.0 * s) {
+            let exact = r.abs() <= 127.0 && (r * s - v).abs() <= 1e-6 * 127.0 * s;
+            if !exact {
                 return None;
             }
             q.push(r as i8);
@@ -837,7 +838,7 @@ fn nonnegative_max(v: &[f32]) -> Option<f32> {
     let mut max = _mm512_reduce_max_ps(hi);
     let mut min = _mm512_reduce_min_ps(lo);
     for &x in rest {
-        if !(x <= f32::MAX) {
+        if !x.is_finite() {
             return None;
         }
         max = max.max(x);
