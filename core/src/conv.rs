@@ -759,6 +759,12 @@ pub(crate) fn building<R>(form: Products, f: impl FnOnce() -> R) -> R {
     r
 }
 
+/// Whether layers built now multiply in int8 where their weights allow ([`Products::Vnni`]):
+/// also the fully connected heads' choice (`landmarks::dense`).
+pub(crate) fn int8_products() -> bool {
+    products() == Products::Vnni
+}
+
 /// The form the layers built now take: [`chosen_products`], or in tests the one [`building`] set.
 fn products() -> Products {
     #[cfg(test)]
@@ -821,7 +827,7 @@ fn pair_bf16(even: &[f32], odd: Option<&[f32]>, dst: &mut [u32]) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 #[allow(unsafe_code)]
-fn nonnegative_max(v: &[f32]) -> Option<f32> {
+pub(crate) fn nonnegative_max(v: &[f32]) -> Option<f32> {
     use std::arch::x86_64::*;
     let (mut hi, mut lo) = (_mm512_setzero_ps(), _mm512_setzero_ps());
     // Comparisons with NaN are false, so a NaN anywhere clears a bit of `ok`.

@@ -330,6 +330,13 @@ mod tests {
                         layers >= 2 && int8 == layers,
                         "{name}: {int8} of {layers} int8"
                     );
+                    // And multiplied in int8 where the trunks are.
+                    let products = if form == crate::conv::Products::Vnni {
+                        layers
+                    } else {
+                        0
+                    };
+                    assert_eq!(dense.int8_product_layers(), products, "{name} {form:?}");
                 }
                 // Where `conv` runs, every 3×3 layer after the first (all the shipped trunks' layers).
                 let convs = op_types(bytes).iter().filter(|o| *o == "Conv").count();
