@@ -822,35 +822,46 @@ fn pair_bf16(even: &[f32], odd: Option<&[f32]>, dst: &mut [u32]) {
     }
 }
 
-/// The largest value of `v`, or `None` where a value is negative or not finite (or `v` is
-/// empty: 0 then).
+/// The largest value of `v`, or `None` where a value is negative or not finite (0 for an empty
+/// `v`; −0 counts as 0).
+///
+/// Why through the bits: for finite values ≥ +0 the order of their bits as unsigned integers is
+/// their order, and every negative, infinite or NaN value has larger bits than any of them, so one
+/// unsigned maximum over four independent registers answers both questions (a float maximum and
+/// minimum waited on their own latency every sixteen values).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 #[allow(unsafe_code)]
 pub(crate) fn nonnegative_max(v: &[f32]) -> Option<f32> {
     use std::arch::x86_64::*;
-    let (mut hi, mut lo) = (_mm512_setzero_ps(), _mm512_setzero_ps());
-    // Comparisons with NaN are false, so a NaN anywhere clears a bit of `ok`.
-    let mut ok: __mmask16 = 0xffff;
-    let chunks = v.chunks_exact(16);
-    let rest = chunks.remainder();
-    for c in chunks {
-        // SAFETY: the chunk holds 16 values.
-        let x = unsafe { _mm512_loadu_ps(c.as_ptr()) };
-        ok &= _mm512_cmp_ps_mask::<_CMP_LE_OQ>(x, _mm512_set1_ps(f32::MAX));
-        hi = _mm512_max_ps(hi, x);
-        lo = _mm512_min_ps(lo, x);
-    }
-    let mut max = _mm512_reduce_max_ps(hi);
-    let mut min = _mm512_reduce_min_ps(lo);
-    for &x in rest {
-        if !x.is_finite() {
-            return None;
+    const INF_BITS: u32 = 0x7f80_0000;
+    let mut acc = [_mm512_setzero_si512(); 4];
+    let blocks = v.chunks_exact(64);
+    let rest = blocks.remainder();
+    for b in blocks {
+        for (k, a) in acc.iter_mut().enumerate() {
+            // SAFETY: the block holds 64 values.
+            let x = unsafe { _mm512_loadu_si512(b.as_ptr().add(16 * k).cast()) };
+            *a = _mm512_max_epu32(*a, x);
         }
-        max = max.max(x);
-        min = min.min(x);
     }
-    (ok == 0xffff && min >= 0.0).then_some(max)
+    for (k, c) in rest.chunks(16).enumerate() {
+        let mask = (1u32 << c.len()).wrapping_sub(1) as u16;
+        // SAFETY: the mask reads the chunk's values only.
+        let x = unsafe { _mm512_maskz_loadu_epi32(mask, c.as_ptr().cast()) };
+        acc[k] = _mm512_max_epu32(acc[k], x);
+    }
+    let m = _mm512_max_epu32(
+        _mm512_max_epu32(acc[0], acc[1]),
+        _mm512_max_epu32(acc[2], acc[3]),
+    );
+    let bits = _mm512_reduce_max_epu32(m);
+    if bits < INF_BITS {
+        return Some(f32::from_bits(bits));
+    }
+    // A negative, infinite or NaN value, or a −0 (whose sign bit makes its bits large).
+    v.iter()
+        .try_fold(0f32, |m, &x| (x.is_finite() && x >= 0.0).then(|| m.max(x)))
 }
 
 /// Quantises four planes to u8 (`round(v · per_step)`, ties to even, at most 255) into one word
@@ -863,25 +874,35 @@ fn quantize_four(planes: [Option<&[f32]>; 4], per_step: f32, dst: &mut [u32]) {
     let n = dst.len();
     assert!(planes.iter().flatten().all(|p| p.len() >= n));
     let (f, top) = (_mm512_set1_ps(per_step), _mm512_set1_epi32(255));
+    // A plane's u8 values at `i..` (the lanes of `mask`), as i32 lanes; 0 without the plane.
+    let level = |p: Option<&[f32]>, i: usize, mask: u16| match p {
+        // SAFETY: the mask's lanes are positions below `n`, inside the plane (asserted above).
+        Some(p) => _mm512_min_epi32(
+            _mm512_cvtps_epi32(_mm512_mul_ps(
+                unsafe { _mm512_maskz_loadu_ps(mask, p.as_ptr().add(i)) },
+                f,
+            )),
+            top,
+        ),
+        None => _mm512_setzero_si512(),
+    };
+    let [p0, p1, p2, p3] = planes;
     let mut i = 0;
-    while i + 16 <= n {
-        let mut word = _mm512_setzero_si512();
-        for (k, p) in planes.iter().enumerate() {
-            let Some(p) = p else { continue };
-            // SAFETY: `i + 16 <= n` and the plane holds at least `n` values (asserted above).
-            let x = unsafe { _mm512_loadu_ps(p.as_ptr().add(i)) };
-            let q = _mm512_min_epi32(_mm512_cvtps_epi32(_mm512_mul_ps(x, f)), top);
-            word = _mm512_or_si512(word, _mm512_sllv_epi32(q, _mm512_set1_epi32(8 * k as i32)));
-        }
-        // SAFETY: as above, for `dst`.
-        unsafe { _mm512_storeu_si512(dst.as_mut_ptr().add(i).cast(), word) };
+    while i < n {
+        let mask = (1u32 << (n - i).min(16)).wrapping_sub(1) as u16;
+        let word = _mm512_or_si512(
+            _mm512_or_si512(
+                level(p0, i, mask),
+                _mm512_slli_epi32::<8>(level(p1, i, mask)),
+            ),
+            _mm512_or_si512(
+                _mm512_slli_epi32::<16>(level(p2, i, mask)),
+                _mm512_slli_epi32::<24>(level(p3, i, mask)),
+            ),
+        );
+        // SAFETY: the mask's lanes are positions below `n`, inside `dst`.
+        unsafe { _mm512_mask_storeu_epi32(dst.as_mut_ptr().add(i).cast(), mask, word) };
         i += 16;
-    }
-    for (j, d) in dst.iter_mut().enumerate().skip(i) {
-        *d = planes.iter().enumerate().fold(0, |word, (k, p)| {
-            let q = p.map_or(0.0, |p| (p[j] * per_step).round_ties_even().min(255.0));
-            word | ((q as u32) << (8 * k))
-        });
     }
 }
 
@@ -1531,12 +1552,17 @@ mod tests {
         #[allow(unsafe_code)]
         // SAFETY: the CPU has AVX-512F (VNNI implies it here: `Products::supported`).
         let max = |v: &[f32]| unsafe { nonnegative_max(v) };
-        let mut v: Vec<f32> = (0..37).map(|i| i as f32 * 0.5).collect();
-        assert_eq!(max(&v), Some(18.0));
+        // Two whole blocks of 64 and a remainder of 22 (a whole 16 and 6).
+        let mut v: Vec<f32> = (0..150).map(|i| (i * 37 % 150) as f32 * 0.5).collect();
+        assert_eq!(max(&v), Some(74.5));
+        assert_eq!(max(&v[..37]), v[..37].iter().copied().reduce(f32::max));
         assert_eq!(max(&[]), Some(0.0));
+        // −0 counts as 0 (through the slower check).
+        v[5] = -0.0;
+        assert_eq!(max(&v), Some(74.5));
         for bad in [-0.5, f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
-            // In a whole vector of sixteen and in the remainder.
-            for at in [3, 35] {
+            // In a block, in the whole remainder vector and in the partial one.
+            for at in [3, 100, 130, 147] {
                 let keep = v[at];
                 v[at] = bad;
                 assert_eq!(max(&v), None, "{bad} at {at}");
