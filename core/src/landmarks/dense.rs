@@ -7,8 +7,9 @@
 //! multiply-adds per face (counted from the shipped graphs). Here each layer is one pass over its
 //! weights, stored input-major so the outputs are the vector lanes, in buffers allocated once.
 //! Where the trunks multiply in int8 ([`crate::conv::int8_products`]: AVX-512 VNNI), int8 layers
-//! do too ([`int8_product`]): their input rounded to u8 per run, the same weights; on the Intel
-//! Xeon of stop 34 `m3_per_face` 162.6–164.1 → 151.5–155.1 µs in alternating runs.
+//! do too ([`int8_product`]): their input rounded per run to 16-bit steps (two u8 digits), the
+//! same weights; on the Intel Xeon of stop 34 `m3_per_face` 162.6–164.1 → 151.5–155.1 µs in
+//! alternating runs with one digit, the second digit then +3–5 µs.
 //!
 //! What a graph may hold after its trunk was cut: `Flatten` of the trunk's output, `Gemm` (α = β =
 //! 1, `transA` 0, either `transB`) with a bias, `Relu` or `LeakyRelu` with α = 0, `Concat` along
