@@ -50,34 +50,14 @@ impl Weights {
     /// within 1e-6 of its column's largest magnitude, else as it is.
     fn compact(w: Vec<f32>, np: usize) -> Self {
         let k = w.len() / np.max(1);
-        let scale: Vec<f32> = (0..np)
-            .map(|o| (0..k).fold(0f32, |m, r| m.max(w[r * np + o].abs())) / 127.0)
-            .collect();
-        let q: Vec<i8> = w
-            .iter()
-            .enumerate()
-            .map(|(t, &v)| {
-                let s = scale[t % np];
-                if s > 0.0 {
-                    (v / s).round().clamp(-127.0, 127.0) as i8
-                } else {
-                    0
-                }
-            })
-            .collect();
-        let exact = w.iter().zip(&q).enumerate().all(|(t, (&v, &q))| {
-            let s = scale[t % np];
-            (f32::from(q) * s - v).abs() <= 1e-6 * 127.0 * s
-        });
-        if exact {
+        if let Some((q, scale)) = crate::conv::int8_per_output(&w, np, |t| t % np) {
             let quads = crate::conv::int8_products().then(|| {
                 (0..k.div_ceil(4) * np)
                     .map(|t| {
                         let (r, o) = (t / np, t % np);
-                        (0..4).fold(0u32, |word, b| {
+                        crate::conv::int8_word(|b| {
                             let row = 4 * r + b;
-                            let v = if row < k { q[row * np + o] } else { 0 };
-                            word | (u32::from(v as u8) << (8 * b))
+                            if row < k { q[row * np + o] } else { 0 }
                         })
                     })
                     .collect()
@@ -486,13 +466,10 @@ fn int8_product(
     out: &mut [f32],
 ) -> bool {
     #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::is_x86_feature_detected as has;
-        if has!("avx512f") && has!("avx512bw") && has!("avx512vnni") {
-            #[allow(unsafe_code)]
-            // SAFETY: the features were just detected.
-            return unsafe { int8_product_avx512(x, quads, scale, bias, relu, quantised, out) };
-        }
+    if crate::conv::Products::Vnni.supported() {
+        #[allow(unsafe_code)]
+        // SAFETY: the CPU has AVX-512F, BW and VNNI (`Products::supported`).
+        return unsafe { int8_product_avx512(x, quads, scale, bias, relu, quantised, out) };
     }
     let _ = (x, quads, scale, bias, relu, quantised, out);
     false
@@ -783,12 +760,7 @@ mod tests {
     /// are left to the f32 kernel.
     #[test]
     fn int8_products_match_the_f32_kernel_within_the_input_quantisation() {
-        #[cfg(target_arch = "x86_64")]
-        let vnni = std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx512bw")
-            && std::arch::is_x86_feature_detected!("avx512vnni");
-        #[cfg(not(target_arch = "x86_64"))]
-        let vnni = false;
+        let vnni = crate::conv::Products::Vnni.supported();
         if !vnni {
             eprintln!("skipped: this CPU has no AVX-512 VNNI");
             return;
