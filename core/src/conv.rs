@@ -122,7 +122,7 @@ impl Products {
 
 /// The form for this CPU, decided once: bf16 on AMD CPUs that have it (Zen 4: 1.45–1.65× on the
 /// trunk layers), int8 on other CPUs with AVX-512 VNNI (on the Intel Xeon measured
-/// on the whole M3: 1.44–1.49×), f32 on 512-bit registers on other CPUs with AVX-512F (on the Intel Xeon
+/// on the whole M3: 1.44–1.50×), f32 on 512-bit registers on other CPUs with AVX-512F (on the Intel Xeon
 /// measured, `vdpbf16ps` ran at half the FMA's rate and two 512-bit FMA units doubled the
 /// 256-bit rate), else f32 on 256-bit registers; `MONOTRACK_CONV` overrides it where the CPU has
 /// the named form.

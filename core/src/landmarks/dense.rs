@@ -9,7 +9,7 @@
 //! Where the trunks multiply in int8 ([`crate::conv::int8_products`]: AVX-512 VNNI), int8 layers
 //! do too ([`int8_product`]): their input rounded per run to 16-bit steps (two u8 digits), the
 //! same weights; on the Intel Xeon of stop 34 `m3_per_face` 162.6–164.1 → 151.5–155.1 µs in
-//! alternating runs with one digit, the second digit then +3–5 µs.
+//! alternating runs with one digit, the second digit then +4.8 µs in one pair of runs and none in the other (noisy).
 //!
 //! What a graph may hold after its trunk was cut: `Flatten` of the trunk's output, `Gemm` (α = β =
 //! 1, `transA` 0, either `transB`) with a bias, `Relu` or `LeakyRelu` with α = 0, `Concat` along
