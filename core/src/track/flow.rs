@@ -235,33 +235,30 @@ impl Pyramid {
     }
 }
 
-/// Samples a `size × size` patch whose top-left sample sits at pixel-index position (x, y)
-/// (bilinear; positions outside the image clamp to the border) into rows `stride ≥ size` apart;
-/// the cells past `size` in each row are left as they are.
+/// Samples a `size × size` patch whose top-left sample sits at pixel-index position (x, y) into
+/// rows `stride ≥ size` apart; the cells past `size` in each row are left as they are.
+///
+/// Bilinear in the separable form the vector kernels compute, so all give the same bits: along x
+/// in each of the two image rows, `a + fx·(b − a)`, then along y between them. Positions outside
+/// the image clamp to the border.
 #[inline(always)]
 fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, stride: usize, out: &mut [f32]) {
     let (w, h) = (img.width(), img.height());
-    let ix = x.floor();
-    let iy = y.floor();
-    let (fx, fy) = (x - ix, y - iy);
-    let (ix, iy) = (ix as i64, iy as i64);
-    let w00 = (1.0 - fx) * (1.0 - fy);
-    let w10 = fx * (1.0 - fy);
-    let w01 = (1.0 - fx) * fy;
-    let w11 = fx * fy;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let (ix, iy) = (x0 as i64, y0 as i64);
     let d = img.data();
     if ix >= 0 && iy >= 0 && ix + (size as i64) < w as i64 && iy + (size as i64) < h as i64 {
-        // Fast path: same weights for the whole patch, no bounds checks per sample.
+        // Fast path: no bounds checks per sample.
         let (ix, iy) = (ix as usize, iy as usize);
         for r in 0..size {
-            let a = &d[(iy + r) * w + ix..(iy + r) * w + ix + size + 1];
-            let b = &d[(iy + r + 1) * w + ix..(iy + r + 1) * w + ix + size + 1];
-            let o = &mut out[r * stride..r * stride + size];
+            let a = &d[(iy + r) * w + ix..][..size + 1];
+            let b = &d[(iy + r + 1) * w + ix..][..size + 1];
+            let o = &mut out[r * stride..][..size];
             for c in 0..size {
-                o[c] = w00 * f32::from(a[c])
-                    + w10 * f32::from(a[c + 1])
-                    + w01 * f32::from(b[c])
-                    + w11 * f32::from(b[c + 1]);
+                let top = lerp(f32::from(a[c]), f32::from(a[c + 1]), fx);
+                let bottom = lerp(f32::from(b[c]), f32::from(b[c + 1]), fx);
+                o[c] = lerp(top, bottom, fy);
             }
         }
         return;
@@ -275,11 +272,50 @@ fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, stride: usize, out
         let py = iy + r as i64;
         for c in 0..size {
             let px = ix + c as i64;
-            out[r * stride + c] = w00 * at(px, py)
-                + w10 * at(px + 1, py)
-                + w01 * at(px, py + 1)
-                + w11 * at(px + 1, py + 1);
+            let top = lerp(at(px, py), at(px + 1, py), fx);
+            let bottom = lerp(at(px, py + 1), at(px + 1, py + 1), fx);
+            out[r * stride + c] = lerp(top, bottom, fy);
         }
+    }
+}
+
+/// `a + t·(b − a)`: the bilinear step every sampling kernel takes, in this order.
+#[inline(always)]
+fn lerp(a: f32, b: f32, t: f32) -> f32 {
+    a + t * (b - a)
+}
+
+/// The window kernels a [`PyramidalLk`] runs. All give the same bits: each sum keeps [`LANES`]
+/// lanes (cell c of a window row in lane c mod [`LANES`]) and adds them in lane order at the end,
+/// and every lane does the portable code's operations in its order (Rust never fuses `a·b + c`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kernels {
+    /// Plain Rust (every CPU; the compiler vectorises what it can).
+    Portable,
+    /// AVX2 + FMA: 8 lanes a register, two registers per lane group.
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    /// AVX-512 (F, BW, VL): one register per lane group, the window's edge by masked byte loads,
+    /// so windows up to the image's last column take the vector path.
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+}
+
+impl Kernels {
+    /// The widest this CPU runs.
+    fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if crate::cpu::has_avx2_fma() {
+                return if has!("avx512f") && has!("avx512bw") && has!("avx512vl") {
+                    Kernels::Avx512
+                } else {
+                    Kernels::Avx2
+                };
+            }
+        }
+        Kernels::Portable
     }
 }
 
@@ -296,16 +332,17 @@ pub struct PyramidalLk {
     patch: Vec<f32>,
     gx: Vec<f32>,
     gy: Vec<f32>,
+    /// The next image's window, sampled here only where the vector kernels, which sample and sum
+    /// in one pass, do not run (near the image's edge, or on the portable path).
     moving: Vec<f32>,
     stride: usize,
-    /// Whether the CPU has AVX2 and FMA: the window sampling and sums then run as AVX2 code.
     #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-    avx2: bool,
+    kernels: Kernels,
 }
 
-/// Lanes of the window sums: eight f32 sums kept apart (one AVX2 register), added in a fixed
-/// order at the end ([`hsum`]).
-const LANES: usize = 8;
+/// Lanes of the window sums: sixteen f32 sums kept apart (one AVX-512 register, two of AVX2),
+/// added in a fixed order at the end ([`reduce`]).
+const LANES: usize = 16;
 
 impl PyramidalLk {
     /// A tracker with `config`.
@@ -316,10 +353,6 @@ impl PyramidalLk {
         config.validate()?;
         let n = 2 * config.half_window + 1;
         let stride = n.next_multiple_of(LANES);
-        #[cfg(target_arch = "x86_64")]
-        let avx2 = crate::cpu::has_avx2_fma();
-        #[cfg(not(target_arch = "x86_64"))]
-        let avx2 = false;
         Ok(Self {
             config,
             bordered: vec![0.0; (n + 2) * (stride + LANES)],
@@ -329,7 +362,7 @@ impl PyramidalLk {
             gy: vec![0.0; n * stride],
             moving: vec![0.0; n * stride],
             stride,
-            avx2,
+            kernels: Kernels::detect(),
         })
     }
 
@@ -404,6 +437,8 @@ impl PyramidalLk {
         }
         let mut g = [0.0f32; 2];
         let mut d = [0.0f32; 2];
+        // Σ |patch − moving| of the last window compared; at the end, level 0's.
+        let mut sad = 0.0f32;
         let (po, no) = (prev.origin(), next.origin());
         for l in (0..prev.len()).rev() {
             let scale = 1.0 / (1u32 << l) as f32;
@@ -418,7 +453,7 @@ impl PyramidalLk {
                 (po[0] >> l) as f32 - (no[0] >> l) as f32,
                 (po[1] >> l) as f32 - (no[1] >> l) as f32,
             );
-            self.sample(pi, cx - hw as f32 - 1.0, cy - hw as f32 - 1.0, n + 2, true);
+            self.sample_bordered(pi, cx - hw as f32 - 1.0, cy - hw as f32 - 1.0);
             let [gxx, gxy, gyy] = self.gradients(n);
             let det = gxx * gyy - gxy * gxy;
             let min_eig = 0.5 * (gxx + gyy - ((gxx - gyy).powi(2) + 4.0 * gxy * gxy).sqrt());
@@ -428,11 +463,12 @@ impl PyramidalLk {
             let inv_det = 1.0 / det;
             d = [0.0, 0.0];
             for _ in 0..cfg.max_iterations {
-                let [bx, by] = self.mismatch(
+                let [bx, by, s] = self.mismatch(
                     ni,
                     cx + ox + g[0] + d[0] - hw as f32,
                     cy + oy + g[1] + d[1] - hw as f32,
                 );
+                sad = s;
                 let ux = (gyy * bx - gxy * by) * inv_det;
                 let uy = (gxx * by - gxy * bx) * inv_det;
                 d[0] += ux;
@@ -456,34 +492,27 @@ impl PyramidalLk {
         {
             return (p, false, f32::INFINITY);
         }
-        // Error at full resolution, where `patch` and `moving` hold level 0 after the loop (both
-        // zero past the window's width).
-        let err = self
-            .patch
-            .iter()
-            .zip(&self.moving)
-            .map(|(a, b)| (a - b).abs())
-            .sum::<f32>()
-            / area;
-        (out, true, err)
+        (out, true, sad / area)
     }
 }
 
 impl PyramidalLk {
-    /// Samples a `size × size` window with its top-left sample at (x, y) into `bordered` (with
-    /// its border: `size = n + 2`) or `moving` (`size = n`).
+    /// Samples the previous image's `(n + 2)²` window with its top-left sample at (x, y) into
+    /// `bordered`.
     #[inline(always)]
-    fn sample(&mut self, img: &GrayImage, x: f32, y: f32, size: usize, bordered: bool) {
-        let (out, stride) = if bordered {
-            (&mut self.bordered, self.bstride)
-        } else {
-            (&mut self.moving, self.stride)
-        };
+    fn sample_bordered(&mut self, img: &GrayImage, x: f32, y: f32) {
+        let size = 2 * self.config.half_window + 3;
+        let (out, stride) = (&mut self.bordered, self.bstride);
         #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `avx2` is set only where the CPU has AVX2 and FMA.
-            #[allow(unsafe_code)]
-            if unsafe { sample_avx2(img, x, y, size, stride, out) } {
+        #[allow(unsafe_code)]
+        {
+            // SAFETY: `kernels` names features `Kernels::detect` found on this CPU.
+            let done = match self.kernels {
+                Kernels::Avx512 => unsafe { sample_avx512(img, x, y, size, stride, out) },
+                Kernels::Avx2 => unsafe { sample_avx2(img, x, y, size, stride, out) },
+                Kernels::Portable => false,
+            };
+            if done {
                 return;
             }
         }
@@ -496,20 +525,19 @@ impl PyramidalLk {
     fn gradients(&mut self, n: usize) -> [f32; 3] {
         let (bw, st) = (self.bstride, self.stride);
         #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `avx2` is set only where the CPU has AVX2 and FMA.
-            #[allow(unsafe_code)]
-            return unsafe {
-                gradients_avx2(
-                    &self.bordered,
-                    bw,
-                    n,
-                    [&mut self.patch, &mut self.gx, &mut self.gy],
-                )
-            };
+        #[allow(unsafe_code)]
+        {
+            let outs = [&mut self.patch, &mut self.gx, &mut self.gy];
+            match self.kernels {
+                // SAFETY: `kernels` names features `Kernels::detect` found on this CPU.
+                Kernels::Avx512 => return unsafe { gradients_avx512(&self.bordered, bw, n, outs) },
+                Kernels::Avx2 => return unsafe { gradients_avx2(&self.bordered, bw, n, outs) },
+                Kernels::Portable => {}
+            }
         }
-        let (mut sxx, mut sxy, mut syy) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        let mut sums = [[[0.0f32; LANES]; 2]; 3];
         for r in 0..n {
+            let a = r % 2;
             let up = &self.bordered[r * bw..(r + 1) * bw];
             let mid = &self.bordered[(r + 1) * bw..(r + 2) * bw];
             let down = &self.bordered[(r + 2) * bw..(r + 3) * bw];
@@ -529,55 +557,99 @@ impl PyramidalLk {
                     patch[k] = if inside { m[k + 1] } else { 0.0 };
                     gxs[k] = gx;
                     gys[k] = gy;
-                    sxx[k] += gx * gx;
-                    sxy[k] += gx * gy;
-                    syy[k] += gy * gy;
+                    sums[0][a][k] += gx * gx;
+                    sums[1][a][k] += gx * gy;
+                    sums[2][a][k] += gy * gy;
                 }
             }
         }
-        [hsum(&sxx), hsum(&sxy), hsum(&syy)]
+        sums.map(|s| reduce(&s))
     }
 
-    /// Samples the next image's window with its top-left sample at (x, y) into `moving` and
-    /// returns the mismatch vector Σ (patch − moving) · (gx, gy), in [`LANES`] sums.
+    /// The next image's window with its top-left sample at (x, y) against the patch: the sums
+    /// [Σ (patch − moving)·gx, Σ (patch − moving)·gy, Σ |patch − moving|], in [`LANES`] sums, the
+    /// lane groups of a row in the outer loop and the rows in the inner one.
     #[inline(always)]
-    fn mismatch(&mut self, img: &GrayImage, x: f32, y: f32) -> [f32; 2] {
+    fn mismatch(&mut self, img: &GrayImage, x: f32, y: f32) -> [f32; 3] {
         let n = 2 * self.config.half_window + 1;
-        self.sample(img, x, y, n, false);
+        let st = self.stride;
         #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `avx2` is set only where the CPU has AVX2 and FMA.
-            #[allow(unsafe_code)]
-            return unsafe { mismatch_avx2([&self.patch, &self.moving, &self.gx, &self.gy]) };
-        }
-        let (mut sx, mut sy) = ([0.0f32; LANES], [0.0f32; LANES]);
-        let chunks = self
-            .patch
-            .chunks_exact(LANES)
-            .zip(self.moving.chunks_exact(LANES))
-            .zip(self.gx.chunks_exact(LANES).zip(self.gy.chunks_exact(LANES)));
-        for ((p, m), (gx, gy)) in chunks {
-            for k in 0..LANES {
-                let diff = p[k] - m[k];
-                sx[k] += diff * gx[k];
-                sy[k] += diff * gy[k];
+        #[allow(unsafe_code)]
+        {
+            let window = [&self.patch[..], &self.gx[..], &self.gy[..]];
+            // SAFETY: `kernels` names features `Kernels::detect` found on this CPU.
+            let sums = match self.kernels {
+                Kernels::Avx512 => unsafe { mismatch_avx512(img, x, y, n, st, window) },
+                Kernels::Avx2 => unsafe { mismatch_avx2(img, x, y, n, st, window) },
+                Kernels::Portable => None,
+            };
+            if let Some(sums) = sums {
+                return sums;
             }
         }
-        [hsum(&sx), hsum(&sy)]
+        sample_patch(img, x, y, n, st, &mut self.moving);
+        let mut sums = [[[0.0f32; LANES]; 2]; 3];
+        for c0 in (0..st).step_by(LANES) {
+            for r in 0..n {
+                let a = r % 2;
+                let k0 = r * st + c0;
+                let p = &self.patch[k0..k0 + LANES];
+                let m = &self.moving[k0..k0 + LANES];
+                let (gx, gy) = (&self.gx[k0..k0 + LANES], &self.gy[k0..k0 + LANES]);
+                for k in 0..LANES {
+                    let diff = p[k] - m[k];
+                    sums[0][a][k] += diff * gx[k];
+                    sums[1][a][k] += diff * gy[k];
+                    sums[2][a][k] += diff.abs();
+                }
+            }
+        }
+        sums.map(|s| reduce(&s))
     }
 }
 
-/// The lanes' sums added in lane order.
+/// One window sum from its two accumulators (even and odd window rows), in the order every
+/// kernel adds them: the two accumulators lane by lane, then the lanes as a tree (lane k + lane
+/// k + 8, then + 4, + 2, + 1). Two chains of row sums and a tree instead of one chain and lane
+/// order shorten the dependency chain each Lucas–Kanade iteration waits on.
 #[inline(always)]
-fn hsum(v: &[f32; LANES]) -> f32 {
-    v.iter().fold(0.0, |a, &b| a + b)
+fn reduce(acc: &[[f32; LANES]; 2]) -> f32 {
+    let mut t: [f32; LANES] = std::array::from_fn(|k| acc[0][k] + acc[1][k]);
+    let mut width = LANES;
+    while width > 1 {
+        width /= 2;
+        for k in 0..width {
+            t[k] += t[k + width];
+        }
+    }
+    t[0]
 }
 
-/// [`sample_patch`] for windows whose rows of whole lane groups lie inside the image (`false`
-/// otherwise, nothing written: the portable path clamps at the border): eight pixels per step with
-/// the portable path's operations in its order, so the same bits, and the lanes past `size` set to
-/// zero, which the portable path leaves as they are (zero: never written there). The compiled
-/// portable loop ran the 11- and 13-pixel rows one pixel at a time.
+/// The integer top-left pixel of a window whose first sample sits at (x, y) and its fractions,
+/// when the `rows + 1` image rows from it and the bytes `ix ..= ix + cols` of each lie inside the
+/// image; `None` otherwise.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn window_inside(
+    img: &GrayImage,
+    x: f32,
+    y: f32,
+    cols: usize,
+    rows: usize,
+) -> Option<([usize; 2], [f32; 2])> {
+    let (x0, y0) = (x.floor(), y.floor());
+    let (ix, iy) = (x0 as i64, y0 as i64);
+    let inside = ix >= 0
+        && iy >= 0
+        && ix + (cols as i64) < img.width() as i64
+        && iy + (rows as i64) < img.height() as i64;
+    inside.then_some(([ix as usize, iy as usize], [x - x0, y - y0]))
+}
+
+/// [`sample_patch`] for windows whose rows of whole 8-lane groups lie inside the image (`false`
+/// otherwise, nothing written: the portable path clamps at the border): the portable path's
+/// operations in its order, so the same bits, and the lanes past `size` set to zero, which the
+/// portable path leaves as they are (zero: never written there).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
@@ -592,37 +664,26 @@ fn sample_avx2(
     use crate::cpu::avx2::load_u8x8;
     use std::arch::x86_64::{
         __m256, _mm256_add_ps, _mm256_and_ps, _mm256_cvtepi32_ps, _mm256_mul_ps, _mm256_set1_ps,
+        _mm256_sub_ps,
     };
-    let groups = size.div_ceil(LANES);
-    let (w, h) = (img.width(), img.height());
-    let (fx0, fy0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - fx0, y - fy0);
-    let (ix, iy) = (fx0 as i64, fy0 as i64);
-    // Each row reads bytes ix ..= ix + 8·groups (the last group's right taps) of rows
-    // iy ..= iy + size.
-    let span = (groups * LANES) as i64;
-    if !(ix >= 0 && iy >= 0 && ix + span < w as i64 && iy + (size as i64) < h as i64) {
+    let span = size.div_ceil(8) * 8;
+    let Some(([ix, iy], [fx, fy])) = window_inside(img, x, y, span, size) else {
         return false;
-    }
-    assert!(stride >= groups * LANES && out.len() >= (size - 1) * stride + groups * LANES);
-    let (ix, iy) = (ix as usize, iy as usize);
-    let d = img.data();
-    let w00 = _mm256_set1_ps((1.0 - fx) * (1.0 - fy));
-    let w10 = _mm256_set1_ps(fx * (1.0 - fy));
-    let w01 = _mm256_set1_ps((1.0 - fx) * fy);
-    let w11 = _mm256_set1_ps(fx * fy);
-    let load8 = |row: &[u8], at: usize| -> __m256 { _mm256_cvtepi32_ps(load_u8x8(&row[at..])) };
-    let span = groups * LANES;
+    };
+    assert!(stride >= span && out.len() >= (size - 1) * stride + span);
+    let (w, d) = (img.width(), img.data());
+    let (vfx, vfy) = (_mm256_set1_ps(fx), _mm256_set1_ps(fy));
+    // Row `r` of the image window, cells c..c + 8, interpolated along x.
+    let along_x = |r: usize, c: usize| -> __m256 {
+        let bytes = &d[(iy + r) * w + ix + c..][..9];
+        let a = _mm256_cvtepi32_ps(load_u8x8(bytes));
+        let b = _mm256_cvtepi32_ps(load_u8x8(&bytes[1..]));
+        _mm256_add_ps(a, _mm256_mul_ps(vfx, _mm256_sub_ps(b, a)))
+    };
     for r in 0..size {
-        let a = &d[(iy + r) * w + ix..(iy + r) * w + ix + span + 1];
-        let b = &d[(iy + r + 1) * w + ix..(iy + r + 1) * w + ix + span + 1];
-        for c in (0..span).step_by(LANES) {
-            let mut v = _mm256_add_ps(
-                _mm256_mul_ps(w00, load8(a, c)),
-                _mm256_mul_ps(w10, load8(a, c + 1)),
-            );
-            v = _mm256_add_ps(v, _mm256_mul_ps(w01, load8(b, c)));
-            v = _mm256_add_ps(v, _mm256_mul_ps(w11, load8(b, c + 1)));
+        for c in (0..span).step_by(8) {
+            let (top, bottom) = (along_x(r, c), along_x(r + 1, c));
+            let v = _mm256_add_ps(top, _mm256_mul_ps(vfy, _mm256_sub_ps(bottom, top)));
             store_lanes(out, r * stride + c, _mm256_and_ps(v, first_lanes(size - c)));
         }
     }
@@ -634,7 +695,7 @@ fn sample_avx2(
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 fn load_lanes(s: &[f32], at: usize) -> std::arch::x86_64::__m256 {
-    let lanes: &[f32; LANES] = s[at..at + LANES].try_into().expect("lanes");
+    let lanes: &[f32; 8] = s[at..at + 8].try_into().expect("lanes");
     // SAFETY: `lanes` is eight readable f32, the width of the unaligned load.
     #[allow(unsafe_code)]
     unsafe {
@@ -647,7 +708,7 @@ fn load_lanes(s: &[f32], at: usize) -> std::arch::x86_64::__m256 {
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 fn store_lanes(s: &mut [f32], at: usize, v: std::arch::x86_64::__m256) {
-    let lanes: &mut [f32; LANES] = (&mut s[at..at + LANES]).try_into().expect("lanes");
+    let lanes: &mut [f32; 8] = (&mut s[at..at + 8]).try_into().expect("lanes");
     // SAFETY: `lanes` is eight writable f32, the width of the unaligned store.
     #[allow(unsafe_code)]
     unsafe {
@@ -655,18 +716,35 @@ fn store_lanes(s: &mut [f32], at: usize, v: std::arch::x86_64::__m256) {
     }
 }
 
-/// The lanes of `v` added in lane order ([`hsum`]).
+/// [`reduce`] of the accumulators `acc[row parity][half]` (lanes 0–7 of a lane group in half
+/// 0, 8–15 in half 1).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-fn hsum_lanes(v: std::arch::x86_64::__m256) -> f32 {
-    let mut lanes = [0.0f32; LANES];
-    store_lanes(&mut lanes, 0, v);
-    hsum(&lanes)
+fn reduce_avx2(acc: [[std::arch::x86_64::__m256; 2]; 2]) -> f32 {
+    use std::arch::x86_64::{_mm256_add_ps, _mm256_castps256_ps128, _mm256_extractf128_ps};
+    let lo = _mm256_add_ps(acc[0][0], acc[1][0]);
+    let hi = _mm256_add_ps(acc[0][1], acc[1][1]);
+    let t8 = _mm256_add_ps(lo, hi);
+    reduce_eight(_mm256_castps256_ps128(t8), _mm256_extractf128_ps::<1>(t8))
 }
 
-/// A mask of the first `count` lanes (all bits set there, zero in the others; `count` may exceed
-/// [`LANES`]): AND-ing with it zeroes the lanes past a window's width.
+/// The last steps of [`reduce`]: lanes k + (k + 4) of the eight in `lo` (0–3) and `hi` (4–7),
+/// then + 2, + 1.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn reduce_eight(lo: std::arch::x86_64::__m128, hi: std::arch::x86_64::__m128) -> f32 {
+    use std::arch::x86_64::{
+        _mm_add_ps, _mm_add_ss, _mm_cvtss_f32, _mm_movehl_ps, _mm_movehdup_ps,
+    };
+    let t4 = _mm_add_ps(lo, hi);
+    let t2 = _mm_add_ps(t4, _mm_movehl_ps(t4, t4));
+    _mm_cvtss_f32(_mm_add_ss(t2, _mm_movehdup_ps(t2)))
+}
+
+/// A mask of the first `count` of eight lanes (all bits set there, zero in the others; `count`
+/// may exceed eight): AND-ing with it zeroes the lanes past a window's width.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
@@ -674,72 +752,351 @@ fn first_lanes(count: usize) -> std::arch::x86_64::__m256 {
     use std::arch::x86_64::{
         _mm256_castsi256_ps, _mm256_cmpgt_epi32, _mm256_set1_epi32, _mm256_setr_epi32,
     };
-    let count = count.min(LANES) as i32;
+    let count = count.min(8) as i32;
     let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(count), lane))
 }
 
-/// [`PyramidalLk::gradients`] on eight lanes per step, the same operations in the same order (the
-/// same bits); the compiled portable loop ran mostly on single lanes.
+/// [`PyramidalLk::gradients`] on eight lanes per step, lanes 0–7 and 8–15 of each lane group in
+/// two registers of sums: the same operations in the same order (the same bits).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn gradients_avx2(
     bordered: &[f32],
     bw: usize,
     n: usize,
-    [patch, gx, gy]: [&mut [f32]; 3],
+    [patch, gx, gy]: [&mut Vec<f32>; 3],
 ) -> [f32; 3] {
     use std::arch::x86_64::{
-        _mm256_add_ps, _mm256_and_ps, _mm256_mul_ps, _mm256_set1_ps, _mm256_setzero_ps,
+        __m256, _mm256_add_ps, _mm256_and_ps, _mm256_mul_ps, _mm256_set1_ps, _mm256_setzero_ps,
         _mm256_sub_ps,
     };
     let st = n.next_multiple_of(LANES);
     assert!(bw >= st + 2 && bordered.len() >= (n + 2) * bw);
     let half = _mm256_set1_ps(0.5);
-    let (mut sxx, mut sxy, mut syy) = (
-        _mm256_setzero_ps(),
-        _mm256_setzero_ps(),
-        _mm256_setzero_ps(),
-    );
-    for r in 0..n {
+    // Window row `r`'s cells c0..c0 + 8 stored, and `acc` plus their terms.
+    let mut cells = |r: usize, c0: usize, acc: [__m256; 3]| {
         let (up, mid, down) = (r * bw, (r + 1) * bw, (r + 2) * bw);
+        let inside = first_lanes(n.saturating_sub(c0));
+        let m0 = load_lanes(bordered, mid + c0);
+        let m2 = load_lanes(bordered, mid + c0 + 2);
+        let u = load_lanes(bordered, up + c0 + 1);
+        let dn = load_lanes(bordered, down + c0 + 1);
+        let x = _mm256_and_ps(_mm256_mul_ps(half, _mm256_sub_ps(m2, m0)), inside);
+        let y = _mm256_and_ps(_mm256_mul_ps(half, _mm256_sub_ps(dn, u)), inside);
+        let k = r * st + c0;
+        let centre = _mm256_and_ps(load_lanes(bordered, mid + c0 + 1), inside);
+        store_lanes(patch, k, centre);
+        store_lanes(gx, k, x);
+        store_lanes(gy, k, y);
+        [
+            _mm256_add_ps(acc[0], _mm256_mul_ps(x, x)),
+            _mm256_add_ps(acc[1], _mm256_mul_ps(x, y)),
+            _mm256_add_ps(acc[2], _mm256_mul_ps(y, y)),
+        ]
+    };
+    // Sums per row parity and half of the lane group, in registers (no run-time indices).
+    let zero = [_mm256_setzero_ps(); 3];
+    let mut row = |r: usize, [mut lo, mut hi]: [[__m256; 3]; 2]| {
         for c0 in (0..st).step_by(LANES) {
-            let inside = first_lanes(n - c0);
-            let m0 = load_lanes(bordered, mid + c0);
-            let m2 = load_lanes(bordered, mid + c0 + 2);
-            let u = load_lanes(bordered, up + c0 + 1);
-            let dn = load_lanes(bordered, down + c0 + 1);
-            let x = _mm256_and_ps(_mm256_mul_ps(half, _mm256_sub_ps(m2, m0)), inside);
-            let y = _mm256_and_ps(_mm256_mul_ps(half, _mm256_sub_ps(dn, u)), inside);
-            let k = r * st + c0;
-            store_lanes(
-                patch,
-                k,
-                _mm256_and_ps(load_lanes(bordered, mid + c0 + 1), inside),
-            );
-            store_lanes(gx, k, x);
-            store_lanes(gy, k, y);
-            sxx = _mm256_add_ps(sxx, _mm256_mul_ps(x, x));
-            sxy = _mm256_add_ps(sxy, _mm256_mul_ps(x, y));
-            syy = _mm256_add_ps(syy, _mm256_mul_ps(y, y));
+            lo = cells(r, c0, lo);
+            hi = cells(r, c0 + 8, hi);
         }
+        [lo, hi]
+    };
+    let (mut even, mut odd) = ([zero; 2], [zero; 2]);
+    let mut r = 0;
+    while r + 1 < n {
+        even = row(r, even);
+        odd = row(r + 1, odd);
+        r += 2;
     }
-    [hsum_lanes(sxx), hsum_lanes(sxy), hsum_lanes(syy)]
+    if r < n {
+        even = row(r, even);
+    }
+    std::array::from_fn(|i| reduce_avx2([[even[0][i], even[1][i]], [odd[0][i], odd[1][i]]]))
 }
 
-/// The mismatch sums of [`PyramidalLk::mismatch`] on eight lanes per step (the same bits).
+/// [`PyramidalLk::mismatch`] where its window's rows of whole 8-lane groups lie inside the image
+/// (`None` otherwise): each row of the next image's window is interpolated along x once and used
+/// by the two window rows it lies between, and the sums are taken in the same pass, the portable
+/// path's operations in its order (the same bits).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn mismatch_avx2([patch, moving, gx, gy]: [&[f32]; 4]) -> [f32; 2] {
-    use std::arch::x86_64::{_mm256_add_ps, _mm256_mul_ps, _mm256_setzero_ps, _mm256_sub_ps};
-    assert!(moving.len() == patch.len() && gx.len() == patch.len() && gy.len() == patch.len());
-    let (mut sx, mut sy) = (_mm256_setzero_ps(), _mm256_setzero_ps());
-    for k in (0..patch.len() - patch.len() % LANES).step_by(LANES) {
-        let diff = _mm256_sub_ps(load_lanes(patch, k), load_lanes(moving, k));
-        sx = _mm256_add_ps(sx, _mm256_mul_ps(diff, load_lanes(gx, k)));
-        sy = _mm256_add_ps(sy, _mm256_mul_ps(diff, load_lanes(gy, k)));
+fn mismatch_avx2(
+    img: &GrayImage,
+    x: f32,
+    y: f32,
+    n: usize,
+    st: usize,
+    [patch, gx, gy]: [&[f32]; 3],
+) -> Option<[f32; 3]> {
+    use crate::cpu::avx2::load_u8x8;
+    use std::arch::x86_64::{
+        __m256, _mm256_add_ps, _mm256_and_ps, _mm256_castsi256_ps, _mm256_cvtepi32_ps,
+        _mm256_mul_ps, _mm256_set1_epi32, _mm256_set1_ps, _mm256_setzero_ps, _mm256_sub_ps,
+    };
+    let ([ix, iy], [fx, fy]) = window_inside(img, x, y, st, n)?;
+    assert!(st.is_multiple_of(LANES) && [patch, gx, gy].iter().all(|b| b.len() >= n * st));
+    let (w, d) = (img.width(), img.data());
+    let (vfx, vfy) = (_mm256_set1_ps(fx), _mm256_set1_ps(fy));
+    let abs = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+    // One half (eight lanes from cell `c`) of a lane group down the whole window: its sums of
+    // even and odd rows added to `acc`.
+    let half = |c: usize, acc: [[__m256; 3]; 2]| {
+        let inside = first_lanes(n.saturating_sub(c));
+        // Row `r` of the image window, cells c..c + 8, along x; zero past the window (as the
+        // portable path's `moving`).
+        let along_x = |r: usize| -> __m256 {
+            let bytes = &d[(iy + r) * w + ix + c..][..9];
+            let a = _mm256_cvtepi32_ps(load_u8x8(bytes));
+            let b = _mm256_cvtepi32_ps(load_u8x8(&bytes[1..]));
+            _mm256_and_ps(_mm256_add_ps(a, _mm256_mul_ps(vfx, _mm256_sub_ps(b, a))), inside)
+        };
+        let row = |r: usize, top: __m256, acc: [__m256; 3]| {
+            let bottom = along_x(r + 1);
+            let moving = _mm256_add_ps(top, _mm256_mul_ps(vfy, _mm256_sub_ps(bottom, top)));
+            let k = r * st + c;
+            let diff = _mm256_sub_ps(load_lanes(patch, k), moving);
+            let acc = [
+                _mm256_add_ps(acc[0], _mm256_mul_ps(diff, load_lanes(gx, k))),
+                _mm256_add_ps(acc[1], _mm256_mul_ps(diff, load_lanes(gy, k))),
+                _mm256_add_ps(acc[2], _mm256_and_ps(diff, abs)),
+            ];
+            (bottom, acc)
+        };
+        let [mut even, mut odd] = acc;
+        let mut top = along_x(0);
+        let mut r = 0;
+        while r + 1 < n {
+            (top, even) = row(r, top, even);
+            (top, odd) = row(r + 1, top, odd);
+            r += 2;
+        }
+        if r < n {
+            (_, even) = row(r, top, even);
+        }
+        [even, odd]
+    };
+    let zero = [[_mm256_setzero_ps(); 3]; 2];
+    let (mut lo, mut hi) = (zero, zero);
+    for c in (0..st).step_by(LANES) {
+        lo = half(c, lo);
+        hi = half(c + 8, hi);
     }
-    [hsum_lanes(sx), hsum_lanes(sy)]
+    Some(std::array::from_fn(|i| {
+        reduce_avx2([[lo[0][i], hi[0][i]], [lo[1][i], hi[1][i]]])
+    }))
+}
+
+/// The bytes `row[at..at + count]` (`count ≤ 16`) as f32 in the first `count` of sixteen lanes,
+/// zero in the others; reads no byte past them.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
+#[inline]
+fn load_u8x16_first(row: &[u8], at: usize, count: usize) -> std::arch::x86_64::__m512 {
+    use std::arch::x86_64::{_mm_maskz_loadu_epi8, _mm512_cvtepi32_ps, _mm512_cvtepu8_epi32};
+    assert!(count <= 16 && at + count <= row.len());
+    let mask = ((1u32 << count) - 1) as u16;
+    // SAFETY: the mask's lanes read `row[at..at + count]`, inside `row`; masked-off lanes read
+    // nothing and do not fault.
+    #[allow(unsafe_code)]
+    let bytes = unsafe { _mm_maskz_loadu_epi8(mask, row.as_ptr().add(at).cast()) };
+    _mm512_cvtepi32_ps(_mm512_cvtepu8_epi32(bytes))
+}
+
+/// Sixteen f32 from `s[at..]` (unaligned).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[inline]
+fn load16(s: &[f32], at: usize) -> std::arch::x86_64::__m512 {
+    let lanes: &[f32; 16] = s[at..at + 16].try_into().expect("lanes");
+    // SAFETY: `lanes` is sixteen readable f32, the width of the unaligned load.
+    #[allow(unsafe_code)]
+    unsafe {
+        std::arch::x86_64::_mm512_loadu_ps(lanes.as_ptr())
+    }
+}
+
+/// Sixteen f32 into `s[at..]` (unaligned).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[inline]
+fn store16(s: &mut [f32], at: usize, v: std::arch::x86_64::__m512) {
+    let lanes: &mut [f32; 16] = (&mut s[at..at + 16]).try_into().expect("lanes");
+    // SAFETY: `lanes` is sixteen writable f32, the width of the unaligned store.
+    #[allow(unsafe_code)]
+    unsafe {
+        std::arch::x86_64::_mm512_storeu_ps(lanes.as_mut_ptr(), v)
+    }
+}
+
+/// [`reduce`] of the accumulators of even and odd rows.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[inline]
+fn reduce_avx512(acc: [std::arch::x86_64::__m512; 2]) -> f32 {
+    use std::arch::x86_64::{
+        _mm256_add_ps, _mm256_castpd_ps, _mm256_castps256_ps128, _mm256_extractf128_ps,
+        _mm512_add_ps, _mm512_castps_pd, _mm512_castps512_ps256,
+        _mm512_extractf64x4_pd,
+    };
+    let v = _mm512_add_ps(acc[0], acc[1]);
+    let hi = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(v)));
+    let t8 = _mm256_add_ps(_mm512_castps512_ps256(v), hi);
+    reduce_eight(_mm256_castps256_ps128(t8), _mm256_extractf128_ps::<1>(t8))
+}
+
+/// [`sample_patch`] for windows inside the image (`false` otherwise, nothing written), sixteen
+/// lanes per step with the window's edge by masked loads: the same bits, and zero in the lanes
+/// past `size` up to the next multiple of sixteen (the portable path leaves those zero).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
+fn sample_avx512(
+    img: &GrayImage,
+    x: f32,
+    y: f32,
+    size: usize,
+    stride: usize,
+    out: &mut [f32],
+) -> bool {
+    use std::arch::x86_64::{_mm512_add_ps, _mm512_mul_ps, _mm512_set1_ps, _mm512_sub_ps};
+    let Some(([ix, iy], [fx, fy])) = window_inside(img, x, y, size, size) else {
+        return false;
+    };
+    let span = size.div_ceil(16) * 16;
+    assert!(stride >= span && out.len() >= (size - 1) * stride + span);
+    let (w, d) = (img.width(), img.data());
+    let (vfx, vfy) = (_mm512_set1_ps(fx), _mm512_set1_ps(fy));
+    for c in (0..span).step_by(16) {
+        let count = (size - c).min(16);
+        let along_x = |r: usize| {
+            let row = &d[(iy + r) * w + ix + c..][..count + 1];
+            let a = load_u8x16_first(row, 0, count);
+            let b = load_u8x16_first(row, 1, count);
+            _mm512_add_ps(a, _mm512_mul_ps(vfx, _mm512_sub_ps(b, a)))
+        };
+        let mut top = along_x(0);
+        for r in 0..size {
+            let bottom = along_x(r + 1);
+            let v = _mm512_add_ps(top, _mm512_mul_ps(vfy, _mm512_sub_ps(bottom, top)));
+            store16(out, r * stride + c, v);
+            top = bottom;
+        }
+    }
+    true
+}
+
+/// [`PyramidalLk::gradients`] on sixteen lanes per step (the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn gradients_avx512(
+    bordered: &[f32],
+    bw: usize,
+    n: usize,
+    [patch, gx, gy]: [&mut Vec<f32>; 3],
+) -> [f32; 3] {
+    use std::arch::x86_64::{
+        __m512, _mm512_add_ps, _mm512_maskz_mov_ps, _mm512_maskz_mul_ps, _mm512_mul_ps,
+        _mm512_set1_ps, _mm512_setzero_ps, _mm512_sub_ps,
+    };
+    let st = n.next_multiple_of(LANES);
+    assert!(bw >= st + 2 && bordered.len() >= (n + 2) * bw);
+    let half = _mm512_set1_ps(0.5);
+    // Window row `r`'s patch and gradients stored, and `acc` plus its terms.
+    let mut row = |r: usize, mut acc: [__m512; 3]| {
+        let (up, mid, down) = (r * bw, (r + 1) * bw, (r + 2) * bw);
+        for c0 in (0..st).step_by(LANES) {
+            let inside = ((1u32 << (n - c0).min(16)) - 1) as u16;
+            let m0 = load16(bordered, mid + c0);
+            let m2 = load16(bordered, mid + c0 + 2);
+            let u = load16(bordered, up + c0 + 1);
+            let dn = load16(bordered, down + c0 + 1);
+            let x = _mm512_maskz_mul_ps(inside, half, _mm512_sub_ps(m2, m0));
+            let y = _mm512_maskz_mul_ps(inside, half, _mm512_sub_ps(dn, u));
+            let k = r * st + c0;
+            let centre = _mm512_maskz_mov_ps(inside, load16(bordered, mid + c0 + 1));
+            store16(patch, k, centre);
+            store16(gx, k, x);
+            store16(gy, k, y);
+            acc = [
+                _mm512_add_ps(acc[0], _mm512_mul_ps(x, x)),
+                _mm512_add_ps(acc[1], _mm512_mul_ps(x, y)),
+                _mm512_add_ps(acc[2], _mm512_mul_ps(y, y)),
+            ];
+        }
+        acc
+    };
+    let (mut even, mut odd) = ([_mm512_setzero_ps(); 3], [_mm512_setzero_ps(); 3]);
+    let mut r = 0;
+    while r + 1 < n {
+        even = row(r, even);
+        odd = row(r + 1, odd);
+        r += 2;
+    }
+    if r < n {
+        even = row(r, even);
+    }
+    std::array::from_fn(|i| reduce_avx512([even[i], odd[i]]))
+}
+
+/// [`PyramidalLk::mismatch`] for windows inside the image (`None` otherwise), sixteen lanes per
+/// step with the window's edge by masked loads; like [`mismatch_avx2`] it interpolates each image
+/// row along x once and sums in the same pass (the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
+fn mismatch_avx512(
+    img: &GrayImage,
+    x: f32,
+    y: f32,
+    n: usize,
+    st: usize,
+    [patch, gx, gy]: [&[f32]; 3],
+) -> Option<[f32; 3]> {
+    use std::arch::x86_64::{
+        __m512, _mm512_abs_ps, _mm512_add_ps, _mm512_mul_ps, _mm512_set1_ps, _mm512_setzero_ps,
+        _mm512_sub_ps,
+    };
+    let ([ix, iy], [fx, fy]) = window_inside(img, x, y, n, n)?;
+    assert!(st.is_multiple_of(LANES) && [patch, gx, gy].iter().all(|b| b.len() >= n * st));
+    let (w, d) = (img.width(), img.data());
+    let (vfx, vfy) = (_mm512_set1_ps(fx), _mm512_set1_ps(fy));
+    // Sums of even and odd window rows, in registers: rows go in pairs so no sum is indexed by
+    // a run-time parity.
+    let (mut even, mut odd) = ([_mm512_setzero_ps(); 3], [_mm512_setzero_ps(); 3]);
+    for c in (0..st).step_by(LANES) {
+        let count = (n - c).min(16);
+        let along_x = |r: usize| {
+            let row = &d[(iy + r) * w + ix + c..][..count + 1];
+            let a = load_u8x16_first(row, 0, count);
+            let b = load_u8x16_first(row, 1, count);
+            _mm512_add_ps(a, _mm512_mul_ps(vfx, _mm512_sub_ps(b, a)))
+        };
+        // Window row `r` between image rows `top` and r + 1: that row, and `acc` plus its terms.
+        let row = |r: usize, top: __m512, acc: [__m512; 3]| {
+            let bottom = along_x(r + 1);
+            let moving = _mm512_add_ps(top, _mm512_mul_ps(vfy, _mm512_sub_ps(bottom, top)));
+            let k = r * st + c;
+            let diff = _mm512_sub_ps(load16(patch, k), moving);
+            let acc = [
+                _mm512_add_ps(acc[0], _mm512_mul_ps(diff, load16(gx, k))),
+                _mm512_add_ps(acc[1], _mm512_mul_ps(diff, load16(gy, k))),
+                _mm512_add_ps(acc[2], _mm512_abs_ps(diff)),
+            ];
+            (bottom, acc)
+        };
+        let mut top = along_x(0);
+        let mut r = 0;
+        while r + 1 < n {
+            (top, even) = row(r, top, even);
+            (top, odd) = row(r + 1, top, odd);
+            r += 2;
+        }
+        if r < n {
+            (_, even) = row(r, top, even);
+        }
+    }
+    Some(std::array::from_fn(|i| reduce_avx512([even[i], odd[i]])))
 }
 
 /// The optical-flow landmark filter (thesis Alg. 8), one per tracked face.
@@ -882,9 +1239,17 @@ mod tests {
             }
             pyramids.push(base);
         }
-        // Grid points plus some near the border (the clamped sampling path).
+        // Grid points plus some near the border (the clamped sampling path) and near the right
+        // and bottom edges (the 512-bit kernels' masked loads reach them; the AVX2 ones fall back).
         let mut from = grid();
-        from.extend([[1.5, 2.5], [637.2, 477.9], [-3.0, 240.0]]);
+        from.extend([
+            [1.5, 2.5],
+            [637.2, 477.9],
+            [-3.0, 240.0],
+            [631.3, 200.6],
+            [633.8, 121.1],
+            [300.4, 472.2],
+        ]);
         let n = from.len();
         let (prev, next) = (&pyramids[0], &pyramids[1]);
         // Points, status and errors of one run: the body as compiled for baseline x86-64, or its
@@ -903,15 +1268,34 @@ mod tests {
             .unwrap();
             (to, st, err)
         };
-        let mut lk = PyramidalLk::new(LkConfig::default()).unwrap();
-        assert!(lk.avx2);
-        let body = run(&mut lk, false);
-        assert_eq!(body, run(&mut lk, true));
-        assert!(body.1.iter().filter(|&&s| s).count() > 40, "{:?}", body.1);
-        // The AVX2 window kernels against the portable ones, bit for bit.
-        let mut portable = PyramidalLk::new(LkConfig::default()).unwrap();
-        portable.avx2 = false;
-        assert_eq!(body, run(&mut portable, false));
+        let wide = Kernels::detect() == Kernels::Avx512;
+        if !wide {
+            eprintln!("SKIPPED (512-bit kernels): this CPU has no AVX-512 F, BW and VL");
+        }
+        // Windows of one 8-lane group, of one 16-lane group and of two.
+        for half_window in [2, 5, 9] {
+            let cfg = LkConfig {
+                half_window,
+                ..LkConfig::default()
+            };
+            let with = |kernels| {
+                let mut lk = PyramidalLk::new(cfg).unwrap();
+                lk.kernels = kernels;
+                lk
+            };
+            // The window kernels against the portable ones, bit for bit, in both copies.
+            let body = run(&mut with(Kernels::Portable), false);
+            assert_eq!(body, run(&mut with(Kernels::Portable), true));
+            assert_eq!(body, run(&mut with(Kernels::Avx2), false));
+            assert_eq!(body, run(&mut with(Kernels::Avx2), true));
+            if wide {
+                assert_eq!(body, run(&mut with(Kernels::Avx512), true));
+            }
+            // Enough tracked points that the comparison means something (the 5×5 window loses
+            // more points as textureless).
+            let tracked = body.1.iter().filter(|&&s| s).count();
+            assert!(tracked > n / 3, "{half_window}: {:?}", body.1);
+        }
     }
 
     fn grid() -> Vec<[f32; 2]> {
