@@ -327,8 +327,9 @@ pub struct PyramidalLk {
     /// `bstride = stride + LANES` cells apart so whole lane groups of the gradients read inside it.
     bordered: Vec<f32>,
     bstride: usize,
-    /// The window's rows, `stride` cells apart (a multiple of [`LANES`]); the cells past the
-    /// window's width stay zero in all four, so whole rows of lanes can be summed.
+    /// The window's rows, `stride` cells apart (a multiple of [`LANES`]), one window per point of a
+    /// batch ([`BATCH`]; `moving` one); the cells past the window's width stay zero in all four,
+    /// so whole rows of lanes can be summed.
     patch: Vec<f32>,
     gx: Vec<f32>,
     gy: Vec<f32>,
@@ -338,7 +339,12 @@ pub struct PyramidalLk {
     stride: usize,
     #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     kernels: Kernels,
+    /// The last batch's points: position, tracked, error.
+    results: Vec<([f32; 2], bool, f32)>,
 }
+
+/// Points tracked together ([`PyramidalLk::track_batch`]); each has its own patch and gradients.
+const BATCH: usize = 4;
 
 /// Lanes of the window sums: sixteen f32 sums kept apart (one AVX-512 register, two of AVX2),
 /// added in a fixed order at the end ([`reduce`]).
@@ -357,12 +363,13 @@ impl PyramidalLk {
             config,
             bordered: vec![0.0; (n + 2) * (stride + LANES)],
             bstride: stride + LANES,
-            patch: vec![0.0; n * stride],
-            gx: vec![0.0; n * stride],
-            gy: vec![0.0; n * stride],
+            patch: vec![0.0; BATCH * n * stride],
+            gx: vec![0.0; BATCH * n * stride],
+            gy: vec![0.0; BATCH * n * stride],
             moving: vec![0.0; n * stride],
             stride,
             kernels: Kernels::detect(),
+            results: Vec::with_capacity(BATCH),
         })
     }
 
@@ -412,91 +419,161 @@ impl PyramidalLk {
                 next.len()
             )));
         }
-        for i in 0..from.len() {
-            let (p, ok, e) = self.track_point(prev, next, from[i]);
-            to[i] = if ok { p } else { from[i] };
-            status[i] = ok;
-            error[i] = e;
+        for start in (0..from.len()).step_by(BATCH) {
+            let end = (start + BATCH).min(from.len());
+            self.track_batch(prev, next, &from[start..end]);
+            for (i, &(p, ok, e)) in (start..end).zip(&self.results) {
+                to[i] = if ok { p } else { from[i] };
+                status[i] = ok;
+                error[i] = e;
+            }
         }
         Ok(())
     }
 
+    /// Tracks up to [`BATCH`] points into `results` (position, tracked, error), each exactly as
+    /// alone: the points go through the levels together and take their iterations in turn, so the
+    /// CPU overlaps one point's window sums with the next one's where a single point would wait on
+    /// each iteration's result before the next can start.
     #[inline(always)]
-    fn track_point(
-        &mut self,
-        prev: &Pyramid,
-        next: &Pyramid,
-        p: [f32; 2],
-    ) -> ([f32; 2], bool, f32) {
+    fn track_batch(&mut self, prev: &Pyramid, next: &Pyramid, points: &[[f32; 2]]) {
         let cfg = self.config;
         let hw = cfg.half_window;
         let n = 2 * hw + 1;
         let area = (n * n) as f32;
-        if !(p[0].is_finite() && p[1].is_finite()) {
-            return (p, false, f32::INFINITY);
+        let k = points.len();
+        debug_assert!(k <= BATCH);
+        #[derive(Clone, Copy, Default)]
+        struct Point {
+            p: [f32; 2],
+            /// Tracking this point (not yet lost).
+            alive: bool,
+            /// Done iterating at this level.
+            done: bool,
+            g: [f32; 2],
+            d: [f32; 2],
+            /// Σ |patch − moving| of the last window compared; at the end, level 0's.
+            sad: f32,
+            /// This level's window origin in the next image (before g + d) and gradient matrix.
+            at: [f32; 2],
+            gm: [f32; 3],
+            inv_det: f32,
         }
-        let mut g = [0.0f32; 2];
-        let mut d = [0.0f32; 2];
-        // Σ |patch − moving| of the last window compared; at the end, level 0's.
-        let mut sad = 0.0f32;
+        let mut pts = [Point::default(); BATCH];
+        for (s, &p) in pts.iter_mut().zip(points) {
+            *s = Point {
+                p,
+                alive: p[0].is_finite() && p[1].is_finite(),
+                ..Point::default()
+            };
+        }
         let (po, no) = (prev.origin(), next.origin());
         for l in (0..prev.len()).rev() {
             let scale = 1.0 / (1u32 << l) as f32;
             let (pi, ni) = (&prev.levels()[l], &next.levels()[l]);
-            // Window centre in the frame's pixel-index coordinates at this level (corner
-            // convention → subtract 0.5), then in each stored region's.
-            let fx = p[0] * scale - 0.5;
-            let fy = p[1] * scale - 0.5;
-            let (cx, cy) = (fx - (po[0] >> l) as f32, fy - (po[1] >> l) as f32);
             // The next pyramid's region starts elsewhere: its window moves by the difference.
             let (ox, oy) = (
                 (po[0] >> l) as f32 - (no[0] >> l) as f32,
                 (po[1] >> l) as f32 - (no[1] >> l) as f32,
             );
-            self.sample_bordered(pi, cx - hw as f32 - 1.0, cy - hw as f32 - 1.0);
-            let [gxx, gxy, gyy] = self.gradients(n);
-            let det = gxx * gyy - gxy * gxy;
-            let min_eig = 0.5 * (gxx + gyy - ((gxx - gyy).powi(2) + 4.0 * gxy * gxy).sqrt());
-            if min_eig / area < cfg.min_eigenvalue || det.abs() < f32::EPSILON {
-                return (p, false, f32::INFINITY);
+            for (slot, s) in pts[..k].iter_mut().enumerate() {
+                if !s.alive {
+                    continue;
+                }
+                // Window centre in the frame's pixel-index coordinates at this level (corner
+                // convention → subtract 0.5), then in each stored region's.
+                let fx = s.p[0] * scale - 0.5;
+                let fy = s.p[1] * scale - 0.5;
+                let (cx, cy) = (fx - (po[0] >> l) as f32, fy - (po[1] >> l) as f32);
+                let [gxx, gxy, gyy] =
+                    self.window_gradients(pi, cx - hw as f32 - 1.0, cy - hw as f32 - 1.0, slot);
+                let det = gxx * gyy - gxy * gxy;
+                let min_eig = 0.5 * (gxx + gyy - ((gxx - gyy).powi(2) + 4.0 * gxy * gxy).sqrt());
+                if min_eig / area < cfg.min_eigenvalue || det.abs() < f32::EPSILON {
+                    s.alive = false;
+                    continue;
+                }
+                s.inv_det = 1.0 / det;
+                s.gm = [gxx, gxy, gyy];
+                s.at = [cx + ox, cy + oy];
+                s.d = [0.0, 0.0];
+                s.done = false;
             }
-            let inv_det = 1.0 / det;
-            d = [0.0, 0.0];
             for _ in 0..cfg.max_iterations {
-                let [bx, by, s] = self.mismatch(
-                    ni,
-                    cx + ox + g[0] + d[0] - hw as f32,
-                    cy + oy + g[1] + d[1] - hw as f32,
-                );
-                sad = s;
-                let ux = (gyy * bx - gxy * by) * inv_det;
-                let uy = (gxx * by - gxy * bx) * inv_det;
-                d[0] += ux;
-                d[1] += uy;
-                if ux * ux + uy * uy < cfg.epsilon * cfg.epsilon {
+                let mut any = false;
+                for (slot, s) in pts[..k].iter_mut().enumerate() {
+                    if !s.alive || s.done {
+                        continue;
+                    }
+                    any = true;
+                    let (g, d) = (s.g, s.d);
+                    let [bx, by, sad] = self.mismatch(
+                        ni,
+                        s.at[0] + g[0] + d[0] - hw as f32,
+                        s.at[1] + g[1] + d[1] - hw as f32,
+                        slot,
+                    );
+                    s.sad = sad;
+                    let [gxx, gxy, gyy] = s.gm;
+                    let ux = (gyy * bx - gxy * by) * s.inv_det;
+                    let uy = (gxx * by - gxy * bx) * s.inv_det;
+                    s.d[0] += ux;
+                    s.d[1] += uy;
+                    s.done = ux * ux + uy * uy < cfg.epsilon * cfg.epsilon;
+                }
+                if !any {
                     break;
                 }
             }
             if l > 0 {
-                g = [2.0 * (g[0] + d[0]), 2.0 * (g[1] + d[1])];
+                for s in &mut pts[..k] {
+                    s.g = [2.0 * (s.g[0] + s.d[0]), 2.0 * (s.g[1] + s.d[1])];
+                }
             }
         }
-        let out = [p[0] + g[0] + d[0], p[1] + g[1] + d[1]];
         let (w, h) = next.size();
-        if !(out[0].is_finite()
-            && out[1].is_finite()
-            && out[0] >= 0.0
-            && out[1] >= 0.0
-            && out[0] <= w as f32
-            && out[1] <= h as f32)
-        {
-            return (p, false, f32::INFINITY);
-        }
-        (out, true, sad / area)
+        self.results.clear();
+        self.results.extend(pts[..k].iter().map(|s| {
+            let out = [s.p[0] + s.g[0] + s.d[0], s.p[1] + s.g[1] + s.d[1]];
+            let inside = out[0].is_finite()
+                && out[1].is_finite()
+                && out[0] >= 0.0
+                && out[1] >= 0.0
+                && out[0] <= w as f32
+                && out[1] <= h as f32;
+            if s.alive && inside {
+                (out, true, s.sad / area)
+            } else {
+                (s.p, false, f32::INFINITY)
+            }
+        }));
     }
 }
 
 impl PyramidalLk {
+    /// The previous image's window with its border's top-left sample at (x, y): its patch and
+    /// gradients in `slot` and the gradient matrix's sums ([`PyramidalLk::gradients`]).
+    #[inline(always)]
+    fn window_gradients(&mut self, img: &GrayImage, x: f32, y: f32, slot: usize) -> [f32; 3] {
+        let n = 2 * self.config.half_window + 1;
+        #[cfg(target_arch = "x86_64")]
+        if self.kernels == Kernels::Avx512 {
+            let (st, at) = (self.stride, slot * n * self.stride);
+            let outs = [
+                &mut self.patch[at..at + n * st],
+                &mut self.gx[at..at + n * st],
+                &mut self.gy[at..at + n * st],
+            ];
+            #[allow(unsafe_code)]
+            // SAFETY: `kernels` names features `Kernels::detect` found on this CPU.
+            if let Some(sums) = unsafe { bordered_gradients_avx512(img, x, y, n, st, outs) } {
+                return sums;
+            }
+        }
+        self.sample_bordered(img, x, y);
+        self.gradients(n, slot)
+    }
+
     /// Samples the previous image's `(n + 2)²` window with its top-left sample at (x, y) into
     /// `bordered`.
     #[inline(always)]
@@ -522,12 +599,18 @@ impl PyramidalLk {
     /// The window's patch and gradients from `bordered` (zero past the window's width) and the
     /// gradient matrix's sums [Σ gx², Σ gx·gy, Σ gy²], in [`LANES`] sums.
     #[inline(always)]
-    fn gradients(&mut self, n: usize) -> [f32; 3] {
+    fn gradients(&mut self, n: usize, slot: usize) -> [f32; 3] {
         let (bw, st) = (self.bstride, self.stride);
+        let at = slot * n * st;
+        let (patch, gx, gy) = (
+            &mut self.patch[at..at + n * st],
+            &mut self.gx[at..at + n * st],
+            &mut self.gy[at..at + n * st],
+        );
         #[cfg(target_arch = "x86_64")]
         #[allow(unsafe_code)]
         {
-            let outs = [&mut self.patch, &mut self.gx, &mut self.gy];
+            let outs = [&mut *patch, &mut *gx, &mut *gy];
             match self.kernels {
                 // SAFETY: `kernels` names features `Kernels::detect` found on this CPU.
                 Kernels::Avx512 => return unsafe { gradients_avx512(&self.bordered, bw, n, outs) },
@@ -543,10 +626,9 @@ impl PyramidalLk {
             let down = &self.bordered[(r + 2) * bw..(r + 3) * bw];
             for c0 in (0..st).step_by(LANES) {
                 let k0 = r * st + c0;
-                let patch: &mut [f32; LANES] =
-                    (&mut self.patch[k0..k0 + LANES]).try_into().unwrap();
-                let gxs: &mut [f32; LANES] = (&mut self.gx[k0..k0 + LANES]).try_into().unwrap();
-                let gys: &mut [f32; LANES] = (&mut self.gy[k0..k0 + LANES]).try_into().unwrap();
+                let patch: &mut [f32; LANES] = (&mut patch[k0..k0 + LANES]).try_into().unwrap();
+                let gxs: &mut [f32; LANES] = (&mut gx[k0..k0 + LANES]).try_into().unwrap();
+                let gys: &mut [f32; LANES] = (&mut gy[k0..k0 + LANES]).try_into().unwrap();
                 let m: &[f32; LANES + 2] = mid[c0..c0 + LANES + 2].try_into().unwrap();
                 let u: &[f32; LANES] = up[c0 + 1..c0 + 1 + LANES].try_into().unwrap();
                 let dn: &[f32; LANES] = down[c0 + 1..c0 + 1 + LANES].try_into().unwrap();
@@ -570,13 +652,19 @@ impl PyramidalLk {
     /// [Σ (patch − moving)·gx, Σ (patch − moving)·gy, Σ |patch − moving|], in [`LANES`] sums, the
     /// lane groups of a row in the outer loop and the rows in the inner one.
     #[inline(always)]
-    fn mismatch(&mut self, img: &GrayImage, x: f32, y: f32) -> [f32; 3] {
+    fn mismatch(&mut self, img: &GrayImage, x: f32, y: f32, slot: usize) -> [f32; 3] {
         let n = 2 * self.config.half_window + 1;
         let st = self.stride;
+        let at = slot * n * st;
+        let (patch, gx, gy) = (
+            &self.patch[at..at + n * st],
+            &self.gx[at..at + n * st],
+            &self.gy[at..at + n * st],
+        );
         #[cfg(target_arch = "x86_64")]
         #[allow(unsafe_code)]
         {
-            let window = [&self.patch[..], &self.gx[..], &self.gy[..]];
+            let window = [patch, gx, gy];
             // SAFETY: `kernels` names features `Kernels::detect` found on this CPU.
             let sums = match self.kernels {
                 Kernels::Avx512 => unsafe { mismatch_avx512(img, x, y, n, st, window) },
@@ -593,9 +681,9 @@ impl PyramidalLk {
             for r in 0..n {
                 let a = r % 2;
                 let k0 = r * st + c0;
-                let p = &self.patch[k0..k0 + LANES];
+                let p = &patch[k0..k0 + LANES];
                 let m = &self.moving[k0..k0 + LANES];
-                let (gx, gy) = (&self.gx[k0..k0 + LANES], &self.gy[k0..k0 + LANES]);
+                let (gx, gy) = (&gx[k0..k0 + LANES], &gy[k0..k0 + LANES]);
                 for k in 0..LANES {
                     let diff = p[k] - m[k];
                     sums[0][a][k] += diff * gx[k];
@@ -736,7 +824,7 @@ fn reduce_avx2(acc: [[std::arch::x86_64::__m256; 2]; 2]) -> f32 {
 #[inline]
 fn reduce_eight(lo: std::arch::x86_64::__m128, hi: std::arch::x86_64::__m128) -> f32 {
     use std::arch::x86_64::{
-        _mm_add_ps, _mm_add_ss, _mm_cvtss_f32, _mm_movehl_ps, _mm_movehdup_ps,
+        _mm_add_ps, _mm_add_ss, _mm_cvtss_f32, _mm_movehdup_ps, _mm_movehl_ps,
     };
     let t4 = _mm_add_ps(lo, hi);
     let t2 = _mm_add_ps(t4, _mm_movehl_ps(t4, t4));
@@ -765,7 +853,7 @@ fn gradients_avx2(
     bordered: &[f32],
     bw: usize,
     n: usize,
-    [patch, gx, gy]: [&mut Vec<f32>; 3],
+    [patch, gx, gy]: [&mut [f32]; 3],
 ) -> [f32; 3] {
     use std::arch::x86_64::{
         __m256, _mm256_add_ps, _mm256_and_ps, _mm256_mul_ps, _mm256_set1_ps, _mm256_setzero_ps,
@@ -851,7 +939,10 @@ fn mismatch_avx2(
             let bytes = &d[(iy + r) * w + ix + c..][..9];
             let a = _mm256_cvtepi32_ps(load_u8x8(bytes));
             let b = _mm256_cvtepi32_ps(load_u8x8(&bytes[1..]));
-            _mm256_and_ps(_mm256_add_ps(a, _mm256_mul_ps(vfx, _mm256_sub_ps(b, a))), inside)
+            _mm256_and_ps(
+                _mm256_add_ps(a, _mm256_mul_ps(vfx, _mm256_sub_ps(b, a))),
+                inside,
+            )
         };
         let row = |r: usize, top: __m256, acc: [__m256; 3]| {
             let bottom = along_x(r + 1);
@@ -938,8 +1029,7 @@ fn store16(s: &mut [f32], at: usize, v: std::arch::x86_64::__m512) {
 fn reduce_avx512(acc: [std::arch::x86_64::__m512; 2]) -> f32 {
     use std::arch::x86_64::{
         _mm256_add_ps, _mm256_castpd_ps, _mm256_castps256_ps128, _mm256_extractf128_ps,
-        _mm512_add_ps, _mm512_castps_pd, _mm512_castps512_ps256,
-        _mm512_extractf64x4_pd,
+        _mm512_add_ps, _mm512_castps_pd, _mm512_castps512_ps256, _mm512_extractf64x4_pd,
     };
     let v = _mm512_add_ps(acc[0], acc[1]);
     let hi = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(v)));
@@ -994,7 +1084,7 @@ fn gradients_avx512(
     bordered: &[f32],
     bw: usize,
     n: usize,
-    [patch, gx, gy]: [&mut Vec<f32>; 3],
+    [patch, gx, gy]: [&mut [f32]; 3],
 ) -> [f32; 3] {
     use std::arch::x86_64::{
         __m512, _mm512_add_ps, _mm512_maskz_mov_ps, _mm512_maskz_mul_ps, _mm512_mul_ps,
@@ -1038,6 +1128,94 @@ fn gradients_avx512(
         even = row(r, even);
     }
     std::array::from_fn(|i| reduce_avx512([even[i], odd[i]]))
+}
+
+/// [`PyramidalLk::sample_bordered`] and [`PyramidalLk::gradients`] in one pass, for windows whose
+/// bordered rows fit one register (`n + 2 ≤ 16`) and lie inside the image (`None` otherwise):
+/// each bordered row is interpolated in a register and its cells one and two to the right come
+/// from lane shifts, the same values as the portable path reads from `bordered` (the same bits).
+/// Reading the stored rows back at those offsets instead made every load straddle two recent
+/// stores, which the CPU cannot forward: a third of the flow's time went to that wait.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
+fn bordered_gradients_avx512(
+    img: &GrayImage,
+    x: f32,
+    y: f32,
+    n: usize,
+    st: usize,
+    [patch, gx, gy]: [&mut [f32]; 3],
+) -> Option<[f32; 3]> {
+    use std::arch::x86_64::{
+        __m512, _mm512_add_ps, _mm512_alignr_epi32, _mm512_castps_si512, _mm512_castsi512_ps,
+        _mm512_maskz_mov_ps, _mm512_maskz_mul_ps, _mm512_mul_ps, _mm512_set1_ps, _mm512_setzero_ps,
+        _mm512_setzero_si512, _mm512_sub_ps,
+    };
+    let size = n + 2;
+    if size > LANES {
+        return None;
+    }
+    let ([ix, iy], [fx, fy]) = window_inside(img, x, y, size, size)?;
+    assert!(st.is_multiple_of(LANES) && [&*patch, &*gx, &*gy].iter().all(|b| b.len() >= n * st));
+    let (w, d) = (img.width(), img.data());
+    let (vfx, vfy, half) = (_mm512_set1_ps(fx), _mm512_set1_ps(fy), _mm512_set1_ps(0.5));
+    let inside = ((1u32 << n) - 1) as u16;
+    let along_x = |r: usize| {
+        let row = &d[(iy + r) * w + ix..][..size + 1];
+        let a = load_u8x16_first(row, 0, size);
+        let b = load_u8x16_first(row, 1, size);
+        _mm512_add_ps(a, _mm512_mul_ps(vfx, _mm512_sub_ps(b, a)))
+    };
+    // Bordered row `r` from image rows r (along x: `top`) and r + 1; returns it and row r + 1.
+    let bordered = |r: usize, top: __m512| {
+        let bottom = along_x(r + 1);
+        (
+            _mm512_add_ps(top, _mm512_mul_ps(vfy, _mm512_sub_ps(bottom, top))),
+            bottom,
+        )
+    };
+    // Lanes moved down by one (two): lane k holds cell k + 1 (k + 2), zero past the register.
+    let next1 = |v: __m512| {
+        let v = _mm512_castps_si512(v);
+        _mm512_castsi512_ps(_mm512_alignr_epi32::<1>(_mm512_setzero_si512(), v))
+    };
+    let next2 = |v: __m512| {
+        let v = _mm512_castps_si512(v);
+        _mm512_castsi512_ps(_mm512_alignr_epi32::<2>(_mm512_setzero_si512(), v))
+    };
+    // Window row `r` between bordered rows `up`, `mid` and `down`: stored, and `acc` plus its
+    // terms.
+    let mut row = |r: usize, [up, mid, down]: [__m512; 3], acc: [__m512; 3]| {
+        let x = _mm512_maskz_mul_ps(inside, half, _mm512_sub_ps(next2(mid), mid));
+        let y = _mm512_maskz_mul_ps(inside, half, _mm512_sub_ps(next1(down), next1(up)));
+        let k = r * st;
+        store16(patch, k, _mm512_maskz_mov_ps(inside, next1(mid)));
+        store16(gx, k, x);
+        store16(gy, k, y);
+        [
+            _mm512_add_ps(acc[0], _mm512_mul_ps(x, x)),
+            _mm512_add_ps(acc[1], _mm512_mul_ps(x, y)),
+            _mm512_add_ps(acc[2], _mm512_mul_ps(y, y)),
+        ]
+    };
+    let (up, top) = bordered(0, along_x(0));
+    let (mut mid, mut top) = bordered(1, top);
+    let mut up = up;
+    let (mut even, mut odd) = ([_mm512_setzero_ps(); 3], [_mm512_setzero_ps(); 3]);
+    let mut r = 0;
+    while r + 1 < n {
+        let (down, t) = bordered(r + 2, top);
+        even = row(r, [up, mid, down], even);
+        let (down2, t) = bordered(r + 3, t);
+        odd = row(r + 1, [mid, down, down2], odd);
+        (up, mid, top) = (down, down2, t);
+        r += 2;
+    }
+    if r < n {
+        let (down, _) = bordered(r + 2, top);
+        even = row(r, [up, mid, down], even);
+    }
+    Some(std::array::from_fn(|i| reduce_avx512([even[i], odd[i]])))
 }
 
 /// [`PyramidalLk::mismatch`] for windows inside the image (`None` otherwise), sixteen lanes per
