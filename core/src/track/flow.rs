@@ -302,8 +302,23 @@ enum Kernels {
 }
 
 impl Kernels {
-    /// The widest this CPU runs.
+    /// The widest this CPU runs, decided once; `MONOTRACK_FLOW=portable|avx2` picks a narrower
+    /// one (to measure them on one machine).
     fn detect() -> Self {
+        static CHOSEN: std::sync::OnceLock<Kernels> = std::sync::OnceLock::new();
+        *CHOSEN.get_or_init(|| {
+            let widest = Self::widest();
+            match std::env::var("MONOTRACK_FLOW").as_deref() {
+                Ok("portable") => Kernels::Portable,
+                #[cfg(target_arch = "x86_64")]
+                Ok("avx2") if widest != Kernels::Portable => Kernels::Avx2,
+                _ => widest,
+            }
+        })
+    }
+
+    /// The widest this CPU has.
+    fn widest() -> Self {
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::is_x86_feature_detected as has;
@@ -557,7 +572,7 @@ impl PyramidalLk {
     fn window_gradients(&mut self, img: &GrayImage, x: f32, y: f32, slot: usize) -> [f32; 3] {
         let n = 2 * self.config.half_window + 1;
         #[cfg(target_arch = "x86_64")]
-        if self.kernels == Kernels::Avx512 {
+        {
             let (st, at) = (self.stride, slot * n * self.stride);
             let outs = [
                 &mut self.patch[at..at + n * st],
@@ -566,7 +581,12 @@ impl PyramidalLk {
             ];
             #[allow(unsafe_code)]
             // SAFETY: `kernels` names features `Kernels::detect` found on this CPU.
-            if let Some(sums) = unsafe { bordered_gradients_avx512(img, x, y, n, st, outs) } {
+            let sums = match self.kernels {
+                Kernels::Avx512 => unsafe { bordered_gradients_avx512(img, x, y, n, st, outs) },
+                Kernels::Avx2 => unsafe { bordered_gradients_avx2(img, x, y, n, st, outs) },
+                Kernels::Portable => None,
+            };
+            if let Some(sums) = sums {
                 return sums;
             }
         }
@@ -905,6 +925,118 @@ fn gradients_avx2(
     std::array::from_fn(|i| reduce_avx2([[even[0][i], even[1][i]], [odd[0][i], odd[1][i]]]))
 }
 
+/// [`bordered_gradients_avx512`] on AVX2: each bordered row in two registers (lanes 0–7, 8–15),
+/// its cells one and two to the right by shifts across the pair; the window's rows of sixteen
+/// image bytes (and one) must lie inside the image (`None` otherwise, as for `n + 2 > 16`). The
+/// same bits as the portable path; lanes past the bordered row hold image values here, which only
+/// lanes the mask clears read.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn bordered_gradients_avx2(
+    img: &GrayImage,
+    x: f32,
+    y: f32,
+    n: usize,
+    st: usize,
+    [patch, gx, gy]: [&mut [f32]; 3],
+) -> Option<[f32; 3]> {
+    use crate::cpu::avx2::load_u8x8;
+    use std::arch::x86_64::{
+        __m256, _mm256_add_ps, _mm256_alignr_epi8, _mm256_and_ps, _mm256_castps_si256,
+        _mm256_castsi256_ps, _mm256_cvtepi32_ps, _mm256_mul_ps, _mm256_permute2f128_ps,
+        _mm256_set1_ps, _mm256_setzero_ps, _mm256_sub_ps,
+    };
+    type Row = [__m256; 2];
+    let size = n + 2;
+    if size > LANES {
+        return None;
+    }
+    let ([ix, iy], [fx, fy]) = window_inside(img, x, y, LANES, size)?;
+    assert!(st.is_multiple_of(LANES) && [&*patch, &*gx, &*gy].iter().all(|b| b.len() >= n * st));
+    let (w, d) = (img.width(), img.data());
+    let (vfx, vfy, half) = (_mm256_set1_ps(fx), _mm256_set1_ps(fy), _mm256_set1_ps(0.5));
+    let inside = [first_lanes(n), first_lanes(n.saturating_sub(8))];
+    let along_x = |r: usize| -> Row {
+        let bytes = &d[(iy + r) * w + ix..][..LANES + 1];
+        std::array::from_fn(|h| {
+            let a = _mm256_cvtepi32_ps(load_u8x8(&bytes[8 * h..]));
+            let b = _mm256_cvtepi32_ps(load_u8x8(&bytes[8 * h + 1..]));
+            _mm256_add_ps(a, _mm256_mul_ps(vfx, _mm256_sub_ps(b, a)))
+        })
+    };
+    let bordered = |r: usize, top: Row| -> (Row, Row) {
+        let bottom = along_x(r + 1);
+        let row = std::array::from_fn(|h| {
+            _mm256_add_ps(top[h], _mm256_mul_ps(vfy, _mm256_sub_ps(bottom[h], top[h])))
+        });
+        (row, bottom)
+    };
+    // The pair's lanes moved down by one (two): lane k holds cell k + 1 (k + 2), zero past the
+    // pair. `permute2f128` brings the next 128-bit half alongside, `alignr` shifts within each.
+    let next1 = |v: Row| -> Row {
+        let (a, b) = (_mm256_castps_si256(v[0]), _mm256_castps_si256(v[1]));
+        let t = _mm256_castps_si256(_mm256_permute2f128_ps::<0x21>(v[0], v[1]));
+        let u = _mm256_castps_si256(_mm256_permute2f128_ps::<0x81>(v[1], v[1]));
+        [
+            _mm256_castsi256_ps(_mm256_alignr_epi8::<4>(t, a)),
+            _mm256_castsi256_ps(_mm256_alignr_epi8::<4>(u, b)),
+        ]
+    };
+    let next2 = |v: Row| -> Row {
+        let (a, b) = (_mm256_castps_si256(v[0]), _mm256_castps_si256(v[1]));
+        let t = _mm256_castps_si256(_mm256_permute2f128_ps::<0x21>(v[0], v[1]));
+        let u = _mm256_castps_si256(_mm256_permute2f128_ps::<0x81>(v[1], v[1]));
+        [
+            _mm256_castsi256_ps(_mm256_alignr_epi8::<8>(t, a)),
+            _mm256_castsi256_ps(_mm256_alignr_epi8::<8>(u, b)),
+        ]
+    };
+    // Window row `r` from bordered rows up, mid, down: stored, and `acc[half]` plus its terms.
+    let mut row = |r: usize, [up, mid, down]: [Row; 3], acc: [[__m256; 3]; 2]| {
+        let (centre, right, up1, down1) = (next1(mid), next2(mid), next1(up), next1(down));
+        std::array::from_fn(|h| {
+            let x = _mm256_and_ps(
+                _mm256_mul_ps(half, _mm256_sub_ps(right[h], mid[h])),
+                inside[h],
+            );
+            let y = _mm256_and_ps(
+                _mm256_mul_ps(half, _mm256_sub_ps(down1[h], up1[h])),
+                inside[h],
+            );
+            let k = r * st + 8 * h;
+            store_lanes(patch, k, _mm256_and_ps(centre[h], inside[h]));
+            store_lanes(gx, k, x);
+            store_lanes(gy, k, y);
+            [
+                _mm256_add_ps(acc[h][0], _mm256_mul_ps(x, x)),
+                _mm256_add_ps(acc[h][1], _mm256_mul_ps(x, y)),
+                _mm256_add_ps(acc[h][2], _mm256_mul_ps(y, y)),
+            ]
+        })
+    };
+    let (up, top) = bordered(0, along_x(0));
+    let (mut mid, mut top) = bordered(1, top);
+    let mut up = up;
+    let zero = [[_mm256_setzero_ps(); 3]; 2];
+    let (mut even, mut odd) = (zero, zero);
+    let mut r = 0;
+    while r + 1 < n {
+        let (down, t) = bordered(r + 2, top);
+        even = row(r, [up, mid, down], even);
+        let (down2, t) = bordered(r + 3, t);
+        odd = row(r + 1, [mid, down, down2], odd);
+        (up, mid, top) = (down, down2, t);
+        r += 2;
+    }
+    if r < n {
+        let (down, _) = bordered(r + 2, top);
+        even = row(r, [up, mid, down], even);
+    }
+    Some(std::array::from_fn(|i| {
+        reduce_avx2([[even[0][i], even[1][i]], [odd[0][i], odd[1][i]]])
+    }))
+}
+
 /// [`PyramidalLk::mismatch`] where its window's rows of whole 8-lane groups lie inside the image
 /// (`None` otherwise): each row of the next image's window is interpolated along x once and used
 /// by the two window rows it lies between, and the sums are taken in the same pass, the portable
@@ -929,54 +1061,62 @@ fn mismatch_avx2(
     let (w, d) = (img.width(), img.data());
     let (vfx, vfy) = (_mm256_set1_ps(fx), _mm256_set1_ps(fy));
     let abs = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
-    // One half (eight lanes from cell `c`) of a lane group down the whole window: its sums of
-    // even and odd rows added to `acc`.
-    let half = |c: usize, acc: [[__m256; 3]; 2]| {
-        let inside = first_lanes(n.saturating_sub(c));
-        // Row `r` of the image window, cells c..c + 8, along x; zero past the window (as the
-        // portable path's `moving`).
-        let along_x = |r: usize| -> __m256 {
-            let bytes = &d[(iy + r) * w + ix + c..][..9];
-            let a = _mm256_cvtepi32_ps(load_u8x8(bytes));
-            let b = _mm256_cvtepi32_ps(load_u8x8(&bytes[1..]));
-            _mm256_and_ps(
-                _mm256_add_ps(a, _mm256_mul_ps(vfx, _mm256_sub_ps(b, a))),
-                inside,
-            )
-        };
-        let row = |r: usize, top: __m256, acc: [__m256; 3]| {
-            let bottom = along_x(r + 1);
-            let moving = _mm256_add_ps(top, _mm256_mul_ps(vfy, _mm256_sub_ps(bottom, top)));
-            let k = r * st + c;
-            let diff = _mm256_sub_ps(load_lanes(patch, k), moving);
-            let acc = [
-                _mm256_add_ps(acc[0], _mm256_mul_ps(diff, load_lanes(gx, k))),
-                _mm256_add_ps(acc[1], _mm256_mul_ps(diff, load_lanes(gy, k))),
-                _mm256_add_ps(acc[2], _mm256_and_ps(diff, abs)),
-            ];
-            (bottom, acc)
-        };
-        let [mut even, mut odd] = acc;
-        let mut top = along_x(0);
+    // Sums [half][term] of even and odd rows. Written as macros, not closures: the compiler kept
+    // nested closures out of line here and passed their registers through memory.
+    let zero = [[_mm256_setzero_ps(); 3]; 2];
+    let (mut even, mut odd) = (zero, zero);
+    for c in (0..st).step_by(LANES) {
+        let inside = [
+            first_lanes(n.saturating_sub(c)),
+            first_lanes(n.saturating_sub(c + 8)),
+        ];
+        // Image row `r`, cells c..c + 16 along x, zero past the window (as the portable path's
+        // `moving`).
+        macro_rules! along_x {
+            ($r:expr) => {{
+                let bytes = &d[(iy + $r) * w + ix + c..][..LANES + 1];
+                let mut v = [_mm256_setzero_ps(); 2];
+                for h in 0..2 {
+                    let a = _mm256_cvtepi32_ps(load_u8x8(&bytes[8 * h..]));
+                    let b = _mm256_cvtepi32_ps(load_u8x8(&bytes[8 * h + 1..]));
+                    let lerp = _mm256_add_ps(a, _mm256_mul_ps(vfx, _mm256_sub_ps(b, a)));
+                    v[h] = _mm256_and_ps(lerp, inside[h]);
+                }
+                v
+            }};
+        }
+        // Window row `r` from image rows `top` and r + 1 into `acc`; `top` becomes row r + 1.
+        macro_rules! row {
+            ($r:expr, $top:ident, $acc:ident) => {{
+                let bottom: [__m256; 2] = along_x!($r + 1);
+                for h in 0..2 {
+                    let moving = _mm256_add_ps(
+                        $top[h],
+                        _mm256_mul_ps(vfy, _mm256_sub_ps(bottom[h], $top[h])),
+                    );
+                    let k = $r * st + c + 8 * h;
+                    let diff = _mm256_sub_ps(load_lanes(patch, k), moving);
+                    $acc[h][0] = _mm256_add_ps($acc[h][0], _mm256_mul_ps(diff, load_lanes(gx, k)));
+                    $acc[h][1] = _mm256_add_ps($acc[h][1], _mm256_mul_ps(diff, load_lanes(gy, k)));
+                    $acc[h][2] = _mm256_add_ps($acc[h][2], _mm256_and_ps(diff, abs));
+                }
+                $top = bottom;
+            }};
+        }
+        let mut top: [__m256; 2] = along_x!(0);
         let mut r = 0;
         while r + 1 < n {
-            (top, even) = row(r, top, even);
-            (top, odd) = row(r + 1, top, odd);
+            row!(r, top, even);
+            row!(r + 1, top, odd);
             r += 2;
         }
         if r < n {
-            (_, even) = row(r, top, even);
+            row!(r, top, even);
         }
-        [even, odd]
-    };
-    let zero = [[_mm256_setzero_ps(); 3]; 2];
-    let (mut lo, mut hi) = (zero, zero);
-    for c in (0..st).step_by(LANES) {
-        lo = half(c, lo);
-        hi = half(c + 8, hi);
+        let _ = top;
     }
     Some(std::array::from_fn(|i| {
-        reduce_avx2([[lo[0][i], hi[0][i]], [lo[1][i], hi[1][i]]])
+        reduce_avx2([[even[0][i], even[1][i]], [odd[0][i], odd[1][i]]])
     }))
 }
 
@@ -1446,7 +1586,7 @@ mod tests {
             .unwrap();
             (to, st, err)
         };
-        let wide = Kernels::detect() == Kernels::Avx512;
+        let wide = Kernels::widest() == Kernels::Avx512;
         if !wide {
             eprintln!("SKIPPED (512-bit kernels): this CPU has no AVX-512 F, BW and VL");
         }
