@@ -5,6 +5,18 @@
 //! - [`PyramidalLk`]: per point, iterative LK in a square window from the coarsest level down, with
 //!   a status (lost: singular gradient matrix or left the image) and an error (mean absolute grey
 //!   difference over the window) per point.
+//!
+//!   Cost: each iteration of a point waits on the last one's result, so the window kernels are
+//!   written for latency. Each image row of the next window is interpolated along x once and
+//!   serves the two window rows it lies between, and the sums are taken in the same pass. Each
+//!   sum keeps separate chains for even and odd rows and ends in a tree. Four points go through
+//!   the levels together and take their iterations in turn, so one point's sums overlap the
+//!   next one's. The previous window's gradients come from bordered rows held in registers,
+//!   their shifted cells by lane shifts: read back from memory at offsets of one and two cells,
+//!   each load straddled two recent stores and waited for them to reach the cache.
+//!   AVX-512 (masked byte loads at the window's edge), AVX2 and portable kernels give the same
+//!   bits: every sum has sixteen lanes and one order. `MONOTRACK_FLOW=portable|avx2` picks a
+//!   narrower set.
 //! - [`FlowFilter`]: per landmark, keeps the flow estimate from the previous frame's (filtered)
 //!   landmarks when it lies within a threshold of the new detection, else takes the detection. The
 //!   flow follows real motion, so this removes detection jitter without adding lag; a landmark that
