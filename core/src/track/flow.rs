@@ -1602,8 +1602,8 @@ mod tests {
         if !wide {
             eprintln!("SKIPPED (512-bit kernels): this CPU has no AVX-512 F, BW and VL");
         }
-        // Windows of one 8-lane group, of one 16-lane group and of two.
-        for half_window in [2, 5, 9] {
+        // Windows of one 8-lane group, of one 16-lane group, of two, and the largest allowed.
+        for half_window in [2, 5, 9, 15] {
             let cfg = LkConfig {
                 half_window,
                 ..LkConfig::default()
