@@ -1297,6 +1297,17 @@ impl<T> Block<'_, T> {
     }
 }
 
+/// Test weights' int8 codes: 127 where `peak` (each output's largest, so its scale is exercised
+/// to the full range), else a spread over −127..=127 from the weight's index `i`.
+#[cfg(test)]
+pub(crate) fn int8_test_code(i: usize, peak: bool) -> i32 {
+    if peak {
+        127
+    } else {
+        (i * 37 % 255) as i32 - 127
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1475,12 +1486,7 @@ mod tests {
             let kernel: Vec<f32> = (0..cout * k)
                 .map(|i| {
                     let (co, t) = (i / k, i % k);
-                    let q = if t == co % k {
-                        127
-                    } else {
-                        (i * 37 % 255) as i32 - 127
-                    };
-                    q as f32 * (0.001 + co as f32 * 1e-4)
+                    int8_test_code(i, t == co % k) as f32 * (0.001 + co as f32 * 1e-4)
                 })
                 .collect();
             let weights = ConvWeights {

@@ -773,11 +773,7 @@ mod tests {
             let weights: Vec<f32> = (0..k * np)
                 .map(|t| {
                     let (row, o) = (t / np, t % np);
-                    let q = if row == o % k {
-                        127
-                    } else {
-                        (t * 37 % 255) as i32 - 127
-                    };
+                    let q = crate::conv::int8_test_code(t, row == o % k);
                     if o < n {
                         q as f32 * 0.002 * (1 + o % 7) as f32
                     } else {

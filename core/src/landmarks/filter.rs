@@ -89,7 +89,7 @@ impl Bilateral {
             #[allow(unsafe_code)]
             // SAFETY: the CPU has the features each function is compiled for.
             unsafe {
-                if std::arch::is_x86_feature_detected!("avx512f") {
+                if crate::conv::Products::Avx512.supported() {
                     self.filter_avx512(width, height, dst)
                 } else {
                     self.filter_avx2(width, height, dst)

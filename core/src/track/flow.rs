@@ -256,13 +256,9 @@ impl Pyramid {
 #[inline(always)]
 fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, stride: usize, out: &mut [f32]) {
     let (w, h) = (img.width(), img.height());
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
-    let (ix, iy) = (x0 as i64, y0 as i64);
     let d = img.data();
-    if ix >= 0 && iy >= 0 && ix + (size as i64) < w as i64 && iy + (size as i64) < h as i64 {
+    if let Some(([ix, iy], [fx, fy])) = window_inside(img, x, y, size, size) {
         // Fast path: no bounds checks per sample.
-        let (ix, iy) = (ix as usize, iy as usize);
         for r in 0..size {
             let a = &d[(iy + r) * w + ix..][..size + 1];
             let b = &d[(iy + r + 1) * w + ix..][..size + 1];
@@ -275,6 +271,9 @@ fn sample_patch(img: &GrayImage, x: f32, y: f32, size: usize, stride: usize, out
         }
         return;
     }
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let (ix, iy) = (x0 as i64, y0 as i64);
     let at = |px: i64, py: i64| -> f32 {
         let px = px.clamp(0, w as i64 - 1) as usize;
         let py = py.clamp(0, h as i64 - 1) as usize;
@@ -366,8 +365,6 @@ pub struct PyramidalLk {
     stride: usize,
     #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     kernels: Kernels,
-    /// The last batch's points: position, tracked, error.
-    results: Vec<([f32; 2], bool, f32)>,
 }
 
 /// Points tracked together ([`PyramidalLk::track_batch`]); each has its own patch and gradients.
@@ -396,7 +393,6 @@ impl PyramidalLk {
             moving: vec![0.0; n * stride],
             stride,
             kernels: Kernels::detect(),
-            results: Vec::with_capacity(BATCH),
         })
     }
 
@@ -448,8 +444,8 @@ impl PyramidalLk {
         }
         for start in (0..from.len()).step_by(BATCH) {
             let end = (start + BATCH).min(from.len());
-            self.track_batch(prev, next, &from[start..end]);
-            for (i, &(p, ok, e)) in (start..end).zip(&self.results) {
+            let results = self.track_batch(prev, next, &from[start..end]);
+            for (i, &(p, ok, e)) in (start..end).zip(&results) {
                 to[i] = if ok { p } else { from[i] };
                 status[i] = ok;
                 error[i] = e;
@@ -458,12 +454,18 @@ impl PyramidalLk {
         Ok(())
     }
 
-    /// Tracks up to [`BATCH`] points into `results` (position, tracked, error), each exactly as
+    /// Tracks up to [`BATCH`] points (position, tracked, error; the first `points.len()` of the
+    /// returned ones), each exactly as
     /// alone: the points go through the levels together and take their iterations in turn, so the
     /// CPU overlaps one point's window sums with the next one's where a single point would wait on
     /// each iteration's result before the next can start.
     #[inline(always)]
-    fn track_batch(&mut self, prev: &Pyramid, next: &Pyramid, points: &[[f32; 2]]) {
+    fn track_batch(
+        &mut self,
+        prev: &Pyramid,
+        next: &Pyramid,
+        points: &[[f32; 2]],
+    ) -> [([f32; 2], bool, f32); BATCH] {
         let cfg = self.config;
         let hw = cfg.half_window;
         let n = 2 * hw + 1;
@@ -559,8 +561,7 @@ impl PyramidalLk {
             }
         }
         let (w, h) = next.size();
-        self.results.clear();
-        self.results.extend(pts[..k].iter().map(|s| {
+        pts.map(|s| {
             let out = [s.p[0] + s.g[0] + s.d[0], s.p[1] + s.g[1] + s.d[1]];
             let inside = out[0].is_finite()
                 && out[1].is_finite()
@@ -573,7 +574,7 @@ impl PyramidalLk {
             } else {
                 (s.p, false, f32::INFINITY)
             }
-        }));
+        })
     }
 }
 
@@ -616,9 +617,12 @@ impl PyramidalLk {
         #[allow(unsafe_code)]
         {
             // SAFETY: `kernels` names features `Kernels::detect` found on this CPU.
+            // The 512-bit kernels sample in `window_gradients`; here, only windows too wide for
+            // it (`n + 2 > 16`) or near the image's edge come, which the AVX2 kernel serves.
             let done = match self.kernels {
-                Kernels::Avx512 => unsafe { sample_avx512(img, x, y, size, stride, out) },
-                Kernels::Avx2 => unsafe { sample_avx2(img, x, y, size, stride, out) },
+                Kernels::Avx512 | Kernels::Avx2 => unsafe {
+                    sample_avx2(img, x, y, size, stride, out)
+                },
                 Kernels::Portable => false,
             };
             if done {
@@ -645,8 +649,10 @@ impl PyramidalLk {
             let outs = [&mut *patch, &mut *gx, &mut *gy];
             match self.kernels {
                 // SAFETY: `kernels` names features `Kernels::detect` found on this CPU.
-                Kernels::Avx512 => return unsafe { gradients_avx512(&self.bordered, bw, n, outs) },
-                Kernels::Avx2 => return unsafe { gradients_avx2(&self.bordered, bw, n, outs) },
+                // (AVX-512 CPUs come here only as `sample_bordered` says.)
+                Kernels::Avx512 | Kernels::Avx2 => {
+                    return unsafe { gradients_avx2(&self.bordered, bw, n, outs) };
+                }
                 Kernels::Portable => {}
             }
         }
@@ -748,7 +754,6 @@ fn reduce(acc: &[[f32; LANES]; 2]) -> f32 {
 /// The integer top-left pixel of a window whose first sample sits at (x, y) and its fractions,
 /// when the `rows + 1` image rows from it and the bytes `ix ..= ix + cols` of each lie inside the
 /// image; `None` otherwise.
-#[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn window_inside(
     img: &GrayImage,
@@ -1187,99 +1192,6 @@ fn reduce_avx512(acc: [std::arch::x86_64::__m512; 2]) -> f32 {
     let hi = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(v)));
     let t8 = _mm256_add_ps(_mm512_castps512_ps256(v), hi);
     reduce_eight(_mm256_castps256_ps128(t8), _mm256_extractf128_ps::<1>(t8))
-}
-
-/// [`sample_patch`] for windows inside the image (`false` otherwise, nothing written), sixteen
-/// lanes per step with the window's edge by masked loads: the same bits, and zero in the lanes
-/// past `size` up to the next multiple of sixteen (the portable path leaves those zero).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
-fn sample_avx512(
-    img: &GrayImage,
-    x: f32,
-    y: f32,
-    size: usize,
-    stride: usize,
-    out: &mut [f32],
-) -> bool {
-    use std::arch::x86_64::{_mm512_add_ps, _mm512_mul_ps, _mm512_set1_ps, _mm512_sub_ps};
-    let Some(([ix, iy], [fx, fy])) = window_inside(img, x, y, size, size) else {
-        return false;
-    };
-    let span = size.div_ceil(16) * 16;
-    assert!(stride >= span && out.len() >= (size - 1) * stride + span);
-    let (w, d) = (img.width(), img.data());
-    let (vfx, vfy) = (_mm512_set1_ps(fx), _mm512_set1_ps(fy));
-    for c in (0..span).step_by(16) {
-        let count = (size - c).min(16);
-        let along_x = |r: usize| {
-            let row = &d[(iy + r) * w + ix + c..][..count + 1];
-            let a = load_u8x16_first(row, 0, count);
-            let b = load_u8x16_first(row, 1, count);
-            _mm512_add_ps(a, _mm512_mul_ps(vfx, _mm512_sub_ps(b, a)))
-        };
-        let mut top = along_x(0);
-        for r in 0..size {
-            let bottom = along_x(r + 1);
-            let v = _mm512_add_ps(top, _mm512_mul_ps(vfy, _mm512_sub_ps(bottom, top)));
-            store16(out, r * stride + c, v);
-            top = bottom;
-        }
-    }
-    true
-}
-
-/// [`PyramidalLk::gradients`] on sixteen lanes per step (the same bits).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2,fma")]
-fn gradients_avx512(
-    bordered: &[f32],
-    bw: usize,
-    n: usize,
-    [patch, gx, gy]: [&mut [f32]; 3],
-) -> [f32; 3] {
-    use std::arch::x86_64::{
-        __m512, _mm512_add_ps, _mm512_maskz_mov_ps, _mm512_maskz_mul_ps, _mm512_mul_ps,
-        _mm512_set1_ps, _mm512_setzero_ps, _mm512_sub_ps,
-    };
-    let st = n.next_multiple_of(LANES);
-    assert!(bw >= st + 2 && bordered.len() >= (n + 2) * bw);
-    let half = _mm512_set1_ps(0.5);
-    // Window row `r`'s patch and gradients stored, and `acc` plus its terms.
-    let mut row = |r: usize, mut acc: [__m512; 3]| {
-        let (up, mid, down) = (r * bw, (r + 1) * bw, (r + 2) * bw);
-        for c0 in (0..st).step_by(LANES) {
-            let inside = ((1u32 << (n - c0).min(16)) - 1) as u16;
-            let m0 = load16(bordered, mid + c0);
-            let m2 = load16(bordered, mid + c0 + 2);
-            let u = load16(bordered, up + c0 + 1);
-            let dn = load16(bordered, down + c0 + 1);
-            let x = _mm512_maskz_mul_ps(inside, half, _mm512_sub_ps(m2, m0));
-            let y = _mm512_maskz_mul_ps(inside, half, _mm512_sub_ps(dn, u));
-            let k = r * st + c0;
-            let centre = _mm512_maskz_mov_ps(inside, load16(bordered, mid + c0 + 1));
-            store16(patch, k, centre);
-            store16(gx, k, x);
-            store16(gy, k, y);
-            acc = [
-                _mm512_add_ps(acc[0], _mm512_mul_ps(x, x)),
-                _mm512_add_ps(acc[1], _mm512_mul_ps(x, y)),
-                _mm512_add_ps(acc[2], _mm512_mul_ps(y, y)),
-            ];
-        }
-        acc
-    };
-    let (mut even, mut odd) = ([_mm512_setzero_ps(); 3], [_mm512_setzero_ps(); 3]);
-    let mut r = 0;
-    while r + 1 < n {
-        even = row(r, even);
-        odd = row(r + 1, odd);
-        r += 2;
-    }
-    if r < n {
-        even = row(r, even);
-    }
-    std::array::from_fn(|i| reduce_avx512([even[i], odd[i]]))
 }
 
 /// [`PyramidalLk::sample_bordered`] and [`PyramidalLk::gradients`] in one pass, for windows whose

@@ -716,30 +716,37 @@ fn integrals(
     sq.resize(stride * (h + 1), 0.0);
     // Each row's running sums are one chain of dependent adds; four rows at a time keep four
     // chains in flight (the same operations per value, so the same bits as row by row).
-    const ROWS: usize = 4;
     let mut y0 = 0;
-    while y0 + ROWS <= h {
-        let (mut rs, mut rq) = ([0.0f64; ROWS], [0.0f64; ROWS]);
-        for x in 0..w {
-            for k in 0..ROWS {
-                let y = y0 + k;
-                let v = f64::from(src[y * stride_src + x]);
-                rs[k] += v;
-                rq[k] += v * v;
-                sum[(y + 1) * stride + x + 1] = sum[y * stride + x + 1] + rs[k];
-                sq[(y + 1) * stride + x + 1] = sq[y * stride + x + 1] + rq[k];
-            }
-        }
-        y0 += ROWS;
+    while y0 + 4 <= h {
+        integrate_rows::<4>(src, w, stride_src, y0, sum, sq);
+        y0 += 4;
     }
     for y in y0..h {
-        let (mut rs, mut rq) = (0.0f64, 0.0f64);
-        for x in 0..w {
+        integrate_rows::<1>(src, w, stride_src, y, sum, sq);
+    }
+}
+
+/// Rows `y0 + 1 ..= y0 + R` of [`integrals`]' two images (rows `w + 1` apart) from the rows
+/// above them and source rows `y0 .. y0 + R`.
+#[inline(always)]
+fn integrate_rows<const R: usize>(
+    src: &[f32],
+    w: usize,
+    stride_src: usize,
+    y0: usize,
+    sum: &mut [f64],
+    sq: &mut [f64],
+) {
+    let stride = w + 1;
+    let (mut rs, mut rq) = ([0.0f64; R], [0.0f64; R]);
+    for x in 0..w {
+        for k in 0..R {
+            let y = y0 + k;
             let v = f64::from(src[y * stride_src + x]);
-            rs += v;
-            rq += v * v;
-            sum[(y + 1) * stride + x + 1] = sum[y * stride + x + 1] + rs;
-            sq[(y + 1) * stride + x + 1] = sq[y * stride + x + 1] + rq;
+            rs[k] += v;
+            rq[k] += v * v;
+            sum[(y + 1) * stride + x + 1] = sum[y * stride + x + 1] + rs[k];
+            sq[(y + 1) * stride + x + 1] = sq[y * stride + x + 1] + rq[k];
         }
     }
 }
