@@ -6,8 +6,14 @@
 //! ```text
 //! cargo run --profile bench -p monotrack-tests --example track_eval -- \
 //!     [--video ../shared/data/video/obama_3ddfa_demo.mp4 --reference REF.jsonl] [--mirror-average]
+//!     [--only ROW] [--passes N] [--camera-frames]
 //! ```
+//! The clip's luma images go to `process` (every frame a buffer no earlier step read);
+//! `--camera-frames` passes them as `Gray8` camera frames instead (`process_frame`, which copies
+//! each into the tracker's luma buffer: the `image` column, counted in the frame's total).
 //! `--mirror-average` runs M3 in its mirror-average mode (`core/models/M3_IO.md`).
+//! `--only ROW` runs only the table's row ROW (0 = tracking, 3 = re-detect every frame) and
+//! `--passes N` repeats each measured pass N times (the row shows the last), for `perf record`.
 //! `REF.jsonl` comes from `tests/scripts/video_reference.py VIDEO REF.jsonl` (dlib's 68 points as
 //! pseudo ground truth). Video frames are decoded with `ffmpeg` (rgb24, CONTRACT luma). Prints
 //! markdown tables; timings are single-threaded means over all frames on this machine.
@@ -17,7 +23,9 @@ use monotrack_core::image::rgb_to_contract_luma;
 use monotrack_core::track::{Mode, Tracker, TrackerConfig};
 use monotrack_tests::shared_data;
 use monotrack_tests::synth::{SeqConfig, load_validation_faces};
-use monotrack_tests::trackeval::{ClipFrame, run_clip, synthetic_clip, table_header, table_row};
+use monotrack_tests::trackeval::{
+    ClipFrame, Input, run_clip_with, synthetic_clip, table_header, table_row,
+};
 use std::io::Read;
 use std::process::{Command, Stdio};
 
@@ -55,14 +63,32 @@ fn configs() -> Vec<(&'static str, TrackerConfig)> {
     ]
 }
 
-fn report(title: &str, clip: &[ClipFrame], mirror_average: bool) -> Result<(), String> {
+/// What `main` reads from the command line besides the video.
+struct Options {
+    mirror_average: bool,
+    only: Option<usize>,
+    passes: usize,
+    input: Input,
+}
+
+fn report(title: &str, clip: &[ClipFrame], opt: &Options) -> Result<(), String> {
     println!("\n### {title}\n\n{}", table_header());
-    for (name, cfg) in configs() {
+    for (row, (name, cfg)) in configs().into_iter().enumerate() {
+        if opt.only.is_some_and(|only| only != row) {
+            continue;
+        }
         let mut tracker = Tracker::with_default_models(cfg).map_err(|e| e.to_string())?;
-        tracker.estimator_mut().set_mirror_average(mirror_average);
+        tracker
+            .estimator_mut()
+            .set_mirror_average(opt.mirror_average);
         // Warm-up pass (plans, buffers), then the measured pass.
-        run_clip(&mut tracker, clip, CORRECT_NME).map_err(|e| e.to_string())?;
-        let s = run_clip(&mut tracker, clip, CORRECT_NME).map_err(|e| e.to_string())?;
+        let mut run =
+            || run_clip_with(&mut tracker, clip, CORRECT_NME, opt.input).map_err(|e| e.to_string());
+        run()?;
+        let mut s = run()?;
+        for _ in 1..opt.passes {
+            s = run()?;
+        }
         println!("{}", table_row(name, &s));
     }
     Ok(())
@@ -136,9 +162,24 @@ fn main() -> Result<(), String> {
             .position(|a| a == name)
             .and_then(|i| args.get(i + 1).cloned())
     };
-    let mirror_average = args.iter().any(|a| a == "--mirror-average");
+    let number = |name: &str| -> Result<Option<usize>, String> {
+        arg(name)
+            .map(|v| v.parse().map_err(|e| format!("{name} {v}: {e}")))
+            .transpose()
+    };
+    let opt = Options {
+        mirror_average: args.iter().any(|a| a == "--mirror-average"),
+        only: number("--only")?,
+        passes: number("--passes")?.unwrap_or(1).max(1),
+        input: if args.iter().any(|a| a == "--camera-frames") {
+            Input::Gray8Frame
+        } else {
+            Input::Luma
+        },
+    };
     println!(
-        "correct frame: NME (inter-ocular) < {CORRECT_NME}; M3 mirror average {mirror_average}"
+        "correct frame: NME (inter-ocular) < {CORRECT_NME}; M3 mirror average {}; input {:?}",
+        opt.mirror_average, opt.input
     );
     if let Some(data) = shared_data() {
         let faces = load_validation_faces(&data, 24, 100.0)?;
@@ -160,7 +201,7 @@ fn main() -> Result<(), String> {
                 cfg.segments
             ),
             &clip,
-            mirror_average,
+            &opt,
         )?;
     } else {
         println!("../shared/data not found: synthetic sequences skipped");
@@ -174,7 +215,7 @@ fn main() -> Result<(), String> {
                 clip.len()
             ),
             &clip,
-            mirror_average,
+            &opt,
         )?;
     }
     Ok(())

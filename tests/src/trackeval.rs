@@ -10,6 +10,7 @@
 
 use crate::synth::{FaceSample, SeqConfig, Sequence, jitter, nme, tight_box};
 use monotrack_core::image::GrayImage;
+use monotrack_core::image::frame::{Frame, FrameDesc, PixelFormat};
 use monotrack_core::landmarks::N_POINTS;
 use monotrack_core::track::{FaceTracker, LandmarkEstimator, RegionDetector};
 use std::time::Instant;
@@ -66,6 +67,8 @@ pub struct ClipStats {
     pub wall_us: f64,
     /// Mean of the tracker's `total_us`.
     pub total_us: f64,
+    /// Mean frame → luma time (0 for [`Input::Luma`]).
+    pub image_us: f64,
     /// Mean region time (detector or NCC + face check).
     pub region_us: f64,
     /// Mean detector time (part of region).
@@ -89,15 +92,41 @@ impl ClipStats {
     }
 }
 
+/// How [`run_clip_with`] hands the clip's frames to the tracker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Input {
+    /// As camera frames: [`FaceTracker::process_frame`] on a `Gray8` frame, the way an app passes
+    /// a YUV frame's Y plane. The tracker copies it into the luma buffer it keeps, as it converts
+    /// every camera format; that copy is the frame's `image` time and counts in its total.
+    Gray8Frame,
+    /// [`FaceTracker::process`] on the clip's own images. Every frame is then a different buffer
+    /// that no step before the tracker has read, so the tracker's first reads of it wait for
+    /// memory (a long clip does not fit in the caches).
+    Luma,
+}
+
+/// [`run_clip_with`] on the clip's luma images ([`Input::Luma`]).
+///
+/// # Errors
+/// As [`run_clip_with`].
+pub fn run_clip<D: RegionDetector, L: LandmarkEstimator>(
+    tracker: &mut FaceTracker<D, L>,
+    clip: &[ClipFrame],
+    correct_nme: f32,
+) -> monotrack_core::Result<ClipStats> {
+    run_clip_with(tracker, clip, correct_nme, Input::Luma)
+}
+
 /// Runs `tracker` (fresh or reset) over `clip` at 30 fps timestamps and scores it with the NME
 /// threshold `correct_nme`.
 ///
 /// # Errors
 /// The tracker's error on the first frame it fails.
-pub fn run_clip<D: RegionDetector, L: LandmarkEstimator>(
+pub fn run_clip_with<D: RegionDetector, L: LandmarkEstimator>(
     tracker: &mut FaceTracker<D, L>,
     clip: &[ClipFrame],
     correct_nme: f32,
+    input: Input,
 ) -> monotrack_core::Result<ClipStats> {
     tracker.reset();
     let mut s = ClipStats::default();
@@ -105,13 +134,23 @@ pub fn run_clip<D: RegionDetector, L: LandmarkEstimator>(
     let mut runs: Vec<Vec<[[f32; 2]; N_POINTS]>> = Vec::new();
     let mut iods: Vec<f32> = Vec::new();
     for (i, f) in clip.iter().enumerate() {
+        let ts = i as i64 * 33_333_333;
         let t = Instant::now();
-        let r = tracker.process(&f.image, i as i64 * 33_333_333)?;
+        let r = match input {
+            Input::Gray8Frame => {
+                let (w, h) = (f.image.width() as u32, f.image.height() as u32);
+                let frame =
+                    Frame::new(f.image.data(), FrameDesc::packed(w, h, PixelFormat::Gray8))?;
+                tracker.process_frame(&frame, ts)?
+            }
+            Input::Luma => tracker.process(&f.image, ts)?,
+        };
         s.wall_us += t.elapsed().as_secs_f64() * 1e6;
         s.frames += 1;
         s.detector_runs += usize::from(r.detector_ran);
         let tm = &r.timings;
         s.total_us += tm.total_us as f64;
+        s.image_us += tm.image_us as f64;
         s.region_us += tm.region_us as f64;
         s.detect_us += tm.detect_us as f64;
         s.landmarks_us += tm.landmarks_us as f64;
@@ -151,6 +190,7 @@ pub fn run_clip<D: RegionDetector, L: LandmarkEstimator>(
     for v in [
         &mut s.wall_us,
         &mut s.total_us,
+        &mut s.image_us,
         &mut s.region_us,
         &mut s.detect_us,
         &mut s.landmarks_us,
@@ -168,15 +208,15 @@ pub fn run_clip<D: RegionDetector, L: LandmarkEstimator>(
 
 /// Markdown table header matching [`table_row`].
 pub fn table_header() -> String {
-    "| run | frames | correct | mean NME | detector runs | per frame (ms) | region | of which detect | landmarks | flow | fit | still jitter (px) |\n\
-     |---|---|---|---|---|---|---|---|---|---|---|---|"
+    "| run | frames | correct | mean NME | detector runs | per frame (ms) | image | region | of which detect | landmarks | flow | fit | still jitter (px) |\n\
+     |---|---|---|---|---|---|---|---|---|---|---|---|---|"
         .to_string()
 }
 
 /// One markdown table row of `s`.
 pub fn table_row(name: &str, s: &ClipStats) -> String {
     format!(
-        "| {name} | {} | {:.1} % ({}/{}) | {:.2} % | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
+        "| {name} | {} | {:.1} % ({}/{}) | {:.2} % | {} | {:.3} | {:.3} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
         s.frames,
         100.0 * s.correct_rate(),
         s.correct,
@@ -184,6 +224,7 @@ pub fn table_row(name: &str, s: &ClipStats) -> String {
         100.0 * s.mean_nme,
         s.detector_runs,
         s.total_us / 1e3,
+        s.image_us / 1e3,
         s.region_us / 1e3,
         s.detect_us / 1e3,
         s.landmarks_us / 1e3,
