@@ -118,6 +118,20 @@ fn bench(c: &mut Criterion) {
             filter.apply(&p0, &p1, &mut pts, 5.0).unwrap()
         })
     });
+    // The same with the default levels (the bench above keeps 3, its figures' history).
+    let levels = LkConfig::default().levels;
+    let (mut q0, mut q1) = (Pyramid::new(), Pyramid::new());
+    q0.build(&prev, levels);
+    c.bench_function("flow_filter_68_points_default_levels", |b| {
+        b.iter(|| {
+            q1.build(black_box(&next), levels);
+            pts.copy_from_slice(&from);
+            filter.reset();
+            filter.apply(&q0, &q0, &mut pts, 5.0).unwrap();
+            pts.copy_from_slice(&moved);
+            filter.apply(&q0, &q1, &mut pts, 5.0).unwrap()
+        })
+    });
 }
 
 criterion_group! {
