@@ -145,8 +145,10 @@ macro_rules! with_avx2_copy {
         }
 
         /// The body compiled for AVX2 + FMA (`cpu::with_avx2_copy`).
+        // The copy repeats the method's arguments; clippy judges their number at the method.
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2,fma")]
+        #[allow(clippy::too_many_arguments)]
         fn $avx2($($recv)+ $(, $arg: $ty)*) $(-> $ret)? {
             $s.$body($($arg),*)
         }
