@@ -710,10 +710,15 @@ fn integrals(
     sq: &mut Vec<f64>,
 ) {
     let stride = w + 1;
-    sum.clear();
-    sum.resize(stride * (h + 1), 0.0);
-    sq.clear();
-    sq.resize(stride * (h + 1), 0.0);
+    // Only the first row and column need zeros: every other entry is written below (clearing
+    // the whole of both images first was a memset as large as the images, each search).
+    for t in [&mut *sum, &mut *sq] {
+        t.resize(stride * (h + 1), 0.0);
+        t[..stride].fill(0.0);
+        for row in t.chunks_exact_mut(stride) {
+            row[0] = 0.0;
+        }
+    }
     // Each row's running sums are one chain of dependent adds; four rows at a time keep four
     // chains in flight (the same operations per value, so the same bits as row by row).
     let mut y0 = 0;
