@@ -206,9 +206,14 @@ impl<'a> ClampedMap<'a> {
         #[cfg(target_arch = "x86_64")]
         if data.len() == iw * ih && crate::cpu::has_avx2_fma() {
             #[allow(unsafe_code)]
-            // SAFETY: the CPU has AVX2 and FMA, the features the function is compiled for.
+            // SAFETY: the CPU has the features each function is compiled for (AVX-512F through
+            // `Products::Avx512`, which includes AVX2 and FMA).
             unsafe {
-                self.sample_gather_avx2(data, iw, ih, width, out)
+                if crate::conv::Products::Avx512.supported() {
+                    self.sample_gather_avx512(data, iw, ih, width, out)
+                } else {
+                    self.sample_gather_avx2(data, iw, ih, width, out)
+                }
             };
             return;
         }
@@ -311,6 +316,104 @@ impl<'a> ClampedMap<'a> {
                     let dst = &mut bytes[half_chunk * 8..half_chunk * 8 + 8];
                     store_u8x8(_mm256_cvttps_epi32(val), dst);
                 }
+                chunk.copy_from_slice(&bytes[..chunk.len()]);
+            }
+        }
+    }
+
+    /// [`ClampedMap::sample_gather_avx2`] on 16 lanes: one gather per tap pair and row for the
+    /// whole chunk, the same arithmetic per lane, so the same bytes.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    fn sample_gather_avx512(
+        &self,
+        data: &[u8],
+        iw: usize,
+        ih: usize,
+        width: usize,
+        out: &mut [u8],
+    ) {
+        use std::arch::x86_64::{
+            __m128i, __m512, __m512i, _mm_storeu_si128, _mm512_add_epi32, _mm512_add_ps,
+            _mm512_and_si512, _mm512_cvtepi32_ps, _mm512_cvttps_epi32, _mm512_cvtusepi32_epi8,
+            _mm512_i32gather_epi32, _mm512_max_ps, _mm512_min_epi32, _mm512_min_ps, _mm512_mul_ps,
+            _mm512_mullo_epi32, _mm512_set1_epi32, _mm512_set1_ps, _mm512_setr_ps,
+            _mm512_setzero_ps, _mm512_srli_epi32, _mm512_sub_ps,
+        };
+        const N: usize = ClampedMap::CHUNK;
+        assert!(iw >= 2 && ih >= 2 && data.len() == iw * ih);
+        let m = self.m;
+        let ramp = _mm512_setr_ps(
+            0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0,
+        );
+        let sx = _mm512_mul_ps(_mm512_set1_ps(m[0] as f32), ramp);
+        let sy = _mm512_mul_ps(_mm512_set1_ps(m[3] as f32), ramp);
+        let zero = _mm512_setzero_ps();
+        let (x_cap, y_cap) = (
+            _mm512_set1_ps((iw - 1) as f32),
+            _mm512_set1_ps((ih - 1) as f32),
+        );
+        let (x0_cap, y0_cap) = (
+            _mm512_set1_epi32(iw as i32 - 2),
+            _mm512_set1_epi32(ih as i32 - 2),
+        );
+        let (half, byte, stride) = (
+            _mm512_set1_ps(0.5),
+            _mm512_set1_epi32(0xff),
+            _mm512_set1_epi32(iw as i32),
+        );
+        // As in the AVX2 kernel: the lower tap pair is bytes 2 and 3 of the word two bytes
+        // before it.
+        let upper = data.as_ptr();
+        let lower = data[iw - 2..].as_ptr();
+        let taps = |w: __m512i| -> (__m512, __m512) {
+            (
+                _mm512_cvtepi32_ps(_mm512_and_si512(w, byte)),
+                _mm512_cvtepi32_ps(_mm512_and_si512(_mm512_srli_epi32::<8>(w), byte)),
+            )
+        };
+        let mut bytes = [0u8; N];
+        for (v, row) in out.chunks_exact_mut(width).enumerate() {
+            let vc = v as f64 + 0.5;
+            for (c, chunk) in row.chunks_mut(N).enumerate() {
+                let uc = (c * N) as f64 + 0.5;
+                let x_org = _mm512_set1_ps((m[0] * uc + m[1] * vc + m[2] - 0.5) as f32);
+                let y_org = _mm512_set1_ps((m[3] * uc + m[4] * vc + m[5] - 0.5) as f32);
+                // max first: it returns its second operand (0) for a NaN lane.
+                let x = _mm512_min_ps(_mm512_max_ps(_mm512_add_ps(x_org, sx), zero), x_cap);
+                let y = _mm512_min_ps(_mm512_max_ps(_mm512_add_ps(y_org, sy), zero), y_cap);
+                let x0 = _mm512_min_epi32(_mm512_cvttps_epi32(x), x0_cap);
+                let y0 = _mm512_min_epi32(_mm512_cvttps_epi32(y), y0_cap);
+                let fx = _mm512_sub_ps(x, _mm512_cvtepi32_ps(x0));
+                let fy = _mm512_sub_ps(y, _mm512_cvtepi32_ps(y0));
+                let idx = _mm512_add_epi32(_mm512_mullo_epi32(y0, stride), x0);
+                #[allow(unsafe_code)]
+                // SAFETY: as in the AVX2 kernel, 0 ≤ idx ≤ (ih − 2)·iw + iw − 2, so the words
+                // at `upper + idx` and `lower + idx` lie inside `data`.
+                let (t, b) = unsafe {
+                    (
+                        _mm512_i32gather_epi32::<1>(idx, upper.cast()),
+                        _mm512_i32gather_epi32::<1>(idx, lower.cast()),
+                    )
+                };
+                let (p00, p01) = taps(t);
+                let (p10, p11) = taps(_mm512_srli_epi32::<16>(b));
+                let top = _mm512_add_ps(p00, _mm512_mul_ps(fx, _mm512_sub_ps(p01, p00)));
+                let bottom = _mm512_add_ps(p10, _mm512_mul_ps(fx, _mm512_sub_ps(p11, p10)));
+                let val = _mm512_add_ps(
+                    _mm512_add_ps(top, _mm512_mul_ps(fy, _mm512_sub_ps(bottom, top))),
+                    half,
+                );
+                // val ≥ 0.5: truncation floors it; the narrowing saturates at 255 as the body's
+                // cast does.
+                #[allow(unsafe_code)]
+                // SAFETY: `bytes` holds the 16 bytes stored.
+                unsafe {
+                    _mm_storeu_si128(
+                        bytes.as_mut_ptr().cast::<__m128i>(),
+                        _mm512_cvtusepi32_epi8(_mm512_cvttps_epi32(val)),
+                    )
+                };
                 chunk.copy_from_slice(&bytes[..chunk.len()]);
             }
         }
@@ -779,7 +882,7 @@ mod tests {
 
     #[cfg(target_arch = "x86_64")]
     #[test]
-    fn the_avx2_copies_of_the_clamped_path_give_the_same_bytes() {
+    fn the_avx2_and_avx512_copies_of_the_clamped_path_give_the_same_bytes() {
         if !crate::cpu::avx2_fma_or_skip() {
             return;
         }
@@ -818,6 +921,15 @@ mod tests {
                     map.sample_gather_avx2(img.data(), iw, ih, w, &mut gathered)
                 };
                 assert_eq!(base, gathered, "gathers, case {case}: {m:?} {w}x{h}");
+                if crate::conv::Products::Avx512.supported() {
+                    let mut wide = vec![3u8; w * h];
+                    #[allow(unsafe_code)]
+                    // SAFETY: the CPU has AVX-512F (checked just above), AVX2 and FMA.
+                    unsafe {
+                        map.sample_gather_avx512(img.data(), iw, ih, w, &mut wide)
+                    };
+                    assert_eq!(base, wide, "16-lane gathers, case {case}: {m:?} {w}x{h}");
+                }
             }
         }
     }
