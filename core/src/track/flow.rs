@@ -17,10 +17,13 @@
 //!   AVX-512 (masked byte loads at the window's edge), AVX2 and portable kernels give the same
 //!   bits: every sum has sixteen lanes and one order. `MONOTRACK_FLOW=portable|avx2` picks a
 //!   narrower set.
+//!   [`PyramidalLk::track_guided`] starts each point at a guess (OpenCV's initial flow), so the
+//!   levels need only cover the guess's error.
 //! - [`FlowFilter`]: per landmark, keeps the flow estimate from the previous frame's (filtered)
 //!   landmarks when it lies within a threshold of the new detection, else takes the detection. The
 //!   flow follows real motion, so this removes detection jitter without adding lag; a landmark that
-//!   moved farther than the threshold snaps to the detection at once.
+//!   moved farther than the threshold snaps to the detection at once. The flow starts at the
+//!   detection: only a match near it is kept, so two levels serve whatever the face's motion.
 //!
 //! Coordinates follow [`crate::camera`]: pixel (i, j) covers [i, i+1)×[j, j+1). With 2×2 box
 //! decimation that corner convention scales exactly: level l's coordinates are level 0's / 2^l.
