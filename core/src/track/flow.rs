@@ -999,6 +999,35 @@ fn gradients_avx2(
     std::array::from_fn(|i| reduce_avx2([[even[0][i], even[1][i]], [odd[0][i], odd[1][i]]]))
 }
 
+/// The row walk of [`bordered_gradients_avx2`] and [`bordered_gradients_avx512`]: bordered rows
+/// 0 and 1, then window rows two at a time (even rows into one chain of sums, odd rows into
+/// another), each from the bordered rows above, at and below it; `row(r, [up, mid, down], acc)`
+/// adds window row r to `acc`. Evaluates to `(even, odd)`. A macro, not a generic function, so
+/// each kernel's closures stay inlined in its own target features (as `mismatch_avx2`'s macros).
+#[cfg(target_arch = "x86_64")]
+macro_rules! walk_bordered_rows {
+    ($n:expr, $along_x:ident, $bordered:ident, $row:ident, $zero:expr) => {{
+        let (up, top) = $bordered(0, $along_x(0));
+        let (mut mid, mut top) = $bordered(1, top);
+        let mut up = up;
+        let (mut even, mut odd) = ($zero, $zero);
+        let mut r = 0;
+        while r + 1 < $n {
+            let (down, t) = $bordered(r + 2, top);
+            even = $row(r, [up, mid, down], even);
+            let (down2, t) = $bordered(r + 3, t);
+            odd = $row(r + 1, [mid, down, down2], odd);
+            (up, mid, top) = (down, down2, t);
+            r += 2;
+        }
+        if r < $n {
+            let (down, _) = $bordered(r + 2, top);
+            even = $row(r, [up, mid, down], even);
+        }
+        (even, odd)
+    }};
+}
+
 /// [`bordered_gradients_avx512`] on AVX2: each bordered row in two registers (lanes 0–7, 8–15),
 /// its cells one and two to the right by shifts across the pair; the window's rows of sixteen
 /// image bytes (and one) must lie inside the image (`None` otherwise, as for `n + 2 > 16`). The
@@ -1088,24 +1117,7 @@ fn bordered_gradients_avx2(
             ]
         })
     };
-    let (up, top) = bordered(0, along_x(0));
-    let (mut mid, mut top) = bordered(1, top);
-    let mut up = up;
-    let zero = [[_mm256_setzero_ps(); 3]; 2];
-    let (mut even, mut odd) = (zero, zero);
-    let mut r = 0;
-    while r + 1 < n {
-        let (down, t) = bordered(r + 2, top);
-        even = row(r, [up, mid, down], even);
-        let (down2, t) = bordered(r + 3, t);
-        odd = row(r + 1, [mid, down, down2], odd);
-        (up, mid, top) = (down, down2, t);
-        r += 2;
-    }
-    if r < n {
-        let (down, _) = bordered(r + 2, top);
-        even = row(r, [up, mid, down], even);
-    }
+    let (even, odd) = walk_bordered_rows!(n, along_x, bordered, row, [[_mm256_setzero_ps(); 3]; 2]);
     Some(std::array::from_fn(|i| {
         reduce_avx2([[even[0][i], even[1][i]], [odd[0][i], odd[1][i]]])
     }))
@@ -1319,23 +1331,7 @@ fn bordered_gradients_avx512(
             _mm512_add_ps(acc[2], _mm512_mul_ps(y, y)),
         ]
     };
-    let (up, top) = bordered(0, along_x(0));
-    let (mut mid, mut top) = bordered(1, top);
-    let mut up = up;
-    let (mut even, mut odd) = ([_mm512_setzero_ps(); 3], [_mm512_setzero_ps(); 3]);
-    let mut r = 0;
-    while r + 1 < n {
-        let (down, t) = bordered(r + 2, top);
-        even = row(r, [up, mid, down], even);
-        let (down2, t) = bordered(r + 3, t);
-        odd = row(r + 1, [mid, down, down2], odd);
-        (up, mid, top) = (down, down2, t);
-        r += 2;
-    }
-    if r < n {
-        let (down, _) = bordered(r + 2, top);
-        even = row(r, [up, mid, down], even);
-    }
+    let (even, odd) = walk_bordered_rows!(n, along_x, bordered, row, [_mm512_setzero_ps(); 3]);
     Some(std::array::from_fn(|i| reduce_avx512([even[i], odd[i]])))
 }
 
