@@ -38,7 +38,13 @@
 //!
 //! Layout (the ONNX one, batch-major): input `batch × cin × (in_h + 2) × (in_w + 2)` with a zero
 //! border of one, output `batch × cout × (out_h + 2·pad) × (out_w + 2·pad)`, only its interior
-//! written.
+//! written. Between two layers of a chain whose second runs in int8 the buffer is
+//! [`Layout::Interleaved`] instead: position after position, each position's channels together.
+//! The first layer then stores each position's sixteen channels as they lie in its register, and
+//! the second quantises them into its own layout on the way, so nothing is transposed in f32
+//! (`store_wide`, which turns a group's positions × channels into channel planes, was 16 % of
+//! `m3_per_face` in `perf` at stop 37). The values and the quantised words are the same in both
+//! layouts.
 
 /// [`Products::whole_graph_tolerance`] of the int8 form. Each layer's input is rounded to 1/255
 /// of its largest value, so a product is off by up to half of that step times its weight.
@@ -60,6 +66,17 @@ pub(crate) struct ConvWeights {
 
 /// Output channels computed together: two AVX2 registers of f32, or one AVX-512 register.
 const BLOCK: usize = 16;
+
+/// How the buffer between two layers holds its values (both with the zero border around each
+/// map that is the next layer's padding).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Layout {
+    /// Channel after channel, each a padded plane: `batch × channels × rows × cols` (ONNX's).
+    Planar,
+    /// Position after position, each position's channels together, their count rounded up to a
+    /// whole [`BLOCK`] (the extra channels zero): `batch × rows × cols × channels`.
+    Interleaved,
+}
 
 /// Output positions per group of the AVX-512 kernel: two blocks of channels times eight positions
 /// is sixteen accumulators of its thirty-two registers, and per tap two weight loads and eight
@@ -207,6 +224,13 @@ pub(crate) struct Conv3x3 {
     /// Whether the f32 products run on 512-bit registers ([`Products::Avx512`], and
     /// [`Products::Vnni`] for the runs the int8 form does not take).
     wide: bool,
+    /// How the input and the output are held ([`Self::interleave_input`],
+    /// [`Self::interleave_output`]).
+    input_layout: Layout,
+    output_layout: Layout,
+    /// Where the input is interleaved: the planar copy the f32 kernels read in the runs the int8
+    /// form does not take.
+    planar: Vec<f32>,
 }
 
 /// A layer in int8 products (`vpdpbusd`: four u8 × i8 products summed into an i32 lane, four
@@ -472,34 +496,80 @@ impl Conv3x3 {
             pairs,
             quads,
             wide: matches!(form, Products::Avx512 | Products::Vnni),
+            input_layout: Layout::Planar,
+            output_layout: Layout::Planar,
+            planar: Vec::new(),
         }
     }
 
-    /// Output shape, border included: `batch × cout × (out_h + 2·pad) × (out_w + 2·pad)`.
+    /// Whether the layer would read an interleaved input in its int8 form: the layers that
+    /// quantise their input ([`Quads`]).
+    pub(crate) fn takes_interleaved_input(&self) -> bool {
+        self.quads.is_some()
+    }
+
+    /// Reads the input as [`Layout::Interleaved`] from now on (see [`Self::input_len`]).
+    ///
+    /// # Panics
+    /// When the layer does not run in int8 ([`Self::takes_interleaved_input`]).
+    pub(crate) fn interleave_input(&mut self) {
+        assert!(self.takes_interleaved_input(), "an f32 layer reads planes");
+        self.input_layout = Layout::Interleaved;
+        self.planar = vec![0.0; self.batch * self.cin * self.in_plane];
+    }
+
+    /// Writes the output as [`Layout::Interleaved`] from now on (see [`Self::output_len`]).
+    ///
+    /// # Panics
+    /// Off the 512-bit kernels (only they store so).
+    pub(crate) fn interleave_output(&mut self) {
+        assert!(self.wide, "only the 512-bit kernels store interleaved");
+        self.output_layout = Layout::Interleaved;
+    }
+
+    /// Channels per position of an interleaved buffer of `channels`.
+    fn interleaved_width(channels: usize) -> usize {
+        channels.next_multiple_of(BLOCK)
+    }
+
+    /// Output shape of a planar output, border included: `batch × cout × (out_h + 2·pad) ×
+    /// (out_w + 2·pad)`.
     pub(crate) fn output_shape(&self) -> [usize; 4] {
         let p = 2 * self.out_pad;
         [self.batch, self.cout, self.out_h + p, self.out_w + p]
     }
 
-    /// Input length: `batch × cin × (in_h + 2) × (in_w + 2)`.
+    /// Output length: [`Self::output_shape`]'s, with the channels rounded up to a whole
+    /// [`BLOCK`] where the output is interleaved.
+    pub(crate) fn output_len(&self) -> usize {
+        let channels = match self.output_layout {
+            Layout::Planar => self.cout,
+            Layout::Interleaved => Self::interleaved_width(self.cout),
+        };
+        self.batch * channels * self.out_plane
+    }
+
+    /// Input length: `batch × cin × (in_h + 2) × (in_w + 2)`, the channels rounded up to a whole
+    /// [`BLOCK`] where the input is interleaved.
     pub(crate) fn input_len(&self) -> usize {
-        self.batch * self.cin * self.in_plane
+        let channels = match self.input_layout {
+            Layout::Planar => self.cin,
+            Layout::Interleaved => Self::interleaved_width(self.cin),
+        };
+        self.batch * channels * self.in_plane
     }
 
     /// Computes the layer on `input` (its border zero) into the interior of `out` (of
-    /// [`Self::output_shape`]; the border is not written). Needs AVX2 and FMA ([`available`]);
-    /// where the CPU has AVX-512 BF16 too, the products are of bf16-rounded inputs and weights
-    /// (f32 sums).
+    /// [`Self::output_len`]; the border is not written, nor, where the output is interleaved,
+    /// anything but the channels of the interior's positions). Needs AVX2 and FMA
+    /// ([`available`]); where the CPU has AVX-512 BF16 too, the products are of bf16-rounded
+    /// inputs and weights (f32 sums).
     ///
     /// # Panics
     /// When the buffer lengths differ from the layer's, or off a CPU with AVX2 and FMA.
     pub(crate) fn run(&mut self, input: &[f32], out: &mut [f32]) {
         assert_eq!(input.len(), self.input_len(), "conv input length");
-        assert_eq!(
-            out.len(),
-            self.output_shape().iter().product::<usize>(),
-            "conv output length"
-        );
+        assert_eq!(out.len(), self.output_len(), "conv output length");
         #[cfg(target_arch = "x86_64")]
         if let Some(mut quads) = self.quads.take() {
             #[allow(unsafe_code)]
@@ -511,6 +581,36 @@ impl Conv3x3 {
                 return;
             }
         }
+        if self.input_layout == Layout::Interleaved {
+            // The f32 kernels read planes: a run the int8 form did not take (an input u8 cannot
+            // hold) goes through a planar copy.
+            let mut planar = std::mem::take(&mut self.planar);
+            self.deinterleave(input, &mut planar);
+            self.run_planar(&planar, out);
+            self.planar = planar;
+        } else {
+            self.run_planar(input, out);
+        }
+    }
+
+    /// `input` (interleaved) as planes into `planar`.
+    fn deinterleave(&self, input: &[f32], planar: &mut [f32]) {
+        let width = Self::interleaved_width(self.cin);
+        for (slot, dst) in input
+            .chunks_exact(width * self.in_plane)
+            .zip(planar.chunks_exact_mut(self.cin * self.in_plane))
+        {
+            for (p, values) in slot.chunks_exact(width).enumerate() {
+                for (c, &v) in values[..self.cin].iter().enumerate() {
+                    dst[c * self.in_plane + p] = v;
+                }
+            }
+        }
+    }
+
+    /// [`Self::run`] in f32 or bf16 products on a planar input.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
+    fn run_planar(&mut self, input: &[f32], out: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
         if let Some(mut pairs) = self.pairs.take() {
             #[allow(unsafe_code)]
@@ -606,9 +706,17 @@ impl Conv3x3 {
     ) {
         let (k, blocks) = (taps.len(), self.cout.div_ceil(BLOCK));
         let per_slot = input.len() / self.batch.max(1);
+        // Per batch slot, and from one block of channels to the next.
+        let (width, out_slot, block_step) = match self.output_layout {
+            Layout::Planar => (0, self.cout * self.out_plane, BLOCK * self.out_plane),
+            Layout::Interleaved => {
+                let width = Self::interleaved_width(self.cout);
+                (width, width * self.out_plane, BLOCK)
+            }
+        };
         for b in 0..self.batch {
             let input = &input[b * per_slot..][..per_slot];
-            let out = &mut out[b * self.cout * self.out_plane..][..self.cout * self.out_plane];
+            let out = &mut out[b * out_slot..][..out_slot];
             let mut blk = 0;
             while blk < blocks {
                 let n = group(blocks - blk);
@@ -624,8 +732,9 @@ impl Conv3x3 {
                     taps,
                     channels: (n * BLOCK).min(self.cout - blk * BLOCK),
                     plane: self.out_plane,
+                    width,
                 };
-                each(&block, n, &mut out[blk * BLOCK * self.out_plane..]);
+                each(&block, n, &mut out[blk * block_step..]);
                 blk += n;
             }
         }
@@ -658,15 +767,24 @@ impl Conv3x3 {
             *d = s * (max / 255.0);
         }
         let cq = self.cin.div_ceil(4);
-        for b in 0..self.batch {
-            let planes = &input[b * self.cin * self.in_plane..][..self.cin * self.in_plane];
-            let words = &mut quads.input[b * cq * self.in_plane..][..cq * self.in_plane];
-            for (four, dst) in words.chunks_exact_mut(self.in_plane).enumerate() {
-                let plane = |k: usize| {
-                    let c = 4 * four + k;
-                    (c < self.cin).then(|| &planes[c * self.in_plane..][..self.in_plane])
-                };
-                quantize_four([plane(0), plane(1), plane(2), plane(3)], per_step, dst);
+        let slots = quads.input.chunks_exact_mut(cq * self.in_plane);
+        match self.input_layout {
+            Layout::Interleaved => {
+                let width = Self::interleaved_width(self.cin);
+                for (values, words) in input.chunks_exact(width * self.in_plane).zip(slots) {
+                    quantize_interleaved(values, width, cq, per_step, words);
+                }
+            }
+            Layout::Planar => {
+                for (planes, words) in input.chunks_exact(self.cin * self.in_plane).zip(slots) {
+                    for (four, dst) in words.chunks_exact_mut(self.in_plane).enumerate() {
+                        let plane = |k: usize| {
+                            let c = 4 * four + k;
+                            (c < self.cin).then(|| &planes[c * self.in_plane..][..self.in_plane])
+                        };
+                        quantize_four([plane(0), plane(1), plane(2), plane(3)], per_step, dst);
+                    }
+                }
             }
         }
         self.for_each_block(
@@ -925,6 +1043,114 @@ fn quantize_four(planes: [Option<&[f32]>; 4], per_step: f32, dst: &mut [u32]) {
     }
 }
 
+/// [`quantize_four`] from an interleaved input: `values` holds `positions × width` values
+/// (channels past the layer's zero), `dst` the `fours` planes of `positions` words. Sixteen
+/// positions at a time: each position's sixteen channels of a block rounded to bytes as
+/// `quantize_four` rounds them (four words, one per four of channels), then the words of sixteen
+/// positions regrouped by four in registers, so each plane takes one store.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw")]
+#[allow(unsafe_code)]
+fn quantize_interleaved(
+    values: &[f32],
+    width: usize,
+    fours: usize,
+    per_step: f32,
+    dst: &mut [u32],
+) {
+    use std::arch::x86_64::*;
+    let n = values.len() / width.max(1);
+    assert!(
+        width.is_multiple_of(BLOCK)
+            && values.len() == n * width
+            && 4 * fours <= width
+            && dst.len() == fours * n,
+        "quantize_interleaved: lengths"
+    );
+    let (f, top) = (_mm512_set1_ps(per_step), _mm512_set1_epi32(255));
+    // Lanes 0–7: word k0 of the eight positions of two registers of four positions × four words;
+    // lanes 8–15: word k1 of the same positions.
+    let pick = |k0: i32, k1: i32| {
+        _mm512_setr_epi32(
+            k0,
+            4 + k0,
+            8 + k0,
+            12 + k0,
+            16 + k0,
+            20 + k0,
+            24 + k0,
+            28 + k0,
+            k1,
+            4 + k1,
+            8 + k1,
+            12 + k1,
+            16 + k1,
+            20 + k1,
+            24 + k1,
+            28 + k1,
+        )
+    };
+    let (words01, words23) = (pick(0, 1), pick(2, 3));
+    for j in 0..fours.div_ceil(4) {
+        let planes = (fours - 4 * j).min(4);
+        let mut p0 = 0;
+        while p0 < n {
+            let m = (n - p0).min(16);
+            // Position p0 + p's channels 16j.. as bytes; zero past the positions.
+            let bytes = |p: usize| {
+                if p < m {
+                    // SAFETY: position p0 + p < n, and its block j lies within its `width`
+                    // values (`16·(j + 1) ≤ 4·fours rounded up ≤ width`).
+                    let v = unsafe {
+                        _mm512_loadu_ps(values.as_ptr().add((p0 + p) * width + j * BLOCK))
+                    };
+                    _mm512_cvtepi32_epi8(_mm512_min_epi32(
+                        _mm512_cvtps_epi32(_mm512_mul_ps(v, f)),
+                        top,
+                    ))
+                } else {
+                    _mm_setzero_si128()
+                }
+            };
+            // Four positions from p: position p + i in 128-bit lane i.
+            let four = |p: usize| {
+                let z = _mm512_castsi128_si512(bytes(p));
+                let z = _mm512_inserti32x4::<1>(z, bytes(p + 1));
+                let z = _mm512_inserti32x4::<2>(z, bytes(p + 2));
+                _mm512_inserti32x4::<3>(z, bytes(p + 3))
+            };
+            let (z0, z1, z2, z3) = (four(0), four(4), four(8), four(12));
+            let (a01, b01) = (
+                _mm512_permutex2var_epi32(z0, words01, z1),
+                _mm512_permutex2var_epi32(z2, words01, z3),
+            );
+            let (a23, b23) = (
+                _mm512_permutex2var_epi32(z0, words23, z1),
+                _mm512_permutex2var_epi32(z2, words23, z3),
+            );
+            // Word k of positions 0–7 (from a) then 8–15 (from b).
+            let word = [
+                _mm512_shuffle_i64x2::<0b01_00_01_00>(a01, b01),
+                _mm512_shuffle_i64x2::<0b11_10_11_10>(a01, b01),
+                _mm512_shuffle_i64x2::<0b01_00_01_00>(a23, b23),
+                _mm512_shuffle_i64x2::<0b11_10_11_10>(a23, b23),
+            ];
+            let mask = ((1u32 << m) - 1) as u16;
+            for (k, w) in word.iter().enumerate().take(planes) {
+                // SAFETY: plane 4j + k < fours, and the mask's lanes are positions below n.
+                unsafe {
+                    _mm512_mask_storeu_epi32(
+                        dst.as_mut_ptr().add((4 * j + k) * n + p0).cast(),
+                        mask,
+                        *w,
+                    )
+                };
+            }
+            p0 += 16;
+        }
+    }
+}
+
 /// Whether [`Conv3x3::run`] can run on this CPU: x86-64 with AVX2 and FMA. Elsewhere tract keeps
 /// these layers (its hand-written kernels for ARM are what phones run; ours are measured on x86-64
 /// only).
@@ -947,9 +1173,11 @@ struct Block<'a, T> {
     /// empty for the other kernels.
     scale: &'a [f32],
     taps: &'a [usize],
-    /// Channels of the block that exist (the rest of the lanes are not stored).
+    /// Channels of the block that exist (the rest of the lanes are not stored in planes).
     channels: usize,
     plane: usize,
+    /// Channels per position of an interleaved output ([`Layout::Interleaved`]); 0 for planes.
+    width: usize,
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -1131,7 +1359,7 @@ impl Block<'_, f32> {
                 }
             }
         }
-        self.store_wide(&acc, at_out, out);
+        self.store_512(&acc, at_out, out);
     }
 }
 
@@ -1190,12 +1418,63 @@ impl Block<'_, u32> {
                 v[j] = _mm512_fmadd_ps(_mm512_cvtepi32_ps(a[j]), m, b);
             }
         }
-        self.store_wide(&values, at_out, out);
+        self.store_512(&values, at_out, out);
     }
 }
 
 #[cfg(target_arch = "x86_64")]
 impl<T> Block<'_, T> {
+    /// The accumulators of [`Block::run_wide`] into `out`, in the output's layout.
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    #[inline]
+    fn store_512<const NB: usize, const P: usize>(
+        &self,
+        acc: &[[std::arch::x86_64::__m512; NB]; P],
+        at_out: &[usize],
+        out: &mut [f32],
+    ) {
+        if self.width == 0 {
+            self.store_wide(acc, at_out, out);
+        } else {
+            self.store_interleaved(acc, at_out, out);
+        }
+    }
+
+    /// The accumulators of [`Block::run_wide`], with the ReLU, into an interleaved `out` (its
+    /// first value this block's first channel at position 0): position `q`'s channels of block
+    /// `j` as one store at `at_out[q]·width + 16·j`. Lanes past `cout` hold zeros (zero weights
+    /// and bias), the channels the layout rounds up to.
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    #[inline]
+    #[allow(unsafe_code)]
+    fn store_interleaved<const NB: usize, const P: usize>(
+        &self,
+        acc: &[[std::arch::x86_64::__m512; NB]; P],
+        at_out: &[usize],
+        out: &mut [f32],
+    ) {
+        use std::arch::x86_64::*;
+        let at_out = &at_out[..P];
+        let blocks = self.channels.div_ceil(BLOCK);
+        let last = at_out.iter().max().copied().unwrap_or(0);
+        assert!(
+            blocks <= NB && (blocks == 0 || out.len() >= last * self.width + blocks * BLOCK),
+            "store outside the output"
+        );
+        let zero = _mm512_setzero_ps();
+        for (a, &o) in acc.iter().zip(at_out) {
+            for (j, &v) in a.iter().enumerate().take(blocks) {
+                // SAFETY: `o·width + 16·j + 16 ≤ last·width + blocks·16 ≤ out.len()` (asserted).
+                unsafe {
+                    _mm512_storeu_ps(
+                        out.as_mut_ptr().add(o * self.width + j * BLOCK),
+                        _mm512_max_ps(v, zero),
+                    )
+                };
+            }
+        }
+    }
+
     /// The accumulators of [`Block::run_wide`], with the ReLU, into their offsets `at_out` of the
     /// block's channel planes in `out`: the positions × channels of each block transposed in
     /// registers, then per channel one masked store per run of positions that are consecutive in
@@ -1553,6 +1832,140 @@ mod tests {
         };
         let layer = building(Products::Vnni, || Conv3x3::new(1, 2, 4, 4, &weights, 1));
         assert!(!layer.is_int8());
+    }
+
+    /// Interleaved buffers between layers change how the values are held, not the values: a
+    /// chain (a one-channel f32 layer, then int8 layers) run through them gives the bits of the
+    /// planar chain, and an input u8 cannot hold goes through the f32 kernel on a planar copy
+    /// with the bits of the planar run.
+    #[test]
+    fn interleaved_buffers_give_the_bits_of_planar_ones() {
+        if !Products::Vnni.supported() {
+            eprintln!("skipped: this CPU has no AVX-512 VNNI");
+            return;
+        }
+        // Channels 1 → 16 → 24 (a partial block) → 40 (a pair and a partial one) → 8; both
+        // strides; maps whose position counts leave remainders of sixteen and eight; two slots.
+        let (batch, h, w) = (2, 19, 13);
+        let int8 = |cin: usize, cout: usize, stride: usize| {
+            let k = 9 * cin;
+            ConvWeights {
+                kernel: (0..cout * k)
+                    .map(|i| {
+                        let (co, t) = (i / k, i % k);
+                        int8_test_code(i, t == co % k) as f32 * (0.002 + co as f32 * 1e-4)
+                    })
+                    .collect(),
+                bias: (0..cout).map(|i| (i as f32 - 5.0) / 20.0).collect(),
+                stride,
+            }
+        };
+        let first = ConvWeights {
+            kernel: (0..16 * 9)
+                .map(|i| ((i * 37 % 17) as f32 - 8.0) / 20.0)
+                .collect(),
+            bias: (0..16).map(|i| (i as f32 - 3.0) / 10.0).collect(),
+            stride: 2,
+        };
+        let chain = [
+            (1, first, 1),
+            (16, int8(16, 24, 2), 1),
+            (24, int8(24, 40, 1), 1),
+            (40, int8(40, 8, 1), 0),
+        ];
+        let build = || {
+            let (mut ih, mut iw) = (h, w);
+            let mut layers = Vec::new();
+            for (cin, weights, pad) in &chain {
+                let layer = Conv3x3::new(batch, *cin, ih, iw, weights, *pad);
+                (ih, iw) = (layer.out_h, layer.out_w);
+                layers.push(layer);
+            }
+            layers
+        };
+        let mut planar = building(Products::Vnni, build);
+        let mut interleaved = building(Products::Vnni, build);
+        for i in 1..interleaved.len() {
+            assert!(
+                interleaved[i].takes_interleaved_input(),
+                "layer {i} not int8"
+            );
+            interleaved[i - 1].interleave_output();
+            interleaved[i].interleave_input();
+        }
+        assert!(!interleaved[0].takes_interleaved_input());
+        // The image, planar with its border.
+        let mut image = vec![0.0; planar[0].input_len()];
+        for (i, v) in image.iter_mut().enumerate() {
+            let (x, y) = (i % (w + 2), i / (w + 2) % (h + 2));
+            if (1..=w).contains(&x) && (1..=h).contains(&y) {
+                *v = (i * 53 % 29) as f32 / 29.0;
+            }
+        }
+        // Runs a chain from `image`, with `poison` (a layer and position) set to −1 in that
+        // layer's input first; returns each layer's output as planes.
+        let run = |layers: &mut [Conv3x3], poison: Option<(usize, usize)>| {
+            let mut input = image.clone();
+            let mut outs = Vec::new();
+            for (i, layer) in layers.iter_mut().enumerate() {
+                if let Some((_, at)) = poison.filter(|p| p.0 == i) {
+                    input[at] = -1.0;
+                }
+                let mut out = vec![0.0; layer.output_len()];
+                layer.run(&input, &mut out);
+                let planes = if layer.output_layout == Layout::Interleaved {
+                    let width = Conv3x3::interleaved_width(layer.cout);
+                    let mut planes = vec![0.0; layer.batch * layer.cout * layer.out_plane];
+                    for (slot, dst) in out
+                        .chunks_exact(width * layer.out_plane)
+                        .zip(planes.chunks_exact_mut(layer.cout * layer.out_plane))
+                    {
+                        for (p, values) in slot.chunks_exact(width).enumerate() {
+                            // The channels the layout rounds up to stay zero.
+                            assert!(values[layer.cout..].iter().all(|&v| v == 0.0));
+                            for (c, &v) in values[..layer.cout].iter().enumerate() {
+                                dst[c * layer.out_plane + p] = v;
+                            }
+                        }
+                    }
+                    planes
+                } else {
+                    out.clone()
+                };
+                outs.push(planes);
+                input = out;
+            }
+            outs
+        };
+        let want = run(&mut planar, None);
+        let got = run(&mut interleaved, None);
+        for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert!(
+                g.iter().zip(w).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "layer {i}: interleaved and planar outputs differ"
+            );
+        }
+        // A negative value in the third layer's input (slot 1, channel 5, the interior's first
+        // position): that layer runs in f32, from planes or from the interleaved copy alike.
+        let layer = &planar[2];
+        // The input's rows are the second layer's output's, border included.
+        let interior = planar[1].out_w + 2 + 1;
+        let planar_at = (layer.cin + 5) * layer.in_plane + interior;
+        let width = Conv3x3::interleaved_width(layer.cin);
+        let interleaved_at = (layer.in_plane + interior) * width + 5;
+        let want = run(&mut planar, Some((2, planar_at)));
+        let got = run(&mut interleaved, Some((2, interleaved_at)));
+        assert_ne!(
+            want[2],
+            run(&mut planar, None)[2],
+            "the poison changed nothing"
+        );
+        for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert!(
+                g.iter().zip(w).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "layer {i} after a negative input: interleaved and planar outputs differ"
+            );
+        }
     }
 
     #[test]

@@ -99,7 +99,7 @@ impl Stem {
             let input = vec![0.0; conv.input_len()];
             layers.push((conv, input));
         }
-        let first = if direct {
+        let mut first = if direct {
             let weights = ConvWeights {
                 kernel: kernel.clone(),
                 bias: bias.clone(),
@@ -120,6 +120,21 @@ impl Stem {
                 odd: vec![0.0; (in_h + 2) * row],
             }
         };
+        // A layer that quantises its input reads it interleaved, so the layer before it stores
+        // each position's channels as they lie in its registers (`crate::conv::Layout`).
+        for i in 0..layers.len() {
+            if !layers[i].0.takes_interleaved_input() {
+                continue;
+            }
+            match (i, &mut first) {
+                (0, First::Direct(conv, _)) => conv.interleave_output(),
+                (0, First::Lanes { .. }) => continue,
+                _ => layers[i - 1].0.interleave_output(),
+            }
+            let (conv, input) = &mut layers[i];
+            conv.interleave_input();
+            *input = vec![0.0; conv.input_len()];
+        }
         Self {
             batch,
             channels,
