@@ -164,30 +164,35 @@ impl Stem {
     /// interior of `out` (of [`Self::output_shape`]; its border is left as it is, zero).
     pub(crate) fn run(&mut self, out: &mut [f32]) {
         let mut layers = std::mem::take(&mut self.layers);
-        match layers.first_mut() {
+        // Each layer writes all of the next one's input (its interior; the border stays zero),
+        // so the largest value it wrote is that input's.
+        let mut peak = match layers.first_mut() {
             Some((_, input)) => self.first(input),
             None => self.first(out),
-        }
+        };
         for i in 0..layers.len() {
             let (done, rest) = layers.split_at_mut(i + 1);
             let (conv, input) = &mut done[i];
             match rest.first_mut() {
-                Some((_, next)) => conv.run(input, next),
-                None => conv.run(input, out),
+                Some((_, next)) => conv.run_with(input, peak, next),
+                None => conv.run_with(input, peak, out),
             }
+            peak = conv.output_peak();
         }
         self.layers = layers;
     }
 
     /// Computes the first layer on the current input into the interior of `out` (the planes
-    /// with their border `pad`, which is left as it is, zero).
-    fn first(&mut self, out: &mut [f32]) {
+    /// with their border `pad`, which is left as it is, zero); where it wrote `out` interleaved,
+    /// returns the largest value it wrote ([`Conv3x3::output_peak`]).
+    fn first(&mut self, out: &mut [f32]) -> Option<f32> {
         let (conv, padded) = match &mut self.first {
             First::Direct(conv, padded) => (conv, padded),
             First::Lanes { weights, even, odd } => {
                 let dims = [self.in_h, self.in_w, self.out_h, self.out_w, self.pad];
                 let affine = (self.scale, self.shift);
-                return first_lanes(dims, affine, &self.input, weights, [even, odd], out);
+                first_lanes(dims, affine, &self.input, weights, [even, odd], out);
+                return None;
             }
         };
         let (h, w, a, c) = (self.in_h, self.in_w, self.scale, self.shift);
@@ -207,6 +212,7 @@ impl Stem {
             }
         }
         conv.run(padded, out);
+        conv.output_peak()
     }
 
     /// How many layers after the first one run here.
