@@ -1046,17 +1046,11 @@ fn quantize_four(planes: [Option<&[f32]>; 4], per_step: f32, dst: &mut [u32]) {
     use std::arch::x86_64::*;
     let n = dst.len();
     assert!(planes.iter().flatten().all(|p| p.len() >= n));
-    let (f, top) = (_mm512_set1_ps(per_step), _mm512_set1_epi32(255));
+    let f = _mm512_set1_ps(per_step);
     // A plane's u8 values at `i..` (the lanes of `mask`), as i32 lanes; 0 without the plane.
     let level = |p: Option<&[f32]>, i: usize, mask: u16| match p {
         // SAFETY: the mask's lanes are positions below `n`, inside the plane (asserted above).
-        Some(p) => _mm512_min_epi32(
-            _mm512_cvtps_epi32(_mm512_mul_ps(
-                unsafe { _mm512_maskz_loadu_ps(mask, p.as_ptr().add(i)) },
-                f,
-            )),
-            top,
-        ),
+        Some(p) => u8_steps(unsafe { _mm512_maskz_loadu_ps(mask, p.as_ptr().add(i)) }, f),
         None => _mm512_setzero_si512(),
     };
     let [p0, p1, p2, p3] = planes;
@@ -1077,6 +1071,22 @@ fn quantize_four(planes: [Option<&[f32]>; 4], per_step: f32, dst: &mut [u32]) {
         unsafe { _mm512_mask_storeu_epi32(dst.as_mut_ptr().add(i).cast(), mask, word) };
         i += 16;
     }
+}
+
+/// The u8 steps of the int8 form's input: `round(v · per_step)` (ties to even), at most 255, as
+/// i32 lanes. Both quantisations take it, so both layouts give the same words.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+fn u8_steps(
+    v: std::arch::x86_64::__m512,
+    per_step: std::arch::x86_64::__m512,
+) -> std::arch::x86_64::__m512i {
+    use std::arch::x86_64::*;
+    _mm512_min_epi32(
+        _mm512_cvtps_epi32(_mm512_mul_ps(v, per_step)),
+        _mm512_set1_epi32(255),
+    )
 }
 
 /// [`quantize_four`] from an interleaved input: `values` holds `positions × width` values
@@ -1103,7 +1113,7 @@ fn quantize_interleaved(
             && dst.len() == fours * n,
         "quantize_interleaved: lengths"
     );
-    let (f, top) = (_mm512_set1_ps(per_step), _mm512_set1_epi32(255));
+    let f = _mm512_set1_ps(per_step);
     // Lanes 0–7: word k0 of the eight positions of two registers of four positions × four words;
     // lanes 8–15: word k1 of the same positions.
     let pick = |k0: i32, k1: i32| {
@@ -1140,10 +1150,7 @@ fn quantize_interleaved(
                     let v = unsafe {
                         _mm512_loadu_ps(values.as_ptr().add((p0 + p) * width + j * BLOCK))
                     };
-                    _mm512_cvtepi32_epi8(_mm512_min_epi32(
-                        _mm512_cvtps_epi32(_mm512_mul_ps(v, f)),
-                        top,
-                    ))
+                    _mm512_cvtepi32_epi8(u8_steps(v, f))
                 } else {
                     _mm_setzero_si128()
                 }

@@ -96,8 +96,8 @@ impl Stem {
             let conv = Conv3x3::new(batch, cin, h, w, weights, out_pad);
             let [_, c, ph, pw] = conv.output_shape();
             (cin, h, w) = (c, ph - 2 * out_pad, pw - 2 * out_pad);
-            let input = vec![0.0; conv.input_len()];
-            layers.push((conv, input));
+            // The input buffer once its layout is known (below).
+            layers.push((conv, Vec::new()));
         }
         let mut first = if direct {
             let weights = ConvWeights {
@@ -131,8 +131,9 @@ impl Stem {
                 (0, First::Lanes { .. }) => continue,
                 _ => layers[i - 1].0.interleave_output(),
             }
-            let (conv, input) = &mut layers[i];
-            conv.interleave_input();
+            layers[i].0.interleave_input();
+        }
+        for (conv, input) in &mut layers {
             *input = vec![0.0; conv.input_len()];
         }
         Self {
