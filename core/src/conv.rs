@@ -202,6 +202,11 @@ pub(crate) struct Conv3x3 {
     cout: usize,
     stride: usize,
     in_plane: usize,
+    /// Values per padded input row.
+    in_row: usize,
+    /// Offset in the input from one output position's window to the next one's along a row: the
+    /// stride, times the channels per position where the input is interleaved.
+    step: usize,
     out_plane: usize,
     out_h: usize,
     out_w: usize,
@@ -355,10 +360,18 @@ macro_rules! each_group {
 macro_rules! group {
     ($block:ident . $method:ident, $layer:expr, $p:expr, $out:expr, $n:expr) => {{
         let (ai, ao) = (&$layer.at_in[$p..$p + $n], &$layer.at_out[$p..$p + $n]);
-        let in_row = ai[$n - 1] - ai[0] == $layer.stride * ($n - 1);
-        match (in_row, $layer.stride) {
+        let in_row = ai[$n - 1] - ai[0] == $layer.step * ($n - 1);
+        // The steps of planes (the stride) and of interleaved inputs (the stride times the
+        // channels of 16, 32, 48 or 64, the widths of the shipped networks) as constants.
+        match (in_row, $layer.step) {
             (true, 1) => $block.$method::<{ $n }, 1>(ai, ao, $out),
             (true, 2) => $block.$method::<{ $n }, 2>(ai, ao, $out),
+            (true, 16) => $block.$method::<{ $n }, 16>(ai, ao, $out),
+            (true, 32) => $block.$method::<{ $n }, 32>(ai, ao, $out),
+            (true, 48) => $block.$method::<{ $n }, 48>(ai, ao, $out),
+            (true, 64) => $block.$method::<{ $n }, 64>(ai, ao, $out),
+            (true, 96) => $block.$method::<{ $n }, 96>(ai, ao, $out),
+            (true, 128) => $block.$method::<{ $n }, 128>(ai, ao, $out),
             _ => $block.$method::<{ $n }, 0>(ai, ao, $out),
         }
     }};
@@ -487,6 +500,8 @@ impl Conv3x3 {
             cout,
             stride: s,
             in_plane,
+            in_row: pw,
+            step: s,
             out_plane: (out_h + 2 * out_pad) * qw,
             out_h,
             out_w,
@@ -506,28 +521,47 @@ impl Conv3x3 {
         }
     }
 
-    /// Whether the layer would read an interleaved input in its int8 form: the layers that
-    /// quantise their input ([`Quads`]).
+    /// Whether the layer would read an interleaved input: the layers that quantise their input
+    /// ([`Quads`]) and those of the 256-bit f32 kernel, which broadcast each input value from
+    /// wherever it lies.
     pub(crate) fn takes_interleaved_input(&self) -> bool {
-        self.quads.is_some()
+        self.quads.is_some() || self.f32_256()
+    }
+
+    /// Whether the layer's products are the 256-bit f32 kernel's ([`Products::Avx2`]).
+    fn f32_256(&self) -> bool {
+        !self.wide && self.pairs.is_none() && self.quads.is_none()
     }
 
     /// Reads the input as [`Layout::Interleaved`] from now on (see [`Self::input_len`]).
     ///
     /// # Panics
-    /// When the layer does not run in int8 ([`Self::takes_interleaved_input`]).
+    /// When the layer reads planes only ([`Self::takes_interleaved_input`]).
     pub(crate) fn interleave_input(&mut self) {
-        assert!(self.takes_interleaved_input(), "an f32 layer reads planes");
+        assert!(self.takes_interleaved_input(), "this layer reads planes");
         self.input_layout = Layout::Interleaved;
-        self.planar = vec![0.0; self.batch * self.cin * self.in_plane];
+        if self.quads.is_some() {
+            self.planar = vec![0.0; self.batch * self.cin * self.in_plane];
+        } else {
+            // The f32 kernel reads the interleaved values in place: the same taps in the same
+            // order (so the same sums), each at its position's channel.
+            let width = Self::interleaved_width(self.cin);
+            self.taps = tap_offsets(self.cin, self.in_plane, self.in_row)
+                .into_iter()
+                .map(|t| {
+                    let (c, at) = (t / self.in_plane, t % self.in_plane);
+                    at * width + c
+                })
+                .collect();
+            for at in &mut self.at_in {
+                *at *= width;
+            }
+            self.step = self.stride * width;
+        }
     }
 
     /// Writes the output as [`Layout::Interleaved`] from now on (see [`Self::output_len`]).
-    ///
-    /// # Panics
-    /// Off the 512-bit kernels (only they store so).
     pub(crate) fn interleave_output(&mut self) {
-        assert!(self.wide, "only the 512-bit kernels store interleaved");
         self.output_layout = Layout::Interleaved;
     }
 
@@ -595,15 +629,15 @@ impl Conv3x3 {
                 return;
             }
         }
-        if self.input_layout == Layout::Interleaved {
-            // The f32 kernels read planes: a run the int8 form did not take (an input u8 cannot
-            // hold) goes through a planar copy.
+        if self.input_layout == Layout::Interleaved && self.quads.is_some() {
+            // The f32 kernels of an int8 layer read planes: a run the int8 form did not take (an
+            // input u8 cannot hold) goes through a planar copy.
             let mut planar = std::mem::take(&mut self.planar);
             self.deinterleave(input, &mut planar);
-            self.run_planar(&planar, out);
+            self.run_float(&planar, out);
             self.planar = planar;
         } else {
-            self.run_planar(input, out);
+            self.run_float(input, out);
         }
     }
 
@@ -627,17 +661,17 @@ impl Conv3x3 {
         }
     }
 
-    /// [`Self::run`] in f32 or bf16 products on a planar input.
+    /// [`Self::run`] in f32 or bf16 products, on an input in the layout [`Self::taps`] address
+    /// (planes, except for a 256-bit f32 layer that reads interleaved).
     #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
-    fn run_planar(&mut self, input: &[f32], out: &mut [f32]) {
+    fn run_float(&mut self, input: &[f32], out: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
         if let Some(mut pairs) = self.pairs.take() {
-            #[allow(unsafe_code)]
             // SAFETY: `pairs` exists only where the CPU has AVX2, FMA and AVX-512 BF16 + VL
             // (`Products::Bf16`); the lengths were checked above.
-            unsafe {
-                self.run_bf16(&mut pairs, input, out)
-            };
+            #[allow(unsafe_code)]
+            let peak = unsafe { self.run_bf16(&mut pairs, input, out) };
+            self.peak = peak;
             self.pairs = Some(pairs);
             return;
         }
@@ -653,11 +687,10 @@ impl Conv3x3 {
         }
         #[cfg(target_arch = "x86_64")]
         if crate::cpu::has_avx2_fma() {
-            #[allow(unsafe_code)]
             // SAFETY: the CPU has AVX2 and FMA; the lengths were checked above.
-            unsafe {
-                self.run_avx2(input, out)
-            };
+            #[allow(unsafe_code)]
+            let peak = unsafe { self.run_avx2(input, out) };
+            self.peak = peak;
             return;
         }
         panic!("Conv3x3::run needs AVX2 and FMA (conv::available)");
@@ -668,7 +701,7 @@ impl Conv3x3 {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     #[allow(unsafe_code)]
-    unsafe fn run_avx2(&self, input: &[f32], out: &mut [f32]) {
+    unsafe fn run_avx2(&self, input: &[f32], out: &mut [f32]) -> Option<f32> {
         self.for_each_block(
             input,
             &self.packed,
@@ -679,7 +712,7 @@ impl Conv3x3 {
             |block, _, out| {
                 each_group!(block.run, self, out);
             },
-        );
+        )
     }
 
     /// # Safety
@@ -853,7 +886,7 @@ impl Conv3x3 {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,avx512f,avx512vl,avx512bf16")]
     #[allow(unsafe_code)]
-    unsafe fn run_bf16(&self, pairs: &mut Pairs, input: &[f32], out: &mut [f32]) {
+    unsafe fn run_bf16(&self, pairs: &mut Pairs, input: &[f32], out: &mut [f32]) -> Option<f32> {
         let cp = self.cin.div_ceil(2);
         for b in 0..self.batch {
             let planes = &input[b * self.cin * self.in_plane..][..self.cin * self.in_plane];
@@ -875,7 +908,7 @@ impl Conv3x3 {
             |block, _, out| {
                 each_group!(block.run_bf16, self, out);
             },
-        );
+        )
     }
 }
 
@@ -1252,9 +1285,12 @@ impl<T> Block<'_, T> {
     }
 
     /// The accumulators of `P` positions, with the ReLU, into their offsets `at_out` of the
-    /// block's channel planes in `out`.
+    /// block's channel planes in `out`, or where the output is interleaved, as each position's
+    /// sixteen channels at `at_out[q]·width` (two stores; lanes past `cout` hold zeros, from zero
+    /// weights and bias), keeping [`Block::peak`].
     #[target_feature(enable = "avx2,fma")]
     #[inline]
+    #[allow(unsafe_code)]
     fn store<const P: usize>(
         &self,
         acc: &[[std::arch::x86_64::__m256; 2]; P],
@@ -1263,6 +1299,32 @@ impl<T> Block<'_, T> {
     ) {
         use std::arch::x86_64::*;
         let zero = _mm256_setzero_ps();
+        if self.width > 0 {
+            let at_out = &at_out[..P];
+            let last = at_out.iter().max().copied().unwrap_or(0);
+            assert!(
+                out.len() >= last * self.width + BLOCK,
+                "store outside the output"
+            );
+            let lanes = self.peak.as_ptr().cast::<__m256i>();
+            // SAFETY: the cell holds BLOCK words, and nothing else refers to them during the
+            // call.
+            let mut peak = unsafe { [_mm256_loadu_si256(lanes), _mm256_loadu_si256(lanes.add(1))] };
+            for (a, &o) in acc.iter().zip(at_out) {
+                for (h, (&v, peak)) in a.iter().zip(&mut peak).enumerate() {
+                    let v = _mm256_max_ps(v, zero);
+                    *peak = _mm256_max_epu32(*peak, _mm256_castps_si256(v));
+                    // SAFETY: `o·width + 16 ≤ last·width + 16 ≤ out.len()` (asserted).
+                    unsafe { _mm256_storeu_ps(out.as_mut_ptr().add(o * self.width + 8 * h), v) };
+                }
+            }
+            // SAFETY: as the load above.
+            unsafe {
+                _mm256_storeu_si256(lanes, peak[0]);
+                _mm256_storeu_si256(lanes.add(1), peak[1]);
+            }
+            return;
+        }
         let mut lanes = [0f32; BLOCK];
         for (acc, &o) in acc.iter().zip(at_out) {
             // SAFETY: `lanes` holds BLOCK values.
@@ -1887,10 +1949,22 @@ mod tests {
     /// with the bits of the planar run.
     #[test]
     fn interleaved_buffers_give_the_bits_of_planar_ones() {
-        if !Products::Vnni.supported() {
-            eprintln!("skipped: this CPU has no AVX-512 VNNI");
+        let forms: Vec<_> = [Products::Vnni, Products::Avx2]
+            .into_iter()
+            .filter(|f| f.supported())
+            .collect();
+        if forms.is_empty() {
+            eprintln!("skipped: this CPU has neither AVX-512 VNNI nor AVX2 + FMA");
             return;
         }
+        for form in forms {
+            interleaved_chain_gives_the_bits_of_the_planar_one(form);
+        }
+    }
+
+    /// [`interleaved_buffers_give_the_bits_of_planar_ones`] in the products `form`: int8 layers
+    /// after a one-channel f32 one, or 256-bit f32 layers throughout.
+    fn interleaved_chain_gives_the_bits_of_the_planar_one(form: Products) {
         // Channels 1 → 16 → 24 (a partial block) → 40 (a pair and a partial one) → 8; both
         // strides; maps whose position counts leave remainders of sixteen and eight; two slots.
         let (batch, h, w) = (2, 19, 13);
@@ -1930,17 +2004,21 @@ mod tests {
             }
             layers
         };
-        let mut planar = building(Products::Vnni, build);
-        let mut interleaved = building(Products::Vnni, build);
+        let mut planar = building(form, build);
+        let mut interleaved = building(form, build);
         for i in 1..interleaved.len() {
             assert!(
                 interleaved[i].takes_interleaved_input(),
-                "layer {i} not int8"
+                "{form:?}: layer {i} reads planes only"
             );
             interleaved[i - 1].interleave_output();
             interleaved[i].interleave_input();
         }
-        assert!(!interleaved[0].takes_interleaved_input());
+        // The one-channel layer takes the image's planes (int8 needs more channels).
+        assert_eq!(
+            interleaved[0].takes_interleaved_input(),
+            form == Products::Avx2
+        );
         // The image, planar with its border.
         let mut image = vec![0.0; planar[0].input_len()];
         for (i, v) in image.iter_mut().enumerate() {
@@ -1997,7 +2075,7 @@ mod tests {
         for (i, (g, w)) in got.iter().zip(&want).enumerate() {
             assert!(
                 g.iter().zip(w).all(|(a, b)| a.to_bits() == b.to_bits()),
-                "layer {i}: interleaved and planar outputs differ"
+                "{form:?}, layer {i}: interleaved and planar outputs differ"
             );
         }
         // A negative or infinite value in the third layer's input (slot 1, channel 5, the
@@ -2016,7 +2094,8 @@ mod tests {
             for (i, (g, w)) in got.iter().zip(&want).enumerate() {
                 assert!(
                     g.iter().zip(w).all(|(a, b)| a.to_bits() == b.to_bits()),
-                    "layer {i} after {v} in an input: interleaved and planar outputs differ"
+                    "{form:?}, layer {i} after {v} in an input: interleaved and planar \
+                     outputs differ"
                 );
             }
         }
