@@ -38,12 +38,15 @@
 //!
 //! Layout (the ONNX one, batch-major): input `batch × cin × (in_h + 2) × (in_w + 2)` with a zero
 //! border of one, output `batch × cout × (out_h + 2·pad) × (out_w + 2·pad)`, only its interior
-//! written. Between two layers of a chain whose second runs in int8 the buffer is
-//! [`Layout::Interleaved`] instead: position after position, each position's channels together.
-//! The first layer then stores each position's sixteen channels as they lie in its register, and
-//! the second quantises them into its own layout on the way, so nothing is transposed in f32
+//! written. Between two layers of a chain whose second runs in int8 or in the 256-bit f32 kernel
+//! the buffer is [`Layout::Interleaved`] instead: position after position, each position's
+//! channels together. The first layer then stores each position's sixteen channels as they lie in
+//! its registers, and the second quantises them into its own layout on the way, or (f32)
+//! broadcasts each value from where it lies, so nothing is transposed or scattered value by value
 //! (`store_wide`, which turns a group's positions × channels into channel planes, was 16 % of
-//! `m3_per_face` in `perf` at stop 37). The values and the quantised words are the same in both
+//! `m3_per_face` in `perf` at stop 37 on the Intel Xeon; the 256-bit kernel's value-by-value
+//! stores about 30 % of its time on an AVX2-only AMD EPYC Zen 3, where `m3_per_face` went
+//! 514–570 → 461–493 µs). The values, the sums and the quantised words are the same in both
 //! layouts.
 
 /// [`Products::whole_graph_tolerance`] of the int8 form. Each layer's input is rounded to 1/255
