@@ -46,7 +46,7 @@
 //! (`store_wide`, which turns a group's positions × channels into channel planes, was 16 % of
 //! `m3_per_face` in `perf` at stop 37 on the Intel Xeon; the 256-bit kernel's value-by-value
 //! stores about 30 % of its time on an AVX2-only AMD EPYC Zen 3, where `m3_per_face` went
-//! 514–570 → 461–493 µs). The values, the sums and the quantised words are the same in both
+//! 551.9 / 536.7 → 460.8 / 461.9 / 492.6 µs in alternating runs). The values, the sums and the quantised words are the same in both
 //! layouts.
 
 /// [`Products::whole_graph_tolerance`] of the int8 form. Each layer's input is rounded to 1/255
@@ -205,11 +205,8 @@ pub(crate) struct Conv3x3 {
     cout: usize,
     stride: usize,
     in_plane: usize,
-    /// Values per padded input row.
+    /// Positions per padded input row.
     in_row: usize,
-    /// Offset in the input from one output position's window to the next one's along a row: the
-    /// stride, times the channels per position where the input is interleaved.
-    step: usize,
     out_plane: usize,
     out_h: usize,
     out_w: usize,
@@ -363,10 +360,11 @@ macro_rules! each_group {
 macro_rules! group {
     ($block:ident . $method:ident, $layer:expr, $p:expr, $out:expr, $n:expr) => {{
         let (ai, ao) = (&$layer.at_in[$p..$p + $n], &$layer.at_out[$p..$p + $n]);
-        let in_row = ai[$n - 1] - ai[0] == $layer.step * ($n - 1);
+        let step = $layer.step();
+        let in_row = ai[$n - 1] - ai[0] == step * ($n - 1);
         // The steps of planes (the stride) and of interleaved inputs (the stride times the
         // channels of 16, 32, 48 or 64, the widths of the shipped networks) as constants.
-        match (in_row, $layer.step) {
+        match (in_row, step) {
             (true, 1) => $block.$method::<{ $n }, 1>(ai, ao, $out),
             (true, 2) => $block.$method::<{ $n }, 2>(ai, ao, $out),
             (true, 16) => $block.$method::<{ $n }, 16>(ai, ao, $out),
@@ -445,7 +443,7 @@ impl Conv3x3 {
         let packed = pack(cout, k, 0.0, |co, t| weights.kernel[co * k + t]);
         let mut bias = weights.bias.clone();
         bias.resize(cout.div_ceil(BLOCK) * BLOCK, 0.0);
-        let taps = tap_offsets(cin, in_plane, pw);
+        let taps = tap_offsets(cin, in_plane, pw, 1);
         let (mut at_in, mut at_out) = (Vec::new(), Vec::new());
         for y in 0..out_h {
             for x in 0..out_w {
@@ -468,7 +466,7 @@ impl Conv3x3 {
             });
             Pairs {
                 packed,
-                taps: tap_offsets(cp, in_plane, pw),
+                taps: tap_offsets(cp, in_plane, pw, 1),
                 input: vec![0; batch * cp * in_plane],
             }
         });
@@ -491,7 +489,7 @@ impl Conv3x3 {
                 scale.resize(bias.len(), 0.0);
                 Quads {
                     packed,
-                    taps: tap_offsets(cq, in_plane, pw),
+                    taps: tap_offsets(cq, in_plane, pw, 1),
                     step: vec![0.0; scale.len()],
                     scale,
                     input: vec![0; batch * cq * in_plane],
@@ -504,7 +502,6 @@ impl Conv3x3 {
             stride: s,
             in_plane,
             in_row: pw,
-            step: s,
             out_plane: (out_h + 2 * out_pad) * qw,
             out_h,
             out_w,
@@ -531,6 +528,18 @@ impl Conv3x3 {
         self.quads.is_some() || self.f32_256()
     }
 
+    /// Offset in the input the f32 kernels read from one output position's window to the next
+    /// one's along a row: the stride, times the channels per position where the layer reads its
+    /// input interleaved in place (the int8 form reads planes of words, its fallback planes).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    fn step(&self) -> usize {
+        if self.input_layout == Layout::Interleaved && self.quads.is_none() {
+            self.stride * Self::interleaved_width(self.cin)
+        } else {
+            self.stride
+        }
+    }
+
     /// Whether the layer's products are the 256-bit f32 kernel's ([`Products::Avx2`]).
     fn f32_256(&self) -> bool {
         !self.wide && self.pairs.is_none() && self.quads.is_none()
@@ -549,17 +558,10 @@ impl Conv3x3 {
             // The f32 kernel reads the interleaved values in place: the same taps in the same
             // order (so the same sums), each at its position's channel.
             let width = Self::interleaved_width(self.cin);
-            self.taps = tap_offsets(self.cin, self.in_plane, self.in_row)
-                .into_iter()
-                .map(|t| {
-                    let (c, at) = (t / self.in_plane, t % self.in_plane);
-                    at * width + c
-                })
-                .collect();
+            self.taps = tap_offsets(self.cin, 1, self.in_row, width);
             for at in &mut self.at_in {
                 *at *= width;
             }
-            self.step = self.stride * width;
         }
     }
 
@@ -928,13 +930,16 @@ fn pack<T: Copy>(cout: usize, k: usize, zero: T, weight: impl Fn(usize, usize) -
     packed
 }
 
-/// Offset of each tap (plane, row, column; `planes × 9` of them) from a window's top-left value
-/// in an input of padded planes `plane` long with rows `row` long.
-fn tap_offsets(planes: usize, plane: usize, row: usize) -> Vec<usize> {
-    (0..9 * planes)
+/// Offset of each tap (channel, row, column; `channels × 9` of them, in that order) from a
+/// window's top-left value in an input of padded maps with rows of `row` positions, where one
+/// channel lies `channel` values from the last and one position `position` values: planes of
+/// `plane` values have `channel = plane, position = 1`, interleaved positions of `width`
+/// channels `channel = 1, position = width`.
+fn tap_offsets(channels: usize, channel: usize, row: usize, position: usize) -> Vec<usize> {
+    (0..9 * channels)
         .map(|t| {
             let (c, dy, dx) = (t / 9, t % 9 / 3, t % 3);
-            c * plane + dy * row + dx
+            c * channel + (dy * row + dx) * position
         })
         .collect()
 }
