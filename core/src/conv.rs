@@ -33,8 +33,21 @@
 //! (474 against 120 GMAC/s): `m3_per_face` 236–237 → 164 µs, `m3_per_face_mirror_average`
 //! 356–375 → 244–251 µs in alternating runs, the validation NME 3.865 → 3.867 % in mirror
 //! average and 3.979 → 3.980 % single-pass (the mean over eight box-jitter seeds 3.906 → 3.906 %;
-//! `models/MODEL_CARD.md`). AMD keeps bf16 (int8 not measured there). `MONOTRACK_CONV=avx2|avx512|bf16|vnni` in the
-//! environment overrides the choice (for measurements; a form the CPU lacks is ignored).
+//! `models/MODEL_CARD.md`). AMD keeps bf16 (int8 not measured there).
+//!
+//! With `MONOTRACK_CONV=maddubs` the same int8 layers run on 256-bit registers (AVX2,
+//! [`Products::Maddubs`]): `vpmaddubsw` sums two u8 × i8 products into an i16
+//! lane and `vpmaddwd` two of those into an i32 lane, three instructions for 32 multiply-adds
+//! where f32 takes four FMAs (on the AMD EPYC Zen 3 of stop 37 a loop of them ran 0.41 against
+//! 0.66 ns). The i16 sum saturates, so each layer's input keeps only as many steps as its widest
+//! pair of neighbouring weights allows ([`maddubs_levels`]: 131–160 for the shipped layers,
+//! against 255). On that Zen 3 (stop 38, one binary, `MONOTRACK_CONV` alternating):
+//! `m3_per_face` 484 / 483 → 395 / 377 µs, `m3_level1_face_confidence` 147 / 150 → 112 / 110 µs;
+//! the validation NME 3.979 → 3.986 % single-pass, 3.865 → 3.865 % in mirror average
+//! (`models/MODEL_CARD.md`). It is not the default anywhere: the brow net's gesture probability
+//! in one `m3_golden` case (single-pass) moved 0.036 from the Python reference, over that test's
+//! 0.02 (0.027 with the brow net itself kept in f32). `MONOTRACK_CONV=avx2|avx512|bf16|vnni|maddubs`
+//! in the environment overrides the choice (for measurements; a form the CPU lacks is ignored).
 //!
 //! Layout (the ONNX one, batch-major): input `batch × cin × (in_h + 2) × (in_w + 2)` with a zero
 //! border of one, output `batch × cout × (out_h + 2·pad) × (out_w + 2·pad)`, only its interior
@@ -57,6 +70,14 @@
 /// to end (`models/MODEL_CARD.md`).
 #[cfg(test)]
 pub(crate) const INT8_TOLERANCE: f32 = 2e-2;
+
+/// [`INT8_TOLERANCE`] of [`Products::Maddubs`], whose inputs keep 131–160 steps instead of 255
+/// ([`maddubs_levels`]). Measured on the shipped networks (the tests' inputs): up to 2.6e-2 for
+/// level 1's face logit, 1.9e-2 and 1.5e-2 for the mouth and brow nets' gesture logits, up to
+/// 3.9e-3 for every other output. What this costs in landmarks is measured end to end
+/// (`models/MODEL_CARD.md`).
+#[cfg(test)]
+pub(crate) const INT8_7BIT_TOLERANCE: f32 = 4e-2;
 
 /// One layer's weights as read from the graph.
 #[derive(Debug, Clone)]
@@ -100,6 +121,39 @@ pub(crate) enum Products {
     /// VNNI + BW), for layers of more than one input channel whose weights are int8 times a
     /// scale per output channel ([`Quads`]); 512-bit f32 for the other layers.
     Vnni,
+    /// The layers [`Products::Vnni`] takes, on 256-bit registers (AVX2): `vpmaddubsw` sums two
+    /// u8 × i8 products into an i16 lane, saturating, and `vpmaddwd` two of those into an i32
+    /// lane; the inputs keep as many steps as no i16 sum can saturate with ([`maddubs_levels`]);
+    /// 256-bit f32 for the other layers.
+    Maddubs,
+}
+
+/// Largest u8 step of the [`Products::Vnni`] form's inputs (`vpdpbusd` sums in i32).
+const VNNI_LEVELS: i32 = 255;
+
+/// Largest u8 step of a [`Products::Maddubs`] layer's inputs: `vpmaddubsw` sums the products of
+/// two neighbouring channels (bytes 0–1 and 2–3 of a word) into an i16 lane, so an input of at
+/// most `L` steps cannot saturate it where `L · (|w₀| + |w₁|) ≤ 32,767` for every such pair of
+/// weights (`q`: `cout × cin × 9`, as ONNX orders them): 129 for pairs of ±127 (seven bits), up
+/// to 255 where no pair's weights are both large.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+fn maddubs_levels(q: &[i8], cout: usize, cin: usize) -> i32 {
+    let mut widest = 1;
+    for co in 0..cout {
+        for c in (0..cin).step_by(2) {
+            for tap in 0..9 {
+                let w = |c: usize| {
+                    if c < cin {
+                        i32::from(q[(co * cin + c) * 9 + tap]).abs()
+                    } else {
+                        0
+                    }
+                };
+                widest = widest.max(w(c) + w(c + 1));
+            }
+        }
+    }
+    (i32::from(i16::MAX) / widest).min(VNNI_LEVELS)
 }
 
 impl Products {
@@ -115,6 +169,7 @@ impl Products {
                 Products::Avx512 => avx512,
                 Products::Bf16 => avx512 && has!("avx512vl") && has!("avx512bf16"),
                 Products::Vnni => avx512 && has!("avx512bw") && has!("avx512vnni"),
+                Products::Maddubs => crate::cpu::has_avx2_fma(),
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
@@ -136,6 +191,7 @@ impl Products {
             Products::Avx2 | Products::Avx512 => 1e-4,
             Products::Bf16 => crate::stem::BF16_TOLERANCE,
             Products::Vnni => INT8_TOLERANCE,
+            Products::Maddubs => INT8_7BIT_TOLERANCE,
         }
     }
 }
@@ -145,7 +201,7 @@ impl Products {
 /// on the whole M3: 1.44–1.50×), f32 on 512-bit registers on other CPUs with AVX-512F (on the Intel Xeon
 /// measured, `vdpbf16ps` ran at half the FMA's rate and two 512-bit FMA units doubled the
 /// 256-bit rate), else f32 on 256-bit registers; `MONOTRACK_CONV` overrides it where the CPU has
-/// the named form.
+/// the named form (the 256-bit int8 form, [`Products::Maddubs`], only so: see the module notes).
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 fn chosen_products() -> Products {
     static CHOSEN: std::sync::OnceLock<Products> = std::sync::OnceLock::new();
@@ -157,6 +213,7 @@ fn chosen_products() -> Products {
                 "avx512" => Some(Products::Avx512),
                 "bf16" => Some(Products::Bf16),
                 "vnni" => Some(Products::Vnni),
+                "maddubs" => Some(Products::Maddubs),
                 _ => None,
             });
         if let Some(p) = named.filter(|p| p.supported()) {
@@ -194,6 +251,12 @@ fn products_for(amd: bool, has_bf16: bool, has_avx512: bool, has_vnni: bool) -> 
 /// measured the same, 12 slower (spills).
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 const POSITIONS: usize = 6;
+
+/// Output positions of [`Block::run_maddubs`]: two i32 accumulators each, with the two weight
+/// registers, the broadcast word, the products and the ones of `vpmaddwd` in the rest of the
+/// sixteen registers (5, which leaves none spare, measured the same within the noise).
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+const POSITIONS_MADDUBS: usize = 4;
 
 /// A layer for fixed input sizes, with its weights packed for the kernel.
 // Off x86-64 nothing runs the kernel ([`available`] is false there), so the packed layout is unread.
@@ -266,6 +329,11 @@ struct Quads {
     step: Vec<f32>,
     /// The input quantised: `batch × ⌈cin/4⌉` padded planes of words.
     input: Vec<u32>,
+    /// Whether the products are `vpdpbusd`'s ([`Products::Vnni`]; else `vpmaddubsw`'s,
+    /// [`Products::Maddubs`]).
+    vnni: bool,
+    /// The largest u8 step of the input: [`VNNI_LEVELS`], or [`maddubs_levels`].
+    levels: i32,
 }
 
 /// `w` as int8 times a scale per output (`output_of(t)` the output of value `t`, below
@@ -325,20 +393,25 @@ struct Pairs {
     input: Vec<u32>,
 }
 
-/// Runs the kernel `$block.$method::<P, S>` (`Block::run` or `Block::run_bf16`) over a layer's
-/// output positions: groups of [`POSITIONS`], then the remainder. For the `unsafe` kernels of
+/// Runs the kernel `$block.$method::<P, S>` (`Block::run`, `Block::run_bf16` or
+/// `Block::run_maddubs`) over a layer's output positions: groups of [`POSITIONS`] (or of the
+/// count given), then the remainder. For the `unsafe` kernels of
 /// [`Block`]: the caller has their CPU features and the layer's offsets.
 #[cfg(target_arch = "x86_64")]
 macro_rules! each_group {
-    ($block:ident . $method:ident, $layer:expr, $out:expr) => {{
+    ($block:ident . $method:ident, $layer:expr, $out:expr) => {
+        each_group!($block.$method, $layer, $out, POSITIONS)
+    };
+    // Groups of `$positions` (at most six) positions.
+    ($block:ident . $method:ident, $layer:expr, $out:expr, $positions:expr) => {{
         let n = $layer.at_in.len();
         let mut p = 0;
         #[allow(unsafe_code)]
         // SAFETY: the caller's features; offsets from the layer, as `Block` needs.
         unsafe {
-            while p + POSITIONS <= n {
-                group!($block.$method, $layer, p, $out, POSITIONS);
-                p += POSITIONS;
+            while p + $positions <= n {
+                group!($block.$method, $layer, p, $out, $positions);
+                p += $positions;
             }
             match n - p {
                 0 => {}
@@ -470,7 +543,7 @@ impl Conv3x3 {
                 input: vec![0; batch * cp * in_plane],
             }
         });
-        let quads = (cin >= 2 && form == Products::Vnni)
+        let quads = (cin >= 2 && matches!(form, Products::Vnni | Products::Maddubs))
             .then(|| int8_per_output(&weights.kernel, cout, |t| t / (9 * cin)))
             .flatten()
             .map(|(q, mut scale)| {
@@ -493,6 +566,12 @@ impl Conv3x3 {
                     step: vec![0.0; scale.len()],
                     scale,
                     input: vec![0; batch * cq * in_plane],
+                    vnni: form == Products::Vnni,
+                    levels: if form == Products::Vnni {
+                        VNNI_LEVELS
+                    } else {
+                        maddubs_levels(&q, cout, cin)
+                    },
                 }
             });
         Self {
@@ -627,8 +706,15 @@ impl Conv3x3 {
             let input_peak = input_peak.filter(|_| self.input_layout == Layout::Interleaved);
             #[allow(unsafe_code)]
             // SAFETY: `quads` exists only where the CPU has AVX-512F, BW and VNNI, AVX2 and FMA
-            // (`Products::Vnni`); the lengths were checked above.
-            let done = unsafe { self.run_vnni(&mut quads, input, input_peak, out) };
+            // (`Products::Vnni`), or (not `vnni`) AVX2 and FMA (`Products::Maddubs`); the
+            // lengths were checked above.
+            let done = unsafe {
+                if quads.vnni {
+                    self.run_vnni(&mut quads, input, input_peak, out)
+                } else {
+                    self.run_maddubs(&mut quads, input, input_peak, out)
+                }
+            };
             self.quads = Some(quads);
             if done {
                 return;
@@ -828,38 +914,9 @@ impl Conv3x3 {
         input_peak: Option<f32>,
         out: &mut [f32],
     ) -> bool {
-        let max = match input_peak {
-            Some(peak) => peak.is_finite().then_some(peak),
-            None => nonnegative_max(input),
-        };
-        let Some(max) = max else {
+        // SAFETY: the CPU has AVX-512F and BW (the caller's contract); the rest as the caller's.
+        if !unsafe { self.quantize(quads, input, input_peak) } {
             return false;
-        };
-        // One step of the u8 scale is max / 255 (no step for an all-zero input).
-        let per_step = if max > 0.0 { 255.0 / max } else { 0.0 };
-        for (d, &s) in quads.step.iter_mut().zip(&quads.scale) {
-            *d = s * (max / 255.0);
-        }
-        let cq = self.cin.div_ceil(4);
-        let slots = quads.input.chunks_exact_mut(cq * self.in_plane);
-        match self.input_layout {
-            Layout::Interleaved => {
-                let width = Self::interleaved_width(self.cin);
-                for (values, words) in input.chunks_exact(width * self.in_plane).zip(slots) {
-                    quantize_interleaved(values, width, cq, per_step, words);
-                }
-            }
-            Layout::Planar => {
-                for (planes, words) in input.chunks_exact(self.cin * self.in_plane).zip(slots) {
-                    for (four, dst) in words.chunks_exact_mut(self.in_plane).enumerate() {
-                        let plane = |k: usize| {
-                            let c = 4 * four + k;
-                            (c < self.cin).then(|| &planes[c * self.in_plane..][..self.in_plane])
-                        };
-                        quantize_four([plane(0), plane(1), plane(2), plane(3)], per_step, dst);
-                    }
-                }
-            }
         }
         self.peak = self.for_each_block(
             &quads.input,
@@ -876,6 +933,104 @@ impl Conv3x3 {
                 }
             },
         );
+        true
+    }
+
+    /// [`Self::run_vnni`] in [`Products::Maddubs`]'s products, one block of [`BLOCK`] output
+    /// channels at a time.
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA; `input` and `out` have the layer's lengths and `quads` is the
+    /// layer's.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[allow(unsafe_code)]
+    unsafe fn run_maddubs(
+        &mut self,
+        quads: &mut Quads,
+        input: &[f32],
+        input_peak: Option<f32>,
+        out: &mut [f32],
+    ) -> bool {
+        // SAFETY: the caller's contract (`quads` not `vnni`, so only AVX2 is needed).
+        if !unsafe { self.quantize(quads, input, input_peak) } {
+            return false;
+        }
+        self.peak = self.for_each_block(
+            &quads.input,
+            &quads.packed,
+            &quads.taps,
+            &quads.step,
+            out,
+            |_| 1,
+            |block, _, out| {
+                each_group!(block.run_maddubs, self, out, POSITIONS_MADDUBS);
+            },
+        );
+        true
+    }
+
+    /// Quantises `input` into `quads.input` (`u8 = round(v · levels / max)`, `levels` the
+    /// layer's [`Quads::levels`]) and sets `quads.step`; false (nothing written) where the input holds a
+    /// negative or non-finite value, which u8 cannot carry. `input_peak`: as [`Self::run_with`].
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA, and where `quads.vnni`, AVX-512F and BW; `input` has the
+    /// layer's length and `quads` is the layer's.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[allow(unsafe_code)]
+    unsafe fn quantize(&self, quads: &mut Quads, input: &[f32], input_peak: Option<f32>) -> bool {
+        let vnni = quads.vnni;
+        let max = match input_peak {
+            Some(peak) => peak.is_finite().then_some(peak),
+            // SAFETY: AVX-512F where `vnni` (the contract).
+            None if vnni => unsafe { nonnegative_max(input) },
+            // The layers before a 256-bit int8 layer hand their peak over (`crate::stem`), so
+            // this runs in tests only.
+            None => nonnegative_max_portable(input),
+        };
+        let Some(max) = max else {
+            return false;
+        };
+        let levels = quads.levels as f32;
+        // One step of the u8 scale is max / levels (no step for an all-zero input).
+        let per_step = if max > 0.0 { levels / max } else { 0.0 };
+        for (d, &s) in quads.step.iter_mut().zip(&quads.scale) {
+            *d = s * (max / levels);
+        }
+        let cq = self.cin.div_ceil(4);
+        let slots = quads.input.chunks_exact_mut(cq * self.in_plane);
+        match self.input_layout {
+            Layout::Interleaved => {
+                let width = Self::interleaved_width(self.cin);
+                for (values, words) in input.chunks_exact(width * self.in_plane).zip(slots) {
+                    if vnni {
+                        // SAFETY: AVX-512F and BW where `vnni` (the contract).
+                        unsafe { quantize_interleaved(values, width, cq, per_step, words) };
+                    } else {
+                        quantize_interleaved_avx2(values, width, cq, per_step, quads.levels, words);
+                    }
+                }
+            }
+            Layout::Planar => {
+                for (planes, words) in input.chunks_exact(self.cin * self.in_plane).zip(slots) {
+                    for (four, dst) in words.chunks_exact_mut(self.in_plane).enumerate() {
+                        let plane = |k: usize| {
+                            let c = 4 * four + k;
+                            (c < self.cin).then(|| &planes[c * self.in_plane..][..self.in_plane])
+                        };
+                        let planes = [plane(0), plane(1), plane(2), plane(3)];
+                        if vnni {
+                            // SAFETY: AVX-512F and BW where `vnni` (the contract).
+                            unsafe { quantize_four(planes, per_step, dst) };
+                        } else {
+                            quantize_four_avx2(planes, per_step, quads.levels, dst);
+                        }
+                    }
+                }
+            }
+        }
         true
     }
 
@@ -958,6 +1113,7 @@ pub(crate) fn product_forms() -> impl Iterator<Item = Products> + Clone {
         Products::Avx512,
         Products::Bf16,
         Products::Vnni,
+        Products::Maddubs,
     ]
     .into_iter()
     .filter(|p| p.supported())
@@ -1074,6 +1230,12 @@ pub(crate) fn nonnegative_max(v: &[f32]) -> Option<f32> {
         return Some(f32::from_bits(bits));
     }
     // A negative, infinite or NaN value, or a −0 (whose sign bit makes its bits large).
+    nonnegative_max_portable(v)
+}
+
+/// [`nonnegative_max`] value by value.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+fn nonnegative_max_portable(v: &[f32]) -> Option<f32> {
     v.iter()
         .try_fold(0f32, |m, &x| (x.is_finite() && x >= 0.0).then(|| m.max(x)))
 }
@@ -1231,6 +1393,112 @@ fn quantize_interleaved(
                 };
             }
             p0 += 16;
+        }
+    }
+}
+
+/// The u8 steps of [`Products::Maddubs`]'s input: `round(v · per_step)` (ties to even), at
+/// most `levels`, as i32 lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn steps_avx2(
+    v: std::arch::x86_64::__m256,
+    per_step: std::arch::x86_64::__m256,
+    levels: std::arch::x86_64::__m256i,
+) -> std::arch::x86_64::__m256i {
+    use std::arch::x86_64::*;
+    _mm256_min_epi32(_mm256_cvtps_epi32(_mm256_mul_ps(v, per_step)), levels)
+}
+
+/// [`steps_avx2`] of one value: the same rounding (`vcvtps2dq` rounds to nearest, ties to even).
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+fn step_of(v: f32, per_step: f32, levels: i32) -> u32 {
+    ((v * per_step).round_ties_even() as i32).clamp(0, levels) as u32
+}
+
+/// [`quantize_four`] for [`Products::Maddubs`] on AVX2: steps of at most `levels`, eight
+/// positions at a time.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(unsafe_code)]
+fn quantize_four_avx2(planes: [Option<&[f32]>; 4], per_step: f32, levels: i32, dst: &mut [u32]) {
+    use std::arch::x86_64::*;
+    let n = dst.len();
+    assert!(planes.iter().flatten().all(|p| p.len() >= n));
+    let (f, top) = (_mm256_set1_ps(per_step), _mm256_set1_epi32(levels));
+    let mut i = 0;
+    while i + 8 <= n {
+        let level = |p: Option<&[f32]>| match p {
+            // SAFETY: positions i..i + 8 lie below `n`, inside the plane (asserted above).
+            Some(p) => steps_avx2(unsafe { _mm256_loadu_ps(p.as_ptr().add(i)) }, f, top),
+            None => _mm256_setzero_si256(),
+        };
+        let [p0, p1, p2, p3] = planes;
+        let word = _mm256_or_si256(
+            _mm256_or_si256(level(p0), _mm256_slli_epi32::<8>(level(p1))),
+            _mm256_or_si256(
+                _mm256_slli_epi32::<16>(level(p2)),
+                _mm256_slli_epi32::<24>(level(p3)),
+            ),
+        );
+        // SAFETY: positions i..i + 8 lie inside `dst`.
+        unsafe { _mm256_storeu_si256(dst.as_mut_ptr().add(i).cast(), word) };
+        i += 8;
+    }
+    for (i, d) in dst.iter_mut().enumerate().skip(i) {
+        *d = (0..4).fold(0, |word, k| {
+            word | (planes[k].map_or(0, |p| step_of(p[i], per_step, levels)) << (8 * k))
+        });
+    }
+}
+
+/// [`quantize_interleaved`] for [`Products::Maddubs`] on AVX2: each position's sixteen channels
+/// of a block rounded to bytes in registers (the same steps as [`quantize_four_avx2`]), their
+/// four words stored to their planes one by one.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(unsafe_code)]
+fn quantize_interleaved_avx2(
+    values: &[f32],
+    width: usize,
+    fours: usize,
+    per_step: f32,
+    levels: i32,
+    dst: &mut [u32],
+) {
+    use std::arch::x86_64::*;
+    let n = values.len() / width.max(1);
+    assert!(
+        width.is_multiple_of(BLOCK)
+            && values.len() == n * width
+            && 4 * fours <= width
+            && dst.len() == fours * n,
+        "quantize_interleaved_avx2: lengths"
+    );
+    let (f, top) = (_mm256_set1_ps(per_step), _mm256_set1_epi32(levels));
+    let mut words = [0u32; 8];
+    for (p, position) in values.chunks_exact(width).enumerate() {
+        for j in 0..fours.div_ceil(4) {
+            // SAFETY: block j's sixteen values lie within the position's `width`
+            // (`16·(j + 1) ≤ 4·fours rounded up ≤ width`, asserted above).
+            let (lo, hi) = unsafe {
+                let at = position.as_ptr().add(j * BLOCK);
+                (
+                    steps_avx2(_mm256_loadu_ps(at), f, top),
+                    steps_avx2(_mm256_loadu_ps(at.add(8)), f, top),
+                )
+            };
+            // i16 lanes: channels 0–3, 8–11 | 4–7, 12–15; then their bytes, so the words of
+            // the 128-bit halves are fours 0 and 2 | 1 and 3 (each in words 0, 1 and 4, 5).
+            let shorts = _mm256_packs_epi32(lo, hi);
+            let bytes = _mm256_packus_epi16(shorts, shorts);
+            // SAFETY: `words` holds eight words.
+            unsafe { _mm256_storeu_si256(words.as_mut_ptr().cast(), bytes) };
+            let four = [words[0], words[4], words[1], words[5]];
+            for (k, &word) in four.iter().enumerate().take(fours - 4 * j) {
+                dst[(4 * j + k) * n + p] = word;
+            }
         }
     }
 }
@@ -1539,6 +1807,70 @@ impl Block<'_, u32> {
 }
 
 #[cfg(target_arch = "x86_64")]
+impl Block<'_, u32> {
+    /// [`Block::run`] on int8 quads ([`Quads`]) in [`Products::Maddubs`]'s products: per quad
+    /// tap two weight loads, and per position one broadcast word; each half of the block's
+    /// sixteen channels takes `vpmaddubsw` (two u8 × i8 products per i16 lane), `vpmaddwd` by
+    /// ones (two of those per i32 lane) and an add. The i32 sums times the channel's
+    /// [`Block::scale`] plus the bias are the outputs.
+    ///
+    /// # Safety
+    /// AVX2 + FMA; every `at_in[j] + taps[t]` lies inside `input`, whose bytes are at most the
+    /// layer's [`maddubs_levels`] (so no i16 sum saturates), `weights` holds `taps.len() × BLOCK` words
+    /// of bytes in −127..=127 and `bias` and `scale` `BLOCK` values.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    #[allow(unsafe_code)]
+    unsafe fn run_maddubs<const P: usize, const S: usize>(
+        &self,
+        at_in: &[usize],
+        at_out: &[usize],
+        out: &mut [f32],
+    ) {
+        use std::arch::x86_64::*;
+        let at: [usize; P] =
+            std::array::from_fn(|j| if S == 0 { at_in[j] } else { at_in[0] + S * j });
+        assert!(self.scale.len() >= BLOCK && self.bias.len() >= BLOCK);
+        debug_assert!(self.weights.len() >= self.taps.len() * BLOCK);
+        let (x, w) = (self.input.as_ptr(), self.weights.as_ptr());
+        let ones = _mm256_set1_epi16(1);
+        let mut acc = [[_mm256_setzero_si256(); 2]; P];
+        for (t, &tap) in self.taps.iter().enumerate() {
+            // SAFETY: the caller's contract: tap offsets and weights within their buffers.
+            unsafe {
+                let w0 = _mm256_loadu_si256(w.add(t * BLOCK).cast());
+                let w1 = _mm256_loadu_si256(w.add(t * BLOCK + 8).cast());
+                for (acc, &at) in acc.iter_mut().zip(&at) {
+                    debug_assert!(at + tap < self.input.len());
+                    let v = _mm256_set1_epi32(*x.add(at + tap) as i32);
+                    let p0 = _mm256_madd_epi16(_mm256_maddubs_epi16(v, w0), ones);
+                    let p1 = _mm256_madd_epi16(_mm256_maddubs_epi16(v, w1), ones);
+                    acc[0] = _mm256_add_epi32(acc[0], p0);
+                    acc[1] = _mm256_add_epi32(acc[1], p1);
+                }
+            }
+        }
+        // SAFETY: `scale` and `bias` hold BLOCK values (asserted above).
+        let (m, b) = unsafe {
+            (
+                [
+                    _mm256_loadu_ps(self.scale.as_ptr()),
+                    _mm256_loadu_ps(self.scale.as_ptr().add(8)),
+                ],
+                [
+                    _mm256_loadu_ps(self.bias.as_ptr()),
+                    _mm256_loadu_ps(self.bias.as_ptr().add(8)),
+                ],
+            )
+        };
+        let values: [[__m256; 2]; P] = std::array::from_fn(|j| {
+            std::array::from_fn(|h| _mm256_fmadd_ps(_mm256_cvtepi32_ps(acc[j][h]), m[h], b[h]))
+        });
+        self.store(&values, at_out, out);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
 impl<T> Block<'_, T> {
     /// The accumulators of [`Block::run_wide`] into `out`, in the output's layout.
     #[target_feature(enable = "avx512f,avx2,fma")]
@@ -1749,7 +2081,8 @@ mod tests {
 
     /// bf16 where it was measured faster (AMD Zen 4), int8 on the other CPUs with AVX-512 VNNI
     /// (the Intel Xeon measured), 512-bit f32 on the other CPUs with AVX-512F (Intel, where bf16
-    /// measured slower), 256-bit f32 elsewhere.
+    /// measured slower), 256-bit f32 elsewhere — also where the 256-bit int8 form
+    /// ([`Products::Maddubs`]) would run, which is chosen by `MONOTRACK_CONV` only.
     #[test]
     fn the_policy_picks_bf16_on_amd_and_int8_or_512_bit_f32_on_other_avx512_cpus() {
         assert_eq!(products_for(true, true, true, true), Products::Bf16);
@@ -1862,10 +2195,21 @@ mod tests {
     /// as in f32.
     #[test]
     fn int8_layers_match_the_definition_within_the_input_quantisation() {
-        if !Products::Vnni.supported() {
-            eprintln!("skipped: this CPU has no AVX-512 VNNI");
+        let forms: Vec<_> = [Products::Vnni, Products::Maddubs]
+            .into_iter()
+            .filter(|f| f.supported())
+            .collect();
+        if forms.is_empty() {
+            eprintln!("skipped: this CPU has neither AVX-512 VNNI nor AVX2 + FMA");
             return;
         }
+        for form in forms {
+            int8_layers_match_the_definition_in(form);
+        }
+    }
+
+    /// [`int8_layers_match_the_definition_within_the_input_quantisation`] in the products `form`.
+    fn int8_layers_match_the_definition_in(form: Products) {
         // Partial fours of input channels (3, 5, 6), partial and double blocks, both strides,
         // remainders of eight positions, batches of one and two.
         let cases = [
@@ -1894,13 +2238,12 @@ mod tests {
                 .map(|i| (i * 53 % 29) as f32 / 7.0)
                 .collect();
             let max = maps.iter().fold(0f32, |m, &v| m.max(v));
-            let mut layer = building(Products::Vnni, || {
-                Conv3x3::new(batch, cin, h, w, &weights, pad)
-            });
+            let mut layer = building(form, || Conv3x3::new(batch, cin, h, w, &weights, pad));
             assert!(
                 layer.is_int8(),
-                "{cin}→{cout}: int8 weights not taken as such"
+                "{form:?} {cin}→{cout}: int8 weights not taken as such"
             );
+            let levels = layer.quads.as_ref().map_or(0, |q| q.levels) as f32;
             let got = run_unbordered(&mut layer, &maps, (h, w));
             let (oh, ow) = ((h - 1) / stride + 1, (w - 1) / stride + 1);
             for b in 0..batch {
@@ -1914,10 +2257,10 @@ mod tests {
                     for p in 0..oh * ow {
                         let g = got[(b * cout + c) * oh * ow + p];
                         let (v, mag) = want[c * oh * ow + p];
-                        let bound = 1e-5 + 1e-5 * mag + row * max / 510.0;
+                        let bound = 1e-5 + 1e-5 * mag + row * max / (2.0 * levels);
                         assert!(
                             (g - v).abs() <= bound,
-                            "{batch}x{cin}x{h}x{w}→{cout} s{stride}: b{b} c{c} p{p}: {g} vs {v} (bound {bound})"
+                            "{form:?} {batch}x{cin}x{h}x{w}→{cout} s{stride}: b{b} c{c} p{p}: {g} vs {v} (bound {bound})"
                         );
                     }
                 }
@@ -1947,8 +2290,65 @@ mod tests {
             bias: vec![0.0; 16],
             stride: 1,
         };
-        let layer = building(Products::Vnni, || Conv3x3::new(1, 2, 4, 4, &weights, 1));
+        let layer = building(form, || Conv3x3::new(1, 2, 4, 4, &weights, 1));
         assert!(!layer.is_int8());
+    }
+
+    /// A 256-bit int8 layer's inputs keep as many steps as its weights allow without an i16 sum
+    /// of `vpmaddubsw` saturating: seven bits where two neighbouring channels' weights are both
+    /// ±127, all eight where no pair exceeds 128; at the largest input everywhere (every pair's
+    /// products at their largest) the outputs are still the definition's.
+    #[test]
+    fn maddubs_levels_keep_every_i16_sum_from_saturating() {
+        // Channel c's weights: 127 steps, or 0 for odd channels in `sparse`.
+        let kernel = |cin: usize, cout: usize, sparse: bool| -> Vec<f32> {
+            (0..cout * cin * 9)
+                .map(|i| {
+                    let c = i / 9 % cin;
+                    if sparse && c % 2 == 1 {
+                        0.0
+                    } else if i / 9 % 3 == 2 {
+                        -0.01
+                    } else {
+                        0.01
+                    }
+                })
+                .collect()
+        };
+        let q = |k: &[f32]| {
+            k.iter()
+                .map(|v| (v * 12700.0).round() as i8)
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(maddubs_levels(&q(&kernel(4, 16, false)), 16, 4), 129);
+        assert_eq!(maddubs_levels(&q(&kernel(4, 16, true)), 16, 4), 255);
+        // An odd channel count: the last channel pairs with nothing.
+        assert_eq!(maddubs_levels(&q(&kernel(3, 16, true)), 16, 3), 255);
+        if !Products::Maddubs.supported() {
+            eprintln!("skipped: this CPU has no AVX2 + FMA");
+            return;
+        }
+        let (h, w) = (6, 9);
+        for (cin, sparse) in [(4, false), (8, false), (4, true), (5, false)] {
+            let weights = ConvWeights {
+                kernel: kernel(cin, 16, sparse),
+                bias: vec![0.5; 16],
+                stride: 1,
+            };
+            let maps = vec![1.0; cin * h * w];
+            let mut layer = building(Products::Maddubs, || {
+                Conv3x3::new(1, cin, h, w, &weights, 1)
+            });
+            assert!(layer.is_int8());
+            let got = run_unbordered(&mut layer, &maps, (h, w));
+            let want = direct(&maps, (cin, h, w), &weights);
+            for (i, (&g, &(v, mag))) in got.iter().zip(&want).enumerate() {
+                assert!(
+                    (g - v).abs() <= 1e-5 + 1e-5 * mag,
+                    "{cin} channels (sparse {sparse}), output {i}: {g} vs {v}"
+                );
+            }
+        }
     }
 
     /// Interleaved buffers between layers change how the values are held, not the values: a
@@ -1957,7 +2357,7 @@ mod tests {
     /// with the bits of the planar run.
     #[test]
     fn interleaved_buffers_give_the_bits_of_planar_ones() {
-        let forms: Vec<_> = [Products::Vnni, Products::Avx2]
+        let forms: Vec<_> = [Products::Vnni, Products::Maddubs, Products::Avx2]
             .into_iter()
             .filter(|f| f.supported())
             .collect();
@@ -1971,7 +2371,8 @@ mod tests {
     }
 
     /// [`interleaved_buffers_give_the_bits_of_planar_ones`] in the products `form`: int8 layers
-    /// after a one-channel f32 one, or 256-bit f32 layers throughout.
+    /// after a one-channel f32 one (which reads the image interleaved where it is a 256-bit one),
+    /// or 256-bit f32 layers throughout.
     fn interleaved_chain_gives_the_bits_of_the_planar_one(form: Products) {
         // Channels 1 → 16 → 24 (a partial block) → 40 (a pair and a partial one) → 8; both
         // strides; maps whose position counts leave remainders of sixteen and eight; two slots.
@@ -2025,7 +2426,7 @@ mod tests {
         // The one-channel layer takes the image's planes (int8 needs more channels).
         assert_eq!(
             interleaved[0].takes_interleaved_input(),
-            form == Products::Avx2
+            matches!(form, Products::Avx2 | Products::Maddubs)
         );
         // The image, planar with its border.
         let mut image = vec![0.0; planar[0].input_len()];
