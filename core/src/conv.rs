@@ -708,13 +708,19 @@ impl Conv3x3 {
             // SAFETY: `quads` exists only where the CPU has AVX-512F, BW and VNNI, AVX2 and FMA
             // (`Products::Vnni`), or (not `vnni`) AVX2 and FMA (`Products::Maddubs`); the
             // lengths were checked above.
-            let done = unsafe {
-                if quads.vnni {
-                    self.run_vnni(&mut quads, input, input_peak, out)
-                } else {
-                    self.run_maddubs(&mut quads, input, input_peak, out)
-                }
-            };
+            let done = unsafe { self.quantize(&mut quads, input, input_peak) };
+            if done {
+                // SAFETY: as above; `quads.input` now holds this run's input.
+                #[allow(unsafe_code)]
+                let peak = unsafe {
+                    if quads.vnni {
+                        self.run_vnni(&quads, out)
+                    } else {
+                        self.run_maddubs(&quads, out)
+                    }
+                };
+                self.peak = peak;
+            }
             self.quads = Some(quads);
             if done {
                 return;
@@ -898,27 +904,17 @@ impl Conv3x3 {
         self.quads.is_some()
     }
 
-    /// Quantises `input` into `quads.input` and runs the int8 kernel; false (nothing written)
-    /// where the input holds a negative or non-finite value, which u8 cannot carry.
+    /// The int8 kernel on the input [`Self::quantize`] left in `quads`; returns the largest value
+    /// stored where the output is interleaved.
     ///
     /// # Safety
-    /// The CPU has AVX-512F, BW and VNNI, AVX2 and FMA; `input` and `out` have the layer's
-    /// lengths and `quads` is the layer's.
+    /// The CPU has AVX-512F, BW and VNNI, AVX2 and FMA; `out` has the layer's length and `quads`
+    /// is the layer's.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx512bw,avx512vnni,avx2,fma")]
     #[allow(unsafe_code)]
-    unsafe fn run_vnni(
-        &mut self,
-        quads: &mut Quads,
-        input: &[f32],
-        input_peak: Option<f32>,
-        out: &mut [f32],
-    ) -> bool {
-        // SAFETY: the CPU has AVX-512F and BW (the caller's contract); the rest as the caller's.
-        if !unsafe { self.quantize(quads, input, input_peak) } {
-            return false;
-        }
-        self.peak = self.for_each_block(
+    unsafe fn run_vnni(&self, quads: &Quads, out: &mut [f32]) -> Option<f32> {
+        self.for_each_block(
             &quads.input,
             &quads.packed,
             &quads.taps,
@@ -932,31 +928,19 @@ impl Conv3x3 {
                     each_group_wide!(block.run_vnni, 1, self, out);
                 }
             },
-        );
-        true
+        )
     }
 
     /// [`Self::run_vnni`] in [`Products::Maddubs`]'s products, one block of [`BLOCK`] output
     /// channels at a time.
     ///
     /// # Safety
-    /// The CPU has AVX2 and FMA; `input` and `out` have the layer's lengths and `quads` is the
-    /// layer's.
+    /// The CPU has AVX2 and FMA; `out` has the layer's length and `quads` is the layer's.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     #[allow(unsafe_code)]
-    unsafe fn run_maddubs(
-        &mut self,
-        quads: &mut Quads,
-        input: &[f32],
-        input_peak: Option<f32>,
-        out: &mut [f32],
-    ) -> bool {
-        // SAFETY: the caller's contract (`quads` not `vnni`, so only AVX2 is needed).
-        if !unsafe { self.quantize(quads, input, input_peak) } {
-            return false;
-        }
-        self.peak = self.for_each_block(
+    unsafe fn run_maddubs(&self, quads: &Quads, out: &mut [f32]) -> Option<f32> {
+        self.for_each_block(
             &quads.input,
             &quads.packed,
             &quads.taps,
@@ -966,8 +950,7 @@ impl Conv3x3 {
             |block, _, out| {
                 each_group!(block.run_maddubs, self, out, POSITIONS_MADDUBS);
             },
-        );
-        true
+        )
     }
 
     /// Quantises `input` into `quads.input` (`u8 = round(v · levels / max)`, `levels` the
