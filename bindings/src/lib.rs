@@ -131,6 +131,42 @@ mod tests {
     }
 
     #[test]
+    fn camera_benchmark_errors_are_typed() {
+        let camera = FrameDesc {
+            width: 64,
+            height: 48,
+            format: PixelFormat::Nv21,
+            row_stride: 64,
+            uv_row_stride: 64,
+            uv_pixel_stride: 2,
+            rotation_degrees: 90,
+            mirrored: false,
+        };
+        // The source's bytes do not match its size.
+        assert!(matches!(
+            run_camera_benchmark(vec![0; 10], 4, 4, camera, 10),
+            Err(MonotrackError::InvalidFrame { .. })
+        ));
+        assert!(matches!(
+            run_camera_benchmark(vec![], 0, 0, camera, 10),
+            Err(MonotrackError::InvalidFrame { .. })
+        ));
+        // A bad camera description and too few frames.
+        let bad = FrameDesc {
+            uv_pixel_stride: 1,
+            ..camera
+        };
+        assert!(matches!(
+            run_camera_benchmark(vec![0; 16], 4, 4, bad, 10),
+            Err(MonotrackError::InvalidFrame { .. })
+        ));
+        assert!(matches!(
+            run_camera_benchmark(vec![0; 16], 4, 4, camera, 1),
+            Err(MonotrackError::InvalidConfig { .. })
+        ));
+    }
+
+    #[test]
     fn fit_errors_are_typed() {
         let r = fit_landmarks(
             vec![Point2 { x: 1.0, y: 1.0 }; 3],

@@ -434,6 +434,107 @@ pub struct StageStat {
     pub mean_us: f64,
 }
 
+/// One stage's median and 90th percentile, microseconds.
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct StagePercentiles {
+    /// Median.
+    pub median_us: f64,
+    /// 90th percentile.
+    pub p90_us: f64,
+}
+
+/// Per-stage times of one kind of frame, camera bytes to result (see `run_camera_benchmark`).
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct FrameStageTimes {
+    /// Camera bytes → upright luma.
+    pub convert: StagePercentiles,
+    /// Face region: NCC + face check on tracked frames, the detector on detected ones.
+    pub region: StagePercentiles,
+    /// M3 landmarks.
+    pub landmarks: StagePercentiles,
+    /// Optical-flow filter.
+    pub flow: StagePercentiles,
+    /// 3D fit.
+    pub fit: StagePercentiles,
+    /// The whole call.
+    pub total: StagePercentiles,
+}
+
+/// What `run_camera_benchmark` measured (the JSON of `monotrack bench --json`).
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct CameraBenchReport {
+    /// Which kernel forms ran: `native` or `portable` (`MONOTRACK_KERNELS=portable`).
+    pub path: String,
+    /// The CPU, in words.
+    pub cpu: String,
+    /// Frames in the clip.
+    pub frames: u32,
+    /// Frames whose faces were all tracked.
+    pub tracked: FrameStageTimes,
+    /// Frames that ran the whole-frame detector and found the face.
+    pub detected: FrameStageTimes,
+}
+
+impl From<monotrack_core::bench::FrameStages> for FrameStageTimes {
+    fn from(s: monotrack_core::bench::FrameStages) -> Self {
+        let p = |p: monotrack_core::bench::Percentiles| StagePercentiles {
+            median_us: p.median_us,
+            p90_us: p.p90_us,
+        };
+        Self {
+            convert: p(s.convert),
+            region: p(s.region),
+            landmarks: p(s.landmarks),
+            flow: p(s.flow),
+            fit: p(s.fit),
+            total: p(s.total),
+        }
+    }
+}
+
+/// The benchmark from camera frames to result (the same code as `monotrack bench`): a clip of
+/// `frames` frames with the face of `source_luma` (a `source_width`×`source_height` upright 8-bit
+/// picture, e.g. the app's own sample face) moving, each frame laid out as `camera` describes
+/// (format, strides, rotation, mirroring: what the app's camera delivers), tracked once in video
+/// mode and once with the detector on every frame; per-stage median and p90.
+///
+/// # Errors
+/// `InvalidFrame` for a bad `camera` description or a source whose size does not match its
+/// bytes, `InvalidConfig` for fewer than 2 or too many frames or a source without a face.
+#[uniffi::export]
+pub fn run_camera_benchmark(
+    source_luma: Vec<u8>,
+    source_width: u32,
+    source_height: u32,
+    camera: FrameDesc,
+    frames: u32,
+) -> Result<CameraBenchReport, MonotrackError> {
+    let source = monotrack_core::image::GrayImage::from_vec(
+        source_width as usize,
+        source_height as usize,
+        source_luma,
+    )
+    .filter(|s| s.width() > 0 && s.height() > 0)
+    .ok_or_else(|| MonotrackError::InvalidFrame {
+        msg: format!(
+            "the source picture must be a non-empty {source_width}x{source_height} luma buffer"
+        ),
+    })?;
+    let r = monotrack_core::bench::run_camera_benchmark(
+        &source,
+        &camera.try_into()?,
+        frames,
+        &core_track::TrackerConfig::default(),
+    )?;
+    Ok(CameraBenchReport {
+        path: r.path.to_string(),
+        cpu: r.cpu,
+        frames: r.frames,
+        tracked: r.tracked.into(),
+        detected: r.detected.into(),
+    })
+}
+
 /// What `run_benchmark` measured.
 #[derive(Debug, Clone, PartialEq, uniffi::Record)]
 pub struct BenchReport {

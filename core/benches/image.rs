@@ -1,5 +1,7 @@
 //! Measures frame → upright luma conversion for a 640×480 camera frame: RGBA (rotation 0 and 90°,
-//! the portrait-phone case), NV21's Y plane with rotation 270° + mirroring (front camera).
+//! the portrait-phone case), NV21 rotated 90° (an Android back camera in portrait), 270° and
+//! mirrored (the front camera), and upright. `MONOTRACK_KERNELS=portable` times the forms an
+//! aarch64 phone runs.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use monotrack_core::camera::Rotation;
@@ -18,14 +20,27 @@ fn bench(c: &mut Criterion) {
             b.iter(|| black_box(&f).to_luma(&mut out))
         });
     }
-    let mut d = FrameDesc::packed(w, h, PixelFormat::Nv21);
-    d.rotation = Rotation::R270;
-    d.mirrored = true;
-    let nv21 = vec![100u8; d.required_len().unwrap()];
-    let f = Frame::new(&nv21, d).unwrap();
-    c.bench_function("nv21_640x480_to_luma_rot270_mirrored", |b| {
-        b.iter(|| black_box(&f).to_luma(&mut out))
-    });
+    for (rot, mirrored) in [
+        (Rotation::R90, false),
+        (Rotation::R270, true),
+        (Rotation::R0, false),
+    ] {
+        let d = FrameDesc {
+            rotation: rot,
+            mirrored,
+            ..FrameDesc::packed(w, h, PixelFormat::Nv21)
+        };
+        let nv21: Vec<u8> = (0..d.required_len().unwrap())
+            .map(|i| (i * 31 % 251) as u8)
+            .collect();
+        let f = Frame::new(&nv21, d).unwrap();
+        let name = format!(
+            "nv21_640x480_to_luma_rot{}{}",
+            rot.degrees(),
+            if mirrored { "_mirrored" } else { "" }
+        );
+        c.bench_function(&name, |b| b.iter(|| black_box(&f).to_luma(&mut out)));
+    }
 }
 
 criterion_group! {

@@ -8,10 +8,17 @@
 //! with M3 in its mirror-average mode (`models/M3_IO.md`), whose cost on a phone decides whether
 //! to turn it on there. Each stage's median, 90th percentile and mean are reported in
 //! microseconds.
+//!
+//! [`run_camera_benchmark`] measures what a user's app sees: camera frames as phones deliver them
+//! (NV21 in sensor orientation on Android, NV12 on iOS, a Y plane, RGBA), converted and tracked
+//! frame after frame on a clip with a moving face ([`clip`]), from the camera bytes to the result.
 
+pub mod clip;
+
+use crate::camera::Rotation;
 use crate::error::{Error, Result};
-use crate::image::Frame;
-use crate::track::{Mode, StageTimings, Tracker, TrackerConfig};
+use crate::image::{Frame, FrameDesc, GrayImage, PixelFormat};
+use crate::track::{FaceState, Mode, StageTimings, Tracker, TrackerConfig};
 use std::time::Instant;
 
 /// Most iterations a benchmark accepts (keeps a device run bounded).
@@ -132,5 +139,147 @@ pub fn run_benchmark(
         faces,
         load_us,
         stages,
+    })
+}
+
+/// Frame period of the benchmark clip (30 fps), nanoseconds.
+const FRAME_NS: i64 = 33_333_333;
+
+/// Most frames [`run_camera_benchmark`] accepts.
+pub const MAX_CLIP_FRAMES: u32 = 100_000;
+
+/// One stage's median and 90th percentile, microseconds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct Percentiles {
+    /// Median.
+    pub median_us: f64,
+    /// 90th percentile.
+    pub p90_us: f64,
+}
+
+/// Per-stage times of one kind of frame: camera bytes → upright luma (`convert`), finding the
+/// face region (`region`: NCC + face check on tracked frames, the detector and its checks on
+/// detected ones), M3 (`landmarks`), the optical-flow filter (`flow`), the 3D fit (`fit`), and
+/// the whole call (`total`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct FrameStages {
+    /// Camera bytes → upright luma.
+    pub convert: Percentiles,
+    /// Face region.
+    pub region: Percentiles,
+    /// Landmarks.
+    pub landmarks: Percentiles,
+    /// Optical-flow filter.
+    pub flow: Percentiles,
+    /// 3D fit.
+    pub fit: Percentiles,
+    /// The whole call, camera bytes to result.
+    pub total: Percentiles,
+}
+
+impl FrameStages {
+    fn of(runs: &[StageTimings]) -> Self {
+        let pick = |get: fn(&StageTimings) -> u64| {
+            let mut v: Vec<u64> = runs.iter().map(get).collect();
+            let s = stats("", &mut v);
+            Percentiles {
+                median_us: s.median_us,
+                p90_us: s.p90_us,
+            }
+        };
+        Self {
+            convert: pick(|t| t.image_us),
+            region: pick(|t| t.region_us),
+            landmarks: pick(|t| t.landmarks_us),
+            flow: pick(|t| t.flow_us),
+            fit: pick(|t| t.fit_us),
+            total: pick(|t| t.total_us),
+        }
+    }
+}
+
+/// The Android back camera held in portrait, the benchmark's default camera: 640×480 NV21 in
+/// sensor orientation, turned 90° to make it upright.
+pub fn android_portrait_camera() -> FrameDesc {
+    FrameDesc {
+        rotation: Rotation::R90,
+        ..FrameDesc::packed(640, 480, PixelFormat::Nv21)
+    }
+}
+
+/// What [`run_camera_benchmark`] measured (the CLI's `monotrack bench --json`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct CameraBenchReport {
+    /// Which kernel forms ran (`native` or `portable`, [`crate::cpu::kernel_path`]).
+    pub path: &'static str,
+    /// The CPU, in words ([`crate::cpu::cpu_name`]).
+    pub cpu: String,
+    /// Frames in the clip.
+    pub frames: u32,
+    /// Frames whose every face was tracked (video mode, the fast tracker).
+    pub tracked: FrameStages,
+    /// Frames that ran the whole-frame detector and found the face (the clip again in image
+    /// mode, M3 single-pass as on tracked frames).
+    pub detected: FrameStages,
+}
+
+/// Runs the face pipeline on a clip of `frames` frames made from the face picture `source`
+/// ([`clip::render`], with a blank frame in the middle), each frame laid out as `camera`
+/// describes ([`clip::encode`]; any format, strides and orientation):
+/// once in video mode (the tracked frames' stages) and once in image mode (every frame detected).
+/// Rendering and laying out happen outside the timed calls.
+///
+/// # Errors
+/// [`Error::InvalidConfig`] for fewer than 2 or more than [`MAX_CLIP_FRAMES`] frames, or a clip
+/// on which no frame was tracked or detected; frame and model errors pass through.
+pub fn run_camera_benchmark(
+    source: &GrayImage,
+    camera: &FrameDesc,
+    frames: u32,
+    config: &TrackerConfig,
+) -> Result<CameraBenchReport> {
+    if !(2..=MAX_CLIP_FRAMES).contains(&frames) {
+        return Err(Error::InvalidConfig(format!(
+            "frames must be 2..={MAX_CLIP_FRAMES}, got {frames}"
+        )));
+    }
+    let desc = *camera;
+    desc.required_len()?;
+    let (ow, oh) = desc.upright_size();
+    let cut = Some(frames as usize / 2);
+    let (mut upright, mut buf) = (GrayImage::default(), Vec::new());
+    let mut pass = |mode: Mode| -> Result<Vec<StageTimings>> {
+        let mut tracker = Tracker::with_default_models(TrackerConfig { mode, ..*config })?;
+        tracker.estimator_mut().set_mirror_average(false);
+        let mut kept = Vec::with_capacity(frames as usize);
+        for t in 0..frames as usize {
+            clip::render(source, t, cut, ow, oh, &mut upright);
+            clip::encode(&upright, &desc, &mut buf)?;
+            let r = tracker.process_frame(&Frame::new(&buf, desc)?, t as i64 * FRAME_NS)?;
+            let want = match mode {
+                Mode::Video => FaceState::Tracked,
+                Mode::Image => FaceState::Detected,
+            };
+            if !r.faces.is_empty() && r.faces.iter().all(|f| f.state == want) {
+                kept.push(r.timings);
+            }
+        }
+        Ok(kept)
+    };
+    let tracked = pass(Mode::Video)?;
+    let detected = pass(Mode::Image)?;
+    if tracked.is_empty() || detected.is_empty() {
+        return Err(Error::InvalidConfig(format!(
+            "the clip gave {} tracked and {} detected frames: the source picture needs a face",
+            tracked.len(),
+            detected.len()
+        )));
+    }
+    Ok(CameraBenchReport {
+        path: crate::cpu::kernel_path().as_str(),
+        cpu: crate::cpu::cpu_name(),
+        frames,
+        tracked: FrameStages::of(&tracked),
+        detected: FrameStages::of(&detected),
     })
 }

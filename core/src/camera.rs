@@ -1,6 +1,6 @@
 //! Pinhole camera intrinsics and the SDK's geometric conventions.
 //!
-//! Conventions (stated once here, referenced everywhere; they are those of `../shared/CONTRACT.md`):
+//! Conventions (stated once here, referenced everywhere; they are those of `CONTRACT.md`):
 //! - Image coordinates are pixels, x right, y down, origin at the top-left *corner* of the top-left
 //!   pixel, so that pixel's centre is (0.5, 0.5).
 //! - The camera frame is right-handed, x right, y down, z forward (OpenCV); units are millimetres.

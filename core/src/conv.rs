@@ -2493,6 +2493,7 @@ mod tests {
         }
     }
 
+    #[cfg(target_arch = "x86_64")]
     #[test]
     fn the_input_check_takes_only_finite_nonnegative_inputs() {
         if !Products::Vnni.supported() {

@@ -81,23 +81,129 @@ mod x86 {
             std::arch::is_x86_feature_detected!("avx512f"),
         ))
     }
+
+    /// The CPUID brand string (leaves 0x8000_0002–4), trimmed; `None` where the CPU has none.
+    pub(super) fn brand() -> Option<String> {
+        use std::arch::x86_64::__cpuid;
+        #[allow(unused_unsafe, unsafe_code)]
+        // SAFETY: CPUID exists on every x86-64 CPU; leaf 0x8000_0000 is always defined and says
+        // whether the brand leaves are.
+        let top = unsafe { __cpuid(0x8000_0000) }.eax;
+        if top < 0x8000_0004 {
+            return None;
+        }
+        let mut bytes = Vec::with_capacity(48);
+        for leaf in 0x8000_0002..=0x8000_0004u32 {
+            #[allow(unused_unsafe, unsafe_code)]
+            // SAFETY: the leaf is at most the highest extended leaf the CPU reported.
+            let r = unsafe { __cpuid(leaf) };
+            for word in [r.eax, r.ebx, r.ecx, r.edx] {
+                bytes.extend_from_slice(&word.to_le_bytes());
+            }
+        }
+        let brand = String::from_utf8_lossy(&bytes)
+            .trim_matches(|c: char| c == '\0' || c.is_whitespace())
+            .to_string();
+        (!brand.is_empty()).then_some(brand)
+    }
 }
 
-/// Whether the CPU has AVX2 and FMA: the hot pixel kernels then run a copy of themselves compiled
-/// for them (the library is otherwise built for baseline x86-64).
+/// Which forms of the library's own kernels run: each kernel has a portable form (plain Rust,
+/// the reference its tests hold every other form to) and per-ISA forms (NEON on aarch64, where it
+/// is baseline; AVX2 / AVX-512 on x86-64, chosen at run time from the CPU's features).
+///
+/// `MONOTRACK_KERNELS=portable` in the environment makes every CPU run the portable forms, which
+/// on x86-64 are exactly the choices an aarch64 phone makes between this library's kernels (each
+/// NEON form gives its portable twin's bits), so the phone's path can be timed and tested on a
+/// development machine. tract's matrix kernels stay its own per-ISA ones on every CPU (NEON
+/// assembly on phones). Read once per process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum KernelPath {
+    /// The fastest forms this CPU has (NEON on aarch64, AVX2 / AVX-512 on x86-64).
+    Native,
+    /// The portable forms only (`MONOTRACK_KERNELS=portable`).
+    Portable,
+}
+
+impl KernelPath {
+    /// `"native"` or `"portable"`, as the CLI's JSON writes it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            KernelPath::Native => "native",
+            KernelPath::Portable => "portable",
+        }
+    }
+}
+
+/// The kernel path of this process (see [`KernelPath`]).
+pub fn kernel_path() -> KernelPath {
+    static PATH: std::sync::OnceLock<KernelPath> = std::sync::OnceLock::new();
+    *PATH.get_or_init(|| kernel_path_from(std::env::var("MONOTRACK_KERNELS").ok().as_deref()))
+}
+
+/// [`kernel_path`]'s reading of the `MONOTRACK_KERNELS` value.
+fn kernel_path_from(value: Option<&str>) -> KernelPath {
+    match value.map(str::trim) {
+        Some(v) if v.eq_ignore_ascii_case("portable") => KernelPath::Portable,
+        _ => KernelPath::Native,
+    }
+}
+
+/// Whether the NEON forms run: on aarch64 unless [`KernelPath::Portable`] was asked for.
+#[cfg(target_arch = "aarch64")]
+#[inline]
+pub(crate) fn neon() -> bool {
+    kernel_path() == KernelPath::Native
+}
+
+/// The CPU this process runs on, in words, for benchmark reports: the CPUID brand string on
+/// x86-64, `/proc/cpuinfo`'s model or implementer / part on Linux elsewhere, else the
+/// architecture's name.
+pub fn cpu_name() -> String {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(brand) = x86::brand() {
+        return brand;
+    }
+    if let Ok(info) = std::fs::read_to_string("/proc/cpuinfo") {
+        let field = |key: &str| {
+            info.lines()
+                .filter_map(|l| l.split_once(':'))
+                .find(|(k, _)| k.trim() == key)
+                .map(|(_, v)| v.trim().to_string())
+        };
+        if let Some(model) = field("model name").or_else(|| field("Hardware")) {
+            return model;
+        }
+        if let (Some(implementer), Some(part)) = (field("CPU implementer"), field("CPU part")) {
+            return format!(
+                "{} (implementer {implementer}, part {part})",
+                std::env::consts::ARCH
+            );
+        }
+    }
+    std::env::consts::ARCH.to_string()
+}
+
+/// Whether the CPU has AVX2 and FMA and the native path runs: the hot pixel kernels then run a
+/// copy of themselves compiled for them (the library is otherwise built for baseline x86-64).
 #[cfg(target_arch = "x86_64")]
 #[inline]
 pub(crate) fn has_avx2_fma() -> bool {
-    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("fma")
+        && kernel_path() == KernelPath::Native
 }
 
 /// For the tests of the AVX2 paths: whether the CPU has AVX2 and FMA, printing the skip reason
 /// when it has not.
-#[cfg(all(test, target_arch = "x86_64"))]
+#[cfg(test)]
 pub(crate) fn avx2_fma_or_skip() -> bool {
+    #[cfg(target_arch = "x86_64")]
     let has = has_avx2_fma();
+    #[cfg(not(target_arch = "x86_64"))]
+    let has = false;
     if !has {
-        eprintln!("SKIPPED: this CPU has no AVX2 + FMA");
+        eprintln!("SKIPPED: this CPU runs no AVX2 + FMA kernels");
     }
     has
 }
@@ -211,6 +317,16 @@ pub(crate) fn clear_upper_vector_state() {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_portable_in_the_environment_selects_the_portable_path() {
+        assert_eq!(kernel_path_from(None), KernelPath::Native);
+        assert_eq!(kernel_path_from(Some("native")), KernelPath::Native);
+        assert_eq!(kernel_path_from(Some("")), KernelPath::Native);
+        assert_eq!(kernel_path_from(Some(" Portable ")), KernelPath::Portable);
+        assert_eq!(KernelPath::Portable.as_str(), "portable");
+        assert!(!cpu_name().is_empty());
+    }
 
     #[test]
     fn only_amd_zen4_with_avx512_loses_tracts_avx512_kernels() {

@@ -5,7 +5,7 @@
 //! `bindings` crate is the only foreign-function layer.
 //!
 //! Conventions (pixels, camera axes, pose, Euler angles, landmark order) are fixed once in
-//! `../shared/CONTRACT.md` and restated in [`camera`]; every module refers to them.
+//! `CONTRACT.md` (the repository root) and restated in [`camera`]; every module refers to them.
 //!
 //! Modules follow the pipeline (see `ARCHITECTURE.md`):
 //! [`image`] → `detect` → `landmarks` → `track` → [`model`] / [`fit`] → results; and apart from
@@ -20,6 +20,7 @@ pub mod detect;
 pub mod error;
 pub mod fit;
 pub mod image;
+mod kernels;
 pub mod landmarks;
 pub mod metrics;
 pub mod model;

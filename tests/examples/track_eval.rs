@@ -178,8 +178,12 @@ fn main() -> Result<(), String> {
         },
     };
     println!(
-        "correct frame: NME (inter-ocular) < {CORRECT_NME}; M3 mirror average {}; input {:?}",
-        opt.mirror_average, opt.input
+        "correct frame: NME (inter-ocular) < {CORRECT_NME}; M3 mirror average {}; input {:?}; \
+         {} kernels on {} (MONOTRACK_KERNELS=portable: the phone's)",
+        opt.mirror_average,
+        opt.input,
+        monotrack_core::cpu::kernel_path().as_str(),
+        monotrack_core::cpu::cpu_name()
     );
     if let Some(data) = shared_data() {
         let faces = load_validation_faces(&data, 24, 100.0)?;

@@ -2,10 +2,17 @@
 //! with the outputs of the Python reference inference (onnxruntime + OpenCV preprocessing), so a
 //! change in preprocessing, tract or the weights is caught. Inputs, provenance and tolerances:
 //! `tests/data/m3_golden/make_golden.py` (rerun it whenever the models are retrained).
+//!
+//! The same cases also hold the outputs of the x86-64 portable path (`x86_64_portable.json`),
+//! which every CPU running the portable kernel forms — aarch64 phones among them — must give
+//! within float-rounding tolerances: a phone computes what the development machine computed.
+//! Recorded on x86-64 with `MONOTRACK_KERNELS=portable MONOTRACK_RECORD_GOLDEN=1 cargo test -p
+//! monotrack-tests --test m3_golden` (again whenever the models are retrained).
 
+use monotrack_core::cpu::{KernelPath, kernel_path};
 use monotrack_core::image::{Frame, FrameDesc, GrayImage, PixelFormat, Rect};
 use monotrack_core::landmarks::{FaceLandmarks, M3};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Landmark tolerance, pixels (faces are ~100 px; `make_golden.py`).
@@ -14,6 +21,13 @@ const POINT_TOL_PX: f64 = 0.5;
 const PROB_TOL: f64 = 0.02;
 /// Gaze component tolerance (`make_golden.py`).
 const GAZE_TOL: f64 = 0.02;
+/// How far the portable path on another CPU may be from the recorded x86-64 portable outputs:
+/// tract's matrix kernels sum in a different order per ISA (NEON against FMA), nothing else
+/// differs. Measured under qemu (aarch64 against the record of an Intel Xeon with AVX-512): points 1.5e-5 px,
+/// probabilities 1.2e-7, gaze 2.6e-8.
+const CROSS_ISA_POINT_TOL_PX: f64 = 1e-3;
+/// The probability and gaze counterpart of [`CROSS_ISA_POINT_TOL_PX`].
+const CROSS_ISA_VALUE_TOL: f64 = 1e-4;
 
 #[derive(Deserialize)]
 struct Gaze {
@@ -59,6 +73,109 @@ fn max_diff(got: impl IntoIterator<Item = f64>, want: &[f64]) -> f64 {
         .zip(want)
         .map(|(g, w)| (g - w).abs())
         .fold(0.0, f64::max)
+}
+
+/// What a run gives for one case, as recorded for the cross-ISA comparison.
+#[derive(Serialize, Deserialize, Clone)]
+struct Outputs {
+    image: String,
+    mirror_average: bool,
+    landmarks68: Vec<[f64; 2]>,
+    /// Yaw probabilities, face probability, mouth and brow gestures, in that order.
+    probabilities: Vec<f64>,
+    /// Left, right and combined gaze vectors.
+    gaze: Vec<f64>,
+}
+
+fn outputs(c: &Case, m3: &mut M3, out: &mut FaceLandmarks) -> Outputs {
+    let img = load_gray(&c.image);
+    let [x, y, w, h] = c.bbox;
+    m3.set_mirror_average(c.mirror_average);
+    m3.estimate(&img, &Rect::new(x, y, w, h), out).unwrap();
+    let f = |v: &[f32]| v.iter().map(|x| f64::from(*x)).collect::<Vec<_>>();
+    Outputs {
+        image: c.image.clone(),
+        mirror_average: c.mirror_average,
+        landmarks68: out
+            .points
+            .iter()
+            .map(|p| [f64::from(p[0]), f64::from(p[1])])
+            .collect(),
+        probabilities: [
+            f(&out.yaw_probs),
+            vec![f64::from(out.face_prob)],
+            f(&out.mouth),
+            f(&out.brows),
+        ]
+        .concat(),
+        gaze: [f(&out.gaze_left), f(&out.gaze_right), f(&out.gaze_combined)].concat(),
+    }
+}
+
+#[test]
+fn the_portable_path_gives_the_recorded_x86_64_outputs() {
+    let portable = kernel_path() == KernelPath::Portable || cfg!(target_arch = "aarch64");
+    if !portable {
+        eprintln!(
+            "SKIPPED: this run takes x86-64's native kernels; set MONOTRACK_KERNELS=portable to \
+             compare the portable path with the recorded x86-64 outputs"
+        );
+        return;
+    }
+    let exp: Expected =
+        serde_json::from_str(&std::fs::read_to_string(dir().join("expected.json")).unwrap())
+            .unwrap();
+    let mut m3 = M3::new().unwrap();
+    let mut out = FaceLandmarks::default();
+    let got: Vec<Outputs> = exp
+        .cases
+        .iter()
+        .map(|c| outputs(c, &mut m3, &mut out))
+        .collect();
+    let recorded = dir().join("x86_64_portable.json");
+    if cfg!(target_arch = "x86_64") && std::env::var_os("MONOTRACK_RECORD_GOLDEN").is_some() {
+        std::fs::write(
+            &recorded,
+            serde_json::to_string_pretty(&got).unwrap() + "\n",
+        )
+        .unwrap();
+        eprintln!("recorded {}", recorded.display());
+    }
+    let want: Vec<Outputs> =
+        serde_json::from_str(&std::fs::read_to_string(&recorded).unwrap()).unwrap();
+    assert_eq!(got.len(), want.len(), "cases");
+    for (g, w) in got.iter().zip(&want) {
+        assert_eq!((&g.image, g.mirror_average), (&w.image, w.mirror_average));
+        let pts = g
+            .landmarks68
+            .iter()
+            .zip(&w.landmarks68)
+            .map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1]))
+            .fold(0.0, f64::max);
+        let probs = max_diff(g.probabilities.iter().copied(), &w.probabilities);
+        let gaze = max_diff(g.gaze.iter().copied(), &w.gaze);
+        println!(
+            "{} mirror_average {} against x86-64 portable ({}): points {pts:.2e} px, probabilities {probs:.2e}, gaze {gaze:.2e}",
+            g.image,
+            g.mirror_average,
+            std::env::consts::ARCH
+        );
+        assert!(
+            pts <= CROSS_ISA_POINT_TOL_PX,
+            "{}: points off by {pts} px",
+            g.image
+        );
+        assert!(
+            probs <= CROSS_ISA_VALUE_TOL,
+            "{}: probabilities off by {probs}",
+            g.image
+        );
+        assert!(
+            gaze <= CROSS_ISA_VALUE_TOL,
+            "{}: gaze off by {gaze}",
+            g.image
+        );
+    }
 }
 
 #[test]

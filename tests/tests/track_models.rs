@@ -28,11 +28,15 @@ fn shipped_models_track_synthetic_sequences() {
     let Some(data) = shared_data_or_skip("track_models") else {
         return;
     };
-    let faces = load_validation_faces(&data, 16, 100.0).unwrap();
+    // Under emulation (tests/aarch64.sh sets MONOTRACK_EMULATED: qemu runs the networks about a
+    // thousand times slower than the host) a shorter clip, without the filter-off pass: the flow
+    // filter's kernels are checked against their portable forms by the unit tests there.
+    let emulated = std::env::var_os("MONOTRACK_EMULATED").is_some();
+    let faces = load_validation_faces(&data, if emulated { 6 } else { 16 }, 100.0).unwrap();
     let cfg = SeqConfig {
-        segments: 3,
-        segment_frames: 40,
-        still_frames: 15,
+        segments: if emulated { 2 } else { 3 },
+        segment_frames: if emulated { 14 } else { 40 },
+        still_frames: if emulated { 5 } else { 15 },
         face_px: (100.0, 200.0),
         noise_sigma: 2.0,
         crop_margin: Some(0.5),
@@ -42,13 +46,15 @@ fn shipped_models_track_synthetic_sequences() {
     let clip = synthetic_clip(cfg, faces).unwrap();
     let video = TrackerConfig::default();
     let tracking = run(&clip, video);
-    let no_filter = run(
-        &clip,
-        TrackerConfig {
-            flow_filter: false,
-            ..video
-        },
-    );
+    let no_filter = (!emulated).then(|| {
+        run(
+            &clip,
+            TrackerConfig {
+                flow_filter: false,
+                ..video
+            },
+        )
+    });
     let every = run(
         &clip,
         TrackerConfig {
@@ -58,7 +64,9 @@ fn shipped_models_track_synthetic_sequences() {
     );
     println!("{}", table_header());
     println!("{}", table_row("tracking", &tracking));
-    println!("{}", table_row("tracking, flow filter off", &no_filter));
+    if let Some(no_filter) = &no_filter {
+        println!("{}", table_row("tracking, flow filter off", no_filter));
+    }
     println!("{}", table_row("re-detect every frame", &every));
 
     let cuts = cfg.segments - 1;
@@ -78,12 +86,14 @@ fn shipped_models_track_synthetic_sequences() {
         "tracking {tracking:?} vs re-detect {every:?}"
     );
     // The filter holds still landmarks steadier than raw M3 on noisy frames.
-    assert!(
-        tracking.jitter_px < 0.8 * no_filter.jitter_px,
-        "jitter with filter {} px, without {} px",
-        tracking.jitter_px,
-        no_filter.jitter_px
-    );
+    if let Some(no_filter) = no_filter {
+        assert!(
+            tracking.jitter_px < 0.8 * no_filter.jitter_px,
+            "jitter with filter {} px, without {} px",
+            tracking.jitter_px,
+            no_filter.jitter_px
+        );
+    }
 }
 
 #[test]

@@ -1572,6 +1572,105 @@ public func FfiConverterTypeBodyTrackerConfig_lower(_ value: BodyTrackerConfig) 
 
 
 /**
+ * What `run_camera_benchmark` measured (the JSON of `monotrack bench --json`).
+ */
+public struct CameraBenchReport: Equatable, Hashable {
+    /**
+     * Which kernel forms ran: `native` or `portable` (`MONOTRACK_KERNELS=portable`).
+     */
+    public var path: String
+    /**
+     * The CPU, in words.
+     */
+    public var cpu: String
+    /**
+     * Frames in the clip.
+     */
+    public var frames: UInt32
+    /**
+     * Frames whose faces were all tracked.
+     */
+    public var tracked: FrameStageTimes
+    /**
+     * Frames that ran the whole-frame detector and found the face.
+     */
+    public var detected: FrameStageTimes
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Which kernel forms ran: `native` or `portable` (`MONOTRACK_KERNELS=portable`).
+         */path: String, 
+        /**
+         * The CPU, in words.
+         */cpu: String, 
+        /**
+         * Frames in the clip.
+         */frames: UInt32, 
+        /**
+         * Frames whose faces were all tracked.
+         */tracked: FrameStageTimes, 
+        /**
+         * Frames that ran the whole-frame detector and found the face.
+         */detected: FrameStageTimes) {
+        self.path = path
+        self.cpu = cpu
+        self.frames = frames
+        self.tracked = tracked
+        self.detected = detected
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension CameraBenchReport: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeCameraBenchReport: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> CameraBenchReport {
+        return
+            try CameraBenchReport(
+                path: FfiConverterString.read(from: &buf), 
+                cpu: FfiConverterString.read(from: &buf), 
+                frames: FfiConverterUInt32.read(from: &buf), 
+                tracked: FfiConverterTypeFrameStageTimes.read(from: &buf), 
+                detected: FfiConverterTypeFrameStageTimes.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: CameraBenchReport, into buf: inout [UInt8]) {
+        FfiConverterString.write(value.path, into: &buf)
+        FfiConverterString.write(value.cpu, into: &buf)
+        FfiConverterUInt32.write(value.frames, into: &buf)
+        FfiConverterTypeFrameStageTimes.write(value.tracked, into: &buf)
+        FfiConverterTypeFrameStageTimes.write(value.detected, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeCameraBenchReport_lift(_ buf: RustBuffer) throws -> CameraBenchReport {
+    return try FfiConverterTypeCameraBenchReport.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeCameraBenchReport_lower(_ value: CameraBenchReport) -> RustBuffer {
+    return FfiConverterTypeCameraBenchReport.lower(value)
+}
+
+
+/**
  * Pinhole intrinsics in pixels.
  */
 public struct CameraIntrinsics: Equatable, Hashable {
@@ -2156,6 +2255,115 @@ public func FfiConverterTypeFrameDesc_lift(_ buf: RustBuffer) throws -> FrameDes
 #endif
 public func FfiConverterTypeFrameDesc_lower(_ value: FrameDesc) -> RustBuffer {
     return FfiConverterTypeFrameDesc.lower(value)
+}
+
+
+/**
+ * Per-stage times of one kind of frame, camera bytes to result (see `run_camera_benchmark`).
+ */
+public struct FrameStageTimes: Equatable, Hashable {
+    /**
+     * Camera bytes → upright luma.
+     */
+    public var convert: StagePercentiles
+    /**
+     * Face region: NCC + face check on tracked frames, the detector on detected ones.
+     */
+    public var region: StagePercentiles
+    /**
+     * M3 landmarks.
+     */
+    public var landmarks: StagePercentiles
+    /**
+     * Optical-flow filter.
+     */
+    public var flow: StagePercentiles
+    /**
+     * 3D fit.
+     */
+    public var fit: StagePercentiles
+    /**
+     * The whole call.
+     */
+    public var total: StagePercentiles
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Camera bytes → upright luma.
+         */convert: StagePercentiles, 
+        /**
+         * Face region: NCC + face check on tracked frames, the detector on detected ones.
+         */region: StagePercentiles, 
+        /**
+         * M3 landmarks.
+         */landmarks: StagePercentiles, 
+        /**
+         * Optical-flow filter.
+         */flow: StagePercentiles, 
+        /**
+         * 3D fit.
+         */fit: StagePercentiles, 
+        /**
+         * The whole call.
+         */total: StagePercentiles) {
+        self.convert = convert
+        self.region = region
+        self.landmarks = landmarks
+        self.flow = flow
+        self.fit = fit
+        self.total = total
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension FrameStageTimes: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeFrameStageTimes: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> FrameStageTimes {
+        return
+            try FrameStageTimes(
+                convert: FfiConverterTypeStagePercentiles.read(from: &buf), 
+                region: FfiConverterTypeStagePercentiles.read(from: &buf), 
+                landmarks: FfiConverterTypeStagePercentiles.read(from: &buf), 
+                flow: FfiConverterTypeStagePercentiles.read(from: &buf), 
+                fit: FfiConverterTypeStagePercentiles.read(from: &buf), 
+                total: FfiConverterTypeStagePercentiles.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: FrameStageTimes, into buf: inout [UInt8]) {
+        FfiConverterTypeStagePercentiles.write(value.convert, into: &buf)
+        FfiConverterTypeStagePercentiles.write(value.region, into: &buf)
+        FfiConverterTypeStagePercentiles.write(value.landmarks, into: &buf)
+        FfiConverterTypeStagePercentiles.write(value.flow, into: &buf)
+        FfiConverterTypeStagePercentiles.write(value.fit, into: &buf)
+        FfiConverterTypeStagePercentiles.write(value.total, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFrameStageTimes_lift(_ buf: RustBuffer) throws -> FrameStageTimes {
+    return try FfiConverterTypeFrameStageTimes.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFrameStageTimes_lower(_ value: FrameStageTimes) -> RustBuffer {
+    return FfiConverterTypeFrameStageTimes.lower(value)
 }
 
 
@@ -2759,6 +2967,75 @@ public func FfiConverterTypeRect_lift(_ buf: RustBuffer) throws -> Rect {
 #endif
 public func FfiConverterTypeRect_lower(_ value: Rect) -> RustBuffer {
     return FfiConverterTypeRect.lower(value)
+}
+
+
+/**
+ * One stage's median and 90th percentile, microseconds.
+ */
+public struct StagePercentiles: Equatable, Hashable {
+    /**
+     * Median.
+     */
+    public var medianUs: Double
+    /**
+     * 90th percentile.
+     */
+    public var p90Us: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Median.
+         */medianUs: Double, 
+        /**
+         * 90th percentile.
+         */p90Us: Double) {
+        self.medianUs = medianUs
+        self.p90Us = p90Us
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension StagePercentiles: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeStagePercentiles: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> StagePercentiles {
+        return
+            try StagePercentiles(
+                medianUs: FfiConverterDouble.read(from: &buf), 
+                p90Us: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: StagePercentiles, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.medianUs, into: &buf)
+        FfiConverterDouble.write(value.p90Us, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeStagePercentiles_lift(_ buf: RustBuffer) throws -> StagePercentiles {
+    return try FfiConverterTypeStagePercentiles.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeStagePercentiles_lower(_ value: StagePercentiles) -> RustBuffer {
+    return FfiConverterTypeStagePercentiles.lower(value)
 }
 
 
@@ -4438,6 +4715,29 @@ public func runBenchmark(bytes: Data, desc: FrameDesc, iterations: UInt32)throws
         }
 })
 }
+/**
+ * The benchmark from camera frames to result (the same code as `monotrack bench`): a clip of
+ * `frames` frames with the face of `source_luma` (a `source_width`×`source_height` upright 8-bit
+ * picture, e.g. the app's own sample face) moving, each frame laid out as `camera` describes
+ * (format, strides, rotation, mirroring: what the app's camera delivers), tracked once in video
+ * mode and once with the detector on every frame; per-stage median and p90.
+ *
+ * # Errors
+ * `InvalidFrame` for a bad `camera` description or a source whose size does not match its
+ * bytes, `InvalidConfig` for fewer than 2 or too many frames or a source without a face.
+ */
+public func runCameraBenchmark(sourceLuma: Data, sourceWidth: UInt32, sourceHeight: UInt32, camera: FrameDesc, frames: UInt32)throws  -> CameraBenchReport  {
+    return try  FfiConverterTypeCameraBenchReport_lift(try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_func_run_camera_benchmark(
+        FfiConverterData.lower(sourceLuma),
+        FfiConverterUInt32.lower(sourceWidth),
+        FfiConverterUInt32.lower(sourceHeight),
+        FfiConverterTypeFrameDesc_lower(camera),
+        FfiConverterUInt32.lower(frames),uniffiCallStatus
+    )
+})
+}
 
 private enum InitializationResult {
     case ok
@@ -4476,6 +4776,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_func_run_benchmark() != 17130) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_func_run_camera_benchmark() != 28614) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_method_bodytracker_fit() != 15052) {

@@ -1,4 +1,4 @@
-//! Head pose: rotation + translation, Euler angles per `../shared/CONTRACT.md`
+//! Head pose: rotation + translation, Euler angles per `CONTRACT.md`
 //! (R = Rz(roll)·Ry(yaw)·Rx(pitch), degrees) and the rotation's partial derivatives used by the
 //! analytic Jacobians.
 

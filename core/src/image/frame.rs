@@ -21,6 +21,7 @@
 use super::GrayImage;
 use crate::camera::Rotation;
 use crate::error::{Error, Result};
+use crate::kernels::plane::{self, Orientation};
 use serde::{Deserialize, Serialize};
 
 /// Pixel formats a frame may arrive in.
@@ -224,76 +225,48 @@ impl<'a> Frame<'a> {
         let (ow, oh) = d.upright_size();
         out.resize(ow, oh);
         let dst = out.data_mut();
+        let o = Orientation::new(d.rotation, d.mirrored);
         let bpp = d.format.luma_bytes_per_pixel();
-        // Where source pixel (x, y) lands in the upright image, as (start, step along x, step along y).
-        let (mut start, mut sx, mut sy): (isize, isize, isize) = match d.rotation {
-            Rotation::R0 => (0, 1, ow as isize),
-            // (x, y) → (h - 1 - y, x)
-            Rotation::R90 => ((h - 1) as isize, ow as isize, -1),
-            // (x, y) → (w - 1 - x, h - 1 - y)
-            Rotation::R180 => ((oh * ow - 1) as isize, -1, -(ow as isize)),
-            // (x, y) → (y, w - 1 - x)
-            Rotation::R270 => (((w - 1) * ow) as isize, -(ow as isize), 1),
-        };
-        if d.mirrored {
-            // Mirror the upright image: upright column c ↦ ow - 1 - c.
-            let col = start.rem_euclid(ow as isize);
-            start += (ow as isize - 1) - 2 * col;
-            // The step that moves along upright columns flips: x's for 0°/180°, y's for 90°/270°.
-            if d.rotation.swaps_axes() {
-                sy = -sy;
-            } else {
-                sx = -sx;
-            }
+        if bpp == 1 {
+            // Gray8 and the YUV formats: only the Y plane is read.
+            return plane::upright(self.data, d.row_stride, w, h, o, dst);
         }
-        if d.rotation == Rotation::R0 && !d.mirrored {
-            // Upright rows are contiguous: a plain row-to-row pass the compiler vectorises.
-            for (y, dst_row) in dst.chunks_exact_mut(w).enumerate() {
-                let row = &self.data[y * d.row_stride..y * d.row_stride + w * bpp];
-                match d.format {
-                    PixelFormat::Rgba8 | PixelFormat::Bgra8 | PixelFormat::Rgb8 => {
-                        let (ri, bi) = if d.format == PixelFormat::Bgra8 {
-                            (2, 0)
-                        } else {
-                            (0, 2)
-                        };
-                        // A compile-time chunk size lets the compiler vectorise the loop.
-                        if bpp == 4 {
-                            for (o, px) in dst_row.iter_mut().zip(row.chunks_exact(4)) {
-                                *o = luma(px[ri], px[1], px[bi]);
-                            }
-                        } else {
-                            for (o, px) in dst_row.iter_mut().zip(row.chunks_exact(3)) {
-                                *o = luma(px[ri], px[1], px[bi]);
-                            }
-                        }
-                    }
-                    _ => dst_row.copy_from_slice(row),
+        let (ri, bi) = if d.format == PixelFormat::Bgra8 {
+            (2, 0)
+        } else {
+            (0, 2)
+        };
+        let stride = d.row_stride;
+        let pixel = |x: usize, y: usize| {
+            let px = &self.data[y * stride + x * bpp..][..3];
+            luma(px[ri], px[1], px[bi])
+        };
+        if o.transposes() {
+            let load8 = |x0: usize, y: usize| {
+                let row = &self.data[y * stride + x0 * bpp..][..8 * bpp];
+                let mut word = [0u8; 8];
+                for (o, px) in word.iter_mut().zip(row.chunks_exact(bpp)) {
+                    *o = luma(px[ri], px[1], px[bi]);
                 }
-            }
-            return;
+                u64::from_le_bytes(word)
+            };
+            return plane::transpose_with(w, h, o, dst, load8, pixel);
         }
         for y in 0..h {
-            let row = &self.data[y * d.row_stride..y * d.row_stride + w * bpp];
-            let mut o = start + sy * y as isize;
-            match d.format {
-                PixelFormat::Gray8 | PixelFormat::Nv21 | PixelFormat::Nv12 | PixelFormat::I420 => {
-                    for &v in row {
-                        dst[o as usize] = v;
-                        o += sx;
-                    }
+            let row = &self.data[y * stride..y * stride + w * bpp];
+            let dst_row = &mut dst[o.upright_row(y, h) * w..][..w];
+            // A compile-time chunk size lets the compiler vectorise the loop.
+            if bpp == 4 {
+                for (o, px) in dst_row.iter_mut().zip(row.chunks_exact(4)) {
+                    *o = luma(px[ri], px[1], px[bi]);
                 }
-                PixelFormat::Rgba8 | PixelFormat::Bgra8 | PixelFormat::Rgb8 => {
-                    let (ri, bi) = if d.format == PixelFormat::Bgra8 {
-                        (2, 0)
-                    } else {
-                        (0, 2)
-                    };
-                    for px in row.chunks_exact(bpp) {
-                        dst[o as usize] = luma(px[ri], px[1], px[bi]);
-                        o += sx;
-                    }
+            } else {
+                for (o, px) in dst_row.iter_mut().zip(row.chunks_exact(3)) {
+                    *o = luma(px[ri], px[1], px[bi]);
                 }
+            }
+            if o.flips_x() {
+                dst_row.reverse();
             }
         }
     }
@@ -415,8 +388,8 @@ mod tests {
 
     #[test]
     fn rotations_and_mirroring_match_a_reference() {
-        for (w, h) in [(5, 3), (1, 4), (4, 1)] {
-            let src: Vec<u8> = (0..(w * h) as u8).collect();
+        for (w, h) in [(5, 3), (1, 4), (4, 1), (19, 13), (40, 33)] {
+            let src: Vec<u8> = (0..w * h).map(|i| (i * 7 % 256) as u8).collect();
             let at = |x: usize, y: usize| src[y * w + x];
             for rot in [Rotation::R0, Rotation::R90, Rotation::R180, Rotation::R270] {
                 for mirrored in [false, true] {
@@ -443,6 +416,37 @@ mod tests {
                                 "{rot:?} mirrored={mirrored} at ({ox},{oy})"
                             );
                         }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn rgb_formats_turn_as_their_luma_does() {
+        for (w, h) in [(5, 3), (19, 13), (40, 33)] {
+            let (rgb, _) = pattern(w, h);
+            for format in [PixelFormat::Rgba8, PixelFormat::Bgra8, PixelFormat::Rgb8] {
+                let (buf, upright) = pack(&rgb, w, h, format, 5);
+                let mut luma = GrayImage::default();
+                Frame::new(&buf, upright).unwrap().to_luma(&mut luma);
+                for rot in [Rotation::R0, Rotation::R90, Rotation::R180, Rotation::R270] {
+                    for mirrored in [false, true] {
+                        let turn = |format| FrameDesc {
+                            rotation: rot,
+                            mirrored,
+                            ..FrameDesc::packed(w as u32, h as u32, format)
+                        };
+                        let (mut want, mut got) = (GrayImage::default(), GrayImage::default());
+                        Frame::new(luma.data(), turn(PixelFormat::Gray8))
+                            .unwrap()
+                            .to_luma(&mut want);
+                        let d = FrameDesc {
+                            row_stride: upright.row_stride,
+                            ..turn(format)
+                        };
+                        Frame::new(&buf, d).unwrap().to_luma(&mut got);
+                        assert_eq!(got, want, "{format:?} {w}x{h} {rot:?} {mirrored}");
                     }
                 }
             }

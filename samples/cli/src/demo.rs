@@ -2,12 +2,14 @@
 //! pipeline (detector → NCC tracking → M3 → optical-flow filter → MSBP) on a sequence made from the
 //! committed public-domain `samples/data/astronaut.jpg` — smooth similarity motion (translation,
 //! scale, in-plane rotation) pasted into a 640×480 frame, with a cut to a blank frame and back at
-//! the middle to force a re-detection — writes overlay PNGs and prints a per-stage timing table.
+//! the middle to force a re-detection (`monotrack_core::bench::clip`, the clip `monotrack bench`
+//! feeds as camera frames) — writes overlay PNGs and prints a per-stage timing table.
 //! Nothing is downloaded and `../shared` is not needed.
 
 use crate::LineSink;
 use crate::track::{Canvas, draw_overlay, frame_json};
 use monotrack_core::TrackerConfig;
+use monotrack_core::bench::clip;
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::image::GrayImage;
 use monotrack_core::track::{FaceState, StageTimings, Tracker};
@@ -22,52 +24,11 @@ const H: usize = 480;
 const FRAME_NS: i64 = 33_333_333;
 
 /// The demo's source image as luma.
-fn source() -> Result<GrayImage, String> {
+pub(crate) fn source() -> Result<GrayImage, String> {
     let mut out = GrayImage::default();
     crate::luma::decode_luma(ASTRONAUT_JPG, &mut out)
         .map_err(|e| format!("embedded astronaut.jpg: {e}"))?;
     Ok(out)
-}
-
-/// Frame `t`: the source under a smooth similarity (centre path, scale 0.88–1.12 — a face of about
-/// 100 px, a front camera at arm's length — roll ±12°),
-/// bilinear, on a mid-grey background. Frame `cut` is blank (the face leaves the picture).
-fn render(src: &GrayImage, t: usize, cut: usize, out: &mut GrayImage) {
-    out.resize(W, H);
-    if t == cut {
-        out.data_mut().fill(96);
-        return;
-    }
-    let tf = t as f64;
-    let scale = 1.0 + 0.12 * (tf * std::f64::consts::TAU / 90.0).sin();
-    let angle = (12.0f64).to_radians() * (tf * std::f64::consts::TAU / 120.0).sin();
-    let cx = W as f64 / 2.0 + 90.0 * (tf * std::f64::consts::TAU / 100.0).sin();
-    let cy = H as f64 / 2.0 + 40.0 * (tf * std::f64::consts::TAU / 70.0).sin();
-    let (sw, sh) = (src.width() as f64, src.height() as f64);
-    let (ca, sa) = (angle.cos() / scale, angle.sin() / scale);
-    let data = out.data_mut();
-    for y in 0..H {
-        for x in 0..W {
-            // Inverse map: frame pixel centre → source coordinates.
-            let (dx, dy) = (x as f64 + 0.5 - cx, y as f64 + 0.5 - cy);
-            let sx = ca * dx + sa * dy + sw / 2.0 - 0.5;
-            let sy = -sa * dx + ca * dy + sh / 2.0 - 0.5;
-            data[y * W + x] = if sx < 0.0 || sy < 0.0 || sx > sw - 1.0 || sy > sh - 1.0 {
-                96
-            } else {
-                let (x0, y0) = (sx.floor() as usize, sy.floor() as usize);
-                let (x1, y1) = (
-                    (x0 + 1).min(src.width() - 1),
-                    (y0 + 1).min(src.height() - 1),
-                );
-                let (fx, fy) = (sx - x0 as f64, sy - y0 as f64);
-                let p = |xx: usize, yy: usize| f64::from(src.get(xx, yy));
-                let v = (1.0 - fy) * ((1.0 - fx) * p(x0, y0) + fx * p(x1, y0))
-                    + fy * ((1.0 - fx) * p(x0, y1) + fx * p(x1, y1));
-                (v + 0.5) as u8
-            };
-        }
-    }
 }
 
 fn median(v: &mut [u64]) -> u64 {
@@ -99,7 +60,7 @@ pub fn run(frames: usize, overlay: Option<&Path>, out: Option<&Path>) -> Result<
     let (mut tracked, mut detected): (Vec<StageTimings>, Vec<StageTimings>) = (vec![], vec![]);
     let (mut n_tracked, mut n_detected, mut n_lost) = (0, 0, 0);
     for t in 0..frames {
-        render(&src, t, cut, &mut frame);
+        clip::render(&src, t, Some(cut), W, H, &mut frame);
         let r = tracker
             .process(&frame, t as i64 * FRAME_NS)
             .map_err(|e| e.to_string())?;

@@ -1,6 +1,7 @@
 //! `monotrack`: the desktop command line of the SDK. Its JSON in and out follows
-//! `../shared/CONTRACT.md` exactly; it is how the SDK is measured from outside.
+//! `CONTRACT.md` exactly; it is how the SDK is measured from outside.
 
+mod bench;
 mod body;
 mod demo;
 mod detect;
@@ -108,6 +109,26 @@ enum Command {
         /// Also write the CONTRACT `track` JSON lines here.
         #[arg(long)]
         out: Option<PathBuf>,
+    },
+    /// Time the face pipeline per stage from camera frames (a moving-face clip laid out as the
+    /// camera delivers it) to the result; `MONOTRACK_KERNELS=portable` times the phone's kernels.
+    Bench {
+        /// Camera frame format.
+        #[arg(long, value_enum, default_value = "nv21")]
+        format: bench::FormatArg,
+        /// Clockwise rotation that makes the 640x480 sensor buffer upright (90: a back camera in
+        /// portrait).
+        #[arg(long, default_value_t = 90, value_parser = bench::parse_rotation)]
+        rotation: u32,
+        /// Mirror the upright image (front cameras).
+        #[arg(long)]
+        mirrored: bool,
+        /// Frames in the clip (each runs once tracked and once detected).
+        #[arg(long, default_value_t = 300)]
+        frames: u32,
+        /// Print the report as one JSON object.
+        #[arg(long)]
+        json: bool,
     },
     /// 3D body pose and dimensions from 2D joints with a known or floor-calibrated camera.
     BodyFit {
@@ -243,6 +264,13 @@ fn main() -> ExitCode {
             frames,
             out,
         } => demo::run(frames, Some(&overlay), out.as_deref()),
+        Command::Bench {
+            format,
+            rotation,
+            mirrored,
+            frames,
+            json,
+        } => bench::run(format, rotation, mirrored, frames, json),
         Command::BodyFit {
             input,
             out,

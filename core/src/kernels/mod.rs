@@ -1,0 +1,16 @@
+//! The library's hand-written pixel kernels that have a form per instruction set, one folder per
+//! kernel: `mod.rs` holds the portable form — plain Rust, the reference — the dispatch and the
+//! tests every form must pass; `arm64.rs` the NEON form (baseline on aarch64: no run-time check);
+//! `x86_64.rs` the x86-64 form where one pays. [`crate::cpu::kernel_path`] decides between them
+//! (`MONOTRACK_KERNELS=portable` runs the portable forms on any CPU, which is what an aarch64 phone
+//! computes, bit for bit).
+//!
+//! | kernel | portable | aarch64 | x86-64 |
+//! |---|---|---|---|
+//! | [`plane`]: an 8-bit plane made upright (rotation, mirroring) | 8×8 tiles transposed in `u64` words | 16×16 tiles in NEON registers | 16×16 tiles in SSE2 registers |
+//!
+//! The M3 trunk layers, patch warps, bilateral filter and LK windows keep their x86-64 forms beside
+//! their pipeline modules (`conv`, `landmarks::{dense, warp, filter}`, `track::flow`); on aarch64
+//! those stages run their portable forms, and the trunk layers run in tract's NEON kernels.
+
+pub(crate) mod plane;

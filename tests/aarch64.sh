@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Runs the phone's instruction set here: the tests cross-compiled for aarch64-unknown-linux-gnu (the
+# ISA and `cfg(target_arch = "aarch64")` code of aarch64-linux-android and aarch64-apple-ios: NEON
+# kernels, tract's arm64 kernels) and run under qemu user-mode emulation. Installs what it needs
+# (Debian's qemu-user and aarch64 cross gcc, the rust target). Emulated time is not phone time:
+# this checks correctness; speed is judged with `MONOTRACK_KERNELS=portable` on the host.
+#
+# What runs (the rest of the workspace's tests are architecture-neutral Rust, run on the host):
+# core's unit tests (every kernel against its portable reference, the M3 and detector graphs),
+# the M3 golden cases against the Python reference and against the recorded x86-64 outputs, the
+# tracker on a synthetic clip with the shipped models (quality bounds), the fit tests, the FFI
+# input fuzz test.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+T=aarch64-unknown-linux-gnu
+if ! command -v qemu-aarch64 >/dev/null || ! command -v aarch64-linux-gnu-gcc >/dev/null; then
+  echo "installing qemu-user and the aarch64 cross gcc"
+  (apt-get update -qq && apt-get install -y -qq qemu-user gcc-aarch64-linux-gnu libc6-dev-arm64-cross) >/dev/null
+fi
+rustup target list --installed | grep -qx "$T" || rustup target add "$T"
+export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=aarch64-linux-gnu-gcc
+export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu"
+export CC_aarch64_unknown_linux_gnu=aarch64-linux-gnu-gcc
+export AR_aarch64_unknown_linux_gnu=aarch64-linux-gnu-ar
+echo "== aarch64 under $(qemu-aarch64 --version | head -n 1)"
+# qemu runs the networks about a thousand times slower than the host: the tracker's model test
+# takes a shorter clip there (MONOTRACK_EMULATED); track_synthetic (oracle landmarks: NCC, flow
+# filter and fit, portable code whose kernels the unit tests cover) runs on the host only. One
+# cargo call, so that every crate is built once with one feature set.
+MONOTRACK_EMULATED=1 cargo test --profile qemu --no-fail-fast --target "$T" \
+  -p monotrack-core -p monotrack-tests -p monotrack-ffi --lib \
+  --test m3_golden --test track_models --test fit_synthetic --test fit_real --test fuzz_inputs
