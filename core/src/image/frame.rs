@@ -237,20 +237,18 @@ impl<'a> Frame<'a> {
             (0, 2)
         };
         let stride = d.row_stride;
-        let pixel = |x: usize, y: usize| {
-            let px = &self.data[y * stride + x * bpp..][..3];
-            luma(px[ri], px[1], px[bi])
-        };
         if o.transposes() {
-            let load8 = |x0: usize, y: usize| {
-                let row = &self.data[y * stride + x0 * bpp..][..8 * bpp];
-                let mut word = [0u8; 8];
-                for (o, px) in word.iter_mut().zip(row.chunks_exact(bpp)) {
-                    *o = luma(px[ri], px[1], px[bi]);
+            // Each source row's luma written down an upright column. (Through the plane's 8×8
+            // tiles, with the luma of eight pixels packed per word, it measured 390-400 against
+            // 310 µs for a 640×480 RGBA frame: the packing does not vectorise.)
+            for y in 0..h {
+                let row = &self.data[y * stride..y * stride + w * bpp];
+                for (x, px) in row.chunks_exact(bpp).enumerate() {
+                    let (ox, oy) = o.upright(x, y, w, h);
+                    dst[oy * ow + ox] = luma(px[ri], px[1], px[bi]);
                 }
-                u64::from_le_bytes(word)
-            };
-            return plane::transpose_with(w, h, o, dst, load8, pixel);
+            }
+            return;
         }
         for y in 0..h {
             let row = &self.data[y * stride..y * stride + w * bpp];

@@ -157,8 +157,7 @@ pub(crate) fn upright(
 
 /// The portable transposition of any source of 8-bit values, for orientations that transpose:
 /// `load8(x0, y)` gives source pixels x0..x0 + 8 of row y as a little-endian word, `pixel(x, y)`
-/// one pixel (for the edges the 8×8 tiles leave). The RGB formats' quarter turns use it with
-/// their luma computed on the way.
+/// one pixel (for the edges the 8×8 tiles leave).
 pub(crate) fn transpose_with(
     w: usize,
     h: usize,
