@@ -133,17 +133,23 @@ pub(crate) fn upright(
     }
     #[cfg(target_arch = "aarch64")]
     if crate::cpu::neon() {
-        #[allow(unsafe_code)]
-        // SAFETY: NEON is part of every aarch64 target's baseline.
-        let (tw, th) = unsafe { arm64::transpose_tiles(src, stride, w, h, o, dst) };
-        return transposed_edges(w, h, tw, th, o, dst, |x, y| src[y * stride + x]);
+        return transpose16_with(src, stride, w, h, o, dst, |rows| {
+            #[allow(unsafe_code)]
+            // SAFETY: NEON is part of every aarch64 target's baseline.
+            unsafe {
+                arm64::transpose16(rows)
+            }
+        });
     }
     #[cfg(target_arch = "x86_64")]
     if crate::cpu::kernel_path() == crate::cpu::KernelPath::Native {
-        #[allow(unsafe_code)]
-        // SAFETY: SSE2 is part of the x86-64 baseline.
-        let (tw, th) = unsafe { x86_64::transpose_tiles(src, stride, w, h, o, dst) };
-        return transposed_edges(w, h, tw, th, o, dst, |x, y| src[y * stride + x]);
+        return transpose16_with(src, stride, w, h, o, dst, |rows| {
+            #[allow(unsafe_code)]
+            // SAFETY: SSE2 is part of the x86-64 baseline.
+            unsafe {
+                x86_64::transpose16(rows)
+            }
+        });
     }
     transpose_with(
         w,
@@ -179,6 +185,38 @@ pub(crate) fn transpose_with(
         }
     }
     transposed_edges(w, h, tw, th, o, dst, pixel);
+}
+
+/// The tile walk of the 16×16 forms: each whole tile's rows (bottom-up where upright columns run
+/// backwards) go to `transpose16`, which gives the tile's columns; each column is stored as a run
+/// of its upright row. The edges the tiles leave are copied pixel by pixel.
+#[cfg(any(target_arch = "aarch64", target_arch = "x86_64"))]
+#[inline]
+fn transpose16_with(
+    src: &[u8],
+    stride: usize,
+    w: usize,
+    h: usize,
+    o: Orientation,
+    dst: &mut [u8],
+    transpose16: impl Fn([&[u8; 16]; 16]) -> [[u8; 16]; 16],
+) {
+    let (tw, th) = (w / 16 * 16, h / 16 * 16);
+    for y0 in (0..th).step_by(16) {
+        let ox = o.tile_column(y0, 16, h);
+        for x0 in (0..tw).step_by(16) {
+            let rows = std::array::from_fn(|r| {
+                src[o.tile_row(y0, r, 16) * stride + x0..][..16]
+                    .try_into()
+                    .expect("16 bytes")
+            });
+            for (c, col) in transpose16(rows).iter().enumerate() {
+                let (_, oy) = o.upright(x0 + c, y0, w, h);
+                dst[oy * h + ox..][..16].copy_from_slice(col);
+            }
+        }
+    }
+    transposed_edges(w, h, tw, th, o, dst, |x, y| src[y * stride + x]);
 }
 
 /// An 8×8 block of bytes, row `r` in word `r` (byte `c` of it column `c`, little-endian), turned
