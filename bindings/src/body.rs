@@ -3,6 +3,7 @@
 //! pose alone per frame (what `monotrack body-fit` does for a `"sequence"`).
 
 use crate::MonotrackError;
+use crate::error::{guard, guard_infallible};
 use crate::types::{CameraIntrinsics, Point2, Vec3, named};
 use monotrack_core::body::calib::calibrate_floor_extrinsics;
 use monotrack_core::body::fit::DEFAULT_PRIOR_WEIGHT_PX;
@@ -186,37 +187,39 @@ pub fn calibrate_floor_camera(
     image_height: u32,
     intrinsics: Option<CameraIntrinsics>,
 ) -> Result<FloorCalibrationResult, MonotrackError> {
-    let corners: [[f64; 2]; 4] = corners_px
-        .iter()
-        .map(|p| [f64::from(p.x), f64::from(p.y)])
-        .collect::<Vec<_>>()
-        .try_into()
-        .map_err(|_| MonotrackError::InvalidConfig {
-            msg: format!("need 4 floor corners, got {}", corners_px.len()),
-        })?;
-    let size = [width_mm, depth_mm];
-    let cal = match intrinsics {
-        Some(k) => {
-            let k = Intrinsics::new(k.fx, k.fy, k.cx, k.cy)?;
-            calibrate_floor_extrinsics(&corners, size, &k)?
-        }
-        None => {
-            if image_width == 0 || image_height == 0 {
-                return Err(MonotrackError::InvalidConfig {
-                    msg: format!("image size {image_width}x{image_height} is empty"),
-                });
+    guard(|| {
+        let corners: [[f64; 2]; 4] = corners_px
+            .iter()
+            .map(|p| [f64::from(p.x), f64::from(p.y)])
+            .collect::<Vec<_>>()
+            .try_into()
+            .map_err(|_| MonotrackError::InvalidConfig {
+                msg: format!("need 4 floor corners, got {}", corners_px.len()),
+            })?;
+        let size = [width_mm, depth_mm];
+        let cal = match intrinsics {
+            Some(k) => {
+                let k = Intrinsics::new(k.fx, k.fy, k.cx, k.cy)?;
+                calibrate_floor_extrinsics(&corners, size, &k)?
             }
-            calibrate_floor(
-                &corners,
-                size,
-                [f64::from(image_width) / 2.0, f64::from(image_height) / 2.0],
-            )?
-        }
-    };
-    Ok(FloorCalibrationResult {
-        camera: BodyCameraPose::from(&cal.camera),
-        rms_px: cal.rms_px,
-        flipped: cal.flipped,
+            None => {
+                if image_width == 0 || image_height == 0 {
+                    return Err(MonotrackError::InvalidConfig {
+                        msg: format!("image size {image_width}x{image_height} is empty"),
+                    });
+                }
+                calibrate_floor(
+                    &corners,
+                    size,
+                    [f64::from(image_width) / 2.0, f64::from(image_height) / 2.0],
+                )?
+            }
+        };
+        Ok(FloorCalibrationResult {
+            camera: BodyCameraPose::from(&cal.camera),
+            rms_px: cal.rms_px,
+            flipped: cal.flipped,
+        })
     })
 }
 
@@ -331,37 +334,39 @@ impl BodyTracker {
         camera: BodyCameraPose,
         config: BodyTrackerConfig,
     ) -> Result<Arc<Self>, MonotrackError> {
-        if config.dimension_frames == 0 {
-            return Err(MonotrackError::InvalidConfig {
-                msg: "dimension_frames must be at least 1".into(),
-            });
-        }
-        if !(config.prior_weight_px.is_finite() && config.prior_weight_px >= 0.0) {
-            return Err(MonotrackError::InvalidConfig {
-                msg: format!(
-                    "prior_weight_px must be finite and >= 0, got {}",
-                    config.prior_weight_px
-                ),
-            });
-        }
-        let convention = Convention::from(config.convention);
-        Ok(Arc::new(Self {
-            state: Mutex::new(BodyState {
-                camera: BodyCamera::try_from(&camera)?,
-                convention,
-                dimension_frames: config.dimension_frames as usize,
-                fitter: BodyFitter::new(BodyFitConfig {
-                    assume_contact: config.assume_contact,
-                    prior_weight_px: config.prior_weight_px,
-                    full_model: config.full_model,
-                    ..BodyFitConfig::default()
+        guard(|| {
+            if config.dimension_frames == 0 {
+                return Err(MonotrackError::InvalidConfig {
+                    msg: "dimension_frames must be at least 1".into(),
+                });
+            }
+            if !(config.prior_weight_px.is_finite() && config.prior_weight_px >= 0.0) {
+                return Err(MonotrackError::InvalidConfig {
+                    msg: format!(
+                        "prior_weight_px must be finite and >= 0, got {}",
+                        config.prior_weight_px
+                    ),
+                });
+            }
+            let convention = Convention::from(config.convention);
+            Ok(Arc::new(Self {
+                state: Mutex::new(BodyState {
+                    camera: BodyCamera::try_from(&camera)?,
+                    convention,
+                    dimension_frames: config.dimension_frames as usize,
+                    fitter: BodyFitter::new(BodyFitConfig {
+                        assume_contact: config.assume_contact,
+                        prior_weight_px: config.prior_weight_px,
+                        full_model: config.full_model,
+                        ..BodyFitConfig::default()
+                    }),
+                    skeleton: mean_skeleton(convention)?,
+                    estimated: false,
+                    collected: Vec::with_capacity(config.dimension_frames as usize),
+                    previous: None,
                 }),
-                skeleton: mean_skeleton(convention)?,
-                estimated: false,
-                collected: Vec::with_capacity(config.dimension_frames as usize),
-                previous: None,
-            }),
-        }))
+            }))
+        })
     }
 
     /// Fits one frame's observed joints (at least the torso: pelvis or both hips, thorax or both
@@ -374,78 +379,82 @@ impl BodyTracker {
     /// `InvalidConfig` for a joint given twice, non-finite positions, or too few joints to place
     /// the torso.
     pub fn fit(&self, joints: Vec<BodyJoint2d>) -> Result<BodyFitResult, MonotrackError> {
-        let mut obs = Joints2d {
-            points: [[0.0; 2]; N_JOINTS],
-            weights: [0.0; N_JOINTS],
-        };
-        for j in &joints {
-            let i = Joint::from(j.joint).index();
-            if obs.weights[i] > 0.0 {
-                return Err(MonotrackError::InvalidConfig {
-                    msg: format!("joint {:?} given twice", j.joint),
-                });
+        guard(|| {
+            let mut obs = Joints2d {
+                points: [[0.0; 2]; N_JOINTS],
+                weights: [0.0; N_JOINTS],
+            };
+            for j in &joints {
+                let i = Joint::from(j.joint).index();
+                if obs.weights[i] > 0.0 {
+                    return Err(MonotrackError::InvalidConfig {
+                        msg: format!("joint {:?} given twice", j.joint),
+                    });
+                }
+                obs.points[i] = [f64::from(j.position.x), f64::from(j.position.y)];
+                obs.weights[i] = 1.0;
             }
-            obs.points[i] = [f64::from(j.position.x), f64::from(j.position.y)];
-            obs.weights[i] = 1.0;
-        }
-        obs.validate()?;
-        let mut s = self.lock();
-        let mut dimensions_us = 0;
-        if !s.estimated {
-            s.collected.push(obs);
-            if s.collected.len() >= s.dimension_frames {
-                let t = Instant::now();
-                let est = DimensionEstimator::default().estimate(
-                    &s.fitter,
-                    &s.collected,
-                    &s.camera,
-                    &Dimensions::mean(s.convention),
-                    s.convention,
-                )?;
-                s.skeleton = Skeleton::new(est.dimensions, s.convention)?;
-                s.estimated = true;
-                s.collected.clear();
-                dimensions_us = t.elapsed().as_micros() as u64;
+            obs.validate()?;
+            let mut s = self.lock();
+            let mut dimensions_us = 0;
+            if !s.estimated {
+                s.collected.push(obs);
+                if s.collected.len() >= s.dimension_frames {
+                    let t = Instant::now();
+                    let est = DimensionEstimator::default().estimate(
+                        &s.fitter,
+                        &s.collected,
+                        &s.camera,
+                        &Dimensions::mean(s.convention),
+                        s.convention,
+                    )?;
+                    s.skeleton = Skeleton::new(est.dimensions, s.convention)?;
+                    s.estimated = true;
+                    s.collected.clear();
+                    dimensions_us = t.elapsed().as_micros() as u64;
+                }
             }
-        }
-        let t = Instant::now();
-        let fit = s
-            .fitter
-            .fit_tracked(&obs, &s.camera, &s.skeleton, s.previous.as_ref())?;
-        s.previous = Some(fit.pose);
-        let pose_us = t.elapsed().as_micros() as u64;
-        Ok(BodyFitResult {
-            joints: Joint::ALL
-                .iter()
-                .zip(&fit.joints)
-                .map(|(j, p)| BodyJoint3d {
-                    joint: (*j).into(),
-                    position_mm: Vec3 {
-                        x: p.x,
-                        y: p.y,
-                        z: p.z,
-                    },
-                })
-                .collect(),
-            dimensions_mm: named(&dim::NAMES, &s.skeleton.dims.lengths),
-            dimensions_estimated: s.estimated,
-            reprojection_rms_px: fit.reprojection_rms_px,
-            contact: fit.contact.map(BodyJoint::from),
-            pose_us,
-            dimensions_us,
+            let t = Instant::now();
+            let fit = s
+                .fitter
+                .fit_tracked(&obs, &s.camera, &s.skeleton, s.previous.as_ref())?;
+            s.previous = Some(fit.pose);
+            let pose_us = t.elapsed().as_micros() as u64;
+            Ok(BodyFitResult {
+                joints: Joint::ALL
+                    .iter()
+                    .zip(&fit.joints)
+                    .map(|(j, p)| BodyJoint3d {
+                        joint: (*j).into(),
+                        position_mm: Vec3 {
+                            x: p.x,
+                            y: p.y,
+                            z: p.z,
+                        },
+                    })
+                    .collect(),
+                dimensions_mm: named(&dim::NAMES, &s.skeleton.dims.lengths),
+                dimensions_estimated: s.estimated,
+                reprojection_rms_px: fit.reprojection_rms_px,
+                contact: fit.contact.map(BodyJoint::from),
+                pose_us,
+                dimensions_us,
+            })
         })
     }
 
     /// Forgets the estimated dimensions and the last pose (a new person or a cut): the next frames
     /// estimate them again.
     pub fn reset(&self) {
-        let mut s = self.lock();
-        s.collected.clear();
-        s.estimated = false;
-        s.previous = None;
-        if let Ok(sk) = mean_skeleton(s.convention) {
-            s.skeleton = sk;
-        }
+        guard_infallible(|| {
+            let mut s = self.lock();
+            s.collected.clear();
+            s.estimated = false;
+            s.previous = None;
+            if let Ok(sk) = mean_skeleton(s.convention) {
+                s.skeleton = sk;
+            }
+        });
     }
 }
 

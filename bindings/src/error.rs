@@ -46,3 +46,51 @@ impl From<CoreError> for MonotrackError {
         }
     }
 }
+
+/// Runs one FFI call, turning a panic into [`MonotrackError::Internal`]: every fallible exported
+/// function's body goes through here, so Kotlin and Swift see the SDK's own error type (never
+/// uniffi's `InternalException` / `rustPanic`) and an app's `catch` of `MonotrackException`
+/// covers everything the SDK raises. The objects' mutexes recover from the poisoning a caught
+/// panic leaves (their tracks restart).
+pub(crate) fn guard<T>(
+    call: impl FnOnce() -> Result<T, MonotrackError>,
+) -> Result<T, MonotrackError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(call)).unwrap_or_else(|payload| {
+        Err(MonotrackError::Internal {
+            msg: format!("panic: {}", panic_message(payload.as_ref())),
+        })
+    })
+}
+
+/// Runs an FFI call that returns no error: a panic is swallowed (after the panic hook has
+/// reported it), since the foreign side has no error to receive and an unwinding panic must not
+/// cross into it.
+pub(crate) fn guard_infallible(call: impl FnOnce()) {
+    let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(call));
+}
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> &str {
+    payload
+        .downcast_ref::<&str>()
+        .copied()
+        .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
+        .unwrap_or("(no message)")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_panic_becomes_an_internal_error() {
+        let r: Result<(), _> = guard(|| panic!("broken invariant {}", 7));
+        match r {
+            Err(MonotrackError::Internal { msg }) => assert!(msg.contains("broken invariant 7")),
+            other => panic!("expected Internal, got {other:?}"),
+        }
+        let r: Result<u8, _> = guard(|| panic!("static"));
+        assert!(matches!(r, Err(MonotrackError::Internal { msg }) if msg.contains("static")));
+        assert_eq!(guard(|| Ok(3)).unwrap(), 3);
+        guard_infallible(|| panic!("swallowed"));
+    }
+}

@@ -14,11 +14,14 @@ uniffi::setup_scaffolding!();
 
 mod body;
 mod error;
+mod live;
 mod tracker;
 mod types;
 
 pub use body::*;
 pub use error::MonotrackError;
+use error::guard;
+pub use live::*;
 pub use tracker::*;
 pub use types::*;
 
@@ -40,13 +43,15 @@ pub fn sdk_version() -> String {
 /// `InvalidFrame` when the description does not match the bytes.
 #[uniffi::export]
 pub fn luma_image(bytes: &[u8], desc: FrameDesc) -> Result<LumaImage, MonotrackError> {
-    let frame = Frame::new(bytes, desc.try_into()?)?;
-    let mut out = GrayImage::default();
-    frame.to_luma(&mut out);
-    Ok(LumaImage {
-        width: out.width() as u32,
-        height: out.height() as u32,
-        pixels: out.data().to_vec(),
+    guard(|| {
+        let frame = Frame::new(bytes, desc.try_into()?)?;
+        let mut out = GrayImage::default();
+        frame.to_luma(&mut out);
+        Ok(LumaImage {
+            width: out.width() as u32,
+            height: out.height() as u32,
+            pixels: out.data().to_vec(),
+        })
     })
 }
 
@@ -57,7 +62,7 @@ pub fn luma_image(bytes: &[u8], desc: FrameDesc) -> Result<LumaImage, MonotrackE
 /// `InvalidConfig` for a zero size.
 #[uniffi::export]
 pub fn default_camera(width: u32, height: u32) -> Result<CameraIntrinsics, MonotrackError> {
-    Ok(Intrinsics::default_for(width, height)?.into())
+    guard(|| Ok(Intrinsics::default_for(width, height)?.into()))
 }
 
 /// Fits the deformable 3D face model to 68 landmarks (pixels, iBUG order; a point with a NaN
@@ -73,29 +78,31 @@ pub fn fit_landmarks(
     camera: Option<CameraIntrinsics>,
     method: FitMethod,
 ) -> Result<FitResult, MonotrackError> {
-    if landmarks.len() != N_LANDMARKS {
-        return Err(MonotrackError::InvalidConfig {
-            msg: format!("expected {N_LANDMARKS} landmarks, got {}", landmarks.len()),
-        });
-    }
-    let cam = match camera {
-        Some(c) => Intrinsics::from(c),
-        None => Intrinsics::default_for(width, height)?,
-    };
-    let mut pts = [[0.0; 2]; N_LANDMARKS];
-    let mut w = [1.0; N_LANDMARKS];
-    for (i, p) in landmarks.iter().enumerate() {
-        if p.x.is_nan() || p.y.is_nan() {
-            w[i] = 0.0;
-        } else {
-            pts[i] = [f64::from(p.x), f64::from(p.y)];
+    guard(|| {
+        if landmarks.len() != N_LANDMARKS {
+            return Err(MonotrackError::InvalidConfig {
+                msg: format!("expected {N_LANDMARKS} landmarks, got {}", landmarks.len()),
+            });
         }
-    }
-    let fit = match method {
-        FitMethod::Msbp => Msbp::new(MsbpConfig::default()).fit(&pts, Some(&w), &cam, None)?,
-        FitMethod::Ffbp => Ffbp::new(FfbpConfig::default()).fit(&pts, Some(&w), &cam)?,
-    };
-    Ok(FitResult::from(&fit))
+        let cam = match camera {
+            Some(c) => Intrinsics::from(c),
+            None => Intrinsics::default_for(width, height)?,
+        };
+        let mut pts = [[0.0; 2]; N_LANDMARKS];
+        let mut w = [1.0; N_LANDMARKS];
+        for (i, p) in landmarks.iter().enumerate() {
+            if p.x.is_nan() || p.y.is_nan() {
+                w[i] = 0.0;
+            } else {
+                pts[i] = [f64::from(p.x), f64::from(p.y)];
+            }
+        }
+        let fit = match method {
+            FitMethod::Msbp => Msbp::new(MsbpConfig::default()).fit(&pts, Some(&w), &cam, None)?,
+            FitMethod::Ffbp => Ffbp::new(FfbpConfig::default()).fit(&pts, Some(&w), &cam)?,
+        };
+        Ok(FitResult::from(&fit))
+    })
 }
 
 #[cfg(test)]

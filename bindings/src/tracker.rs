@@ -3,6 +3,7 @@
 //! benchmark (`monotrack_core::bench`) for the device benchmark apps.
 
 use crate::MonotrackError;
+use crate::error::{guard, guard_infallible};
 use crate::types::{CameraIntrinsics, FrameDesc, HeadPose, NamedValue, Point2, Vec3, named};
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::detect::DetectorConfig;
@@ -27,7 +28,9 @@ pub struct TrackerConfig {
     pub running_mode: RunningMode,
     /// Most faces tracked at once (1..=16).
     pub max_faces: u32,
-    /// Intrinsics of the upright image, pixels; `None`: fx = fy = 0.9·max side, centred.
+    /// The camera's intrinsics for the frames as passed in (the sensor's, before rotation and
+    /// mirroring: `CameraIntrinsics`); `None`: fx = fy = 0.9·max side of the upright image,
+    /// centred.
     pub camera: Option<CameraIntrinsics>,
     /// Smallest face the detector looks for, pixels of the upright image (16..=4096). Default 24;
     /// 16 with `min_detection_score` 0.25 is the small-faces operating point (faces down to ~17 px,
@@ -64,7 +67,10 @@ pub fn default_tracker_config() -> TrackerConfig {
 }
 
 /// The embedded models' tracker for `config`; in image mode whatever its mode with `stills`.
-fn build_tracker(config: &TrackerConfig, stills: bool) -> Result<Tracker, MonotrackError> {
+pub(crate) fn build_tracker(
+    config: &TrackerConfig,
+    stills: bool,
+) -> Result<Tracker, MonotrackError> {
     let (mut core, det) = to_core(config)?;
     if stills {
         core.mode = core_track::Mode::Image;
@@ -285,7 +291,7 @@ pub struct TrackingResult {
     pub timings: StageTimings,
 }
 
-fn result(r: &core_track::TrackingResult, w: u32, h: u32) -> TrackingResult {
+pub(crate) fn result(r: &core_track::TrackingResult, w: u32, h: u32) -> TrackingResult {
     let t = &r.timings;
     TrackingResult {
         frame_width: w,
@@ -350,14 +356,16 @@ impl FaceTracker {
     /// `InvalidConfig` for out-of-range settings, `ModelLoad` if the embedded models cannot load.
     #[uniffi::constructor]
     pub fn new(config: TrackerConfig) -> Result<Arc<Self>, MonotrackError> {
-        let video = build_tracker(&config, false)?;
-        Ok(Arc::new(Self {
-            state: Mutex::new(State {
-                config,
-                video,
-                stills: None,
-            }),
-        }))
+        guard(|| {
+            let video = build_tracker(&config, false)?;
+            Ok(Arc::new(Self {
+                state: Mutex::new(State {
+                    config,
+                    video,
+                    stills: None,
+                }),
+            }))
+        })
     }
 
     /// Processes one camera frame taken at `timestamp_ns` (video mode: strictly increasing).
@@ -371,17 +379,21 @@ impl FaceTracker {
         desc: FrameDesc,
         timestamp_ns: i64,
     ) -> Result<TrackingResult, MonotrackError> {
-        let (w, h) = upright_size(&desc);
-        let frame = Frame::new(bytes, desc.try_into()?)?;
-        let mut g = self.lock();
-        let r = g
-            .video
-            .process_frame(&frame, timestamp_ns)
-            .map_err(|e| match e {
-                monotrack_core::Error::InvalidInput(msg) => MonotrackError::InvalidFrame { msg },
-                e => e.into(),
-            })?;
-        Ok(result(r, w, h))
+        guard(|| {
+            let (w, h) = upright_size(&desc);
+            let frame = Frame::new(bytes, desc.try_into()?)?;
+            let mut g = self.lock();
+            let r = g
+                .video
+                .process_frame(&frame, timestamp_ns)
+                .map_err(|e| match e {
+                    monotrack_core::Error::InvalidInput(msg) => {
+                        MonotrackError::InvalidFrame { msg }
+                    }
+                    e => e.into(),
+                })?;
+            Ok(result(r, w, h))
+        })
     }
 
     /// Processes a still image: detection on every call, no video track touched.
@@ -393,26 +405,30 @@ impl FaceTracker {
         bytes: &[u8],
         desc: FrameDesc,
     ) -> Result<TrackingResult, MonotrackError> {
-        let (w, h) = upright_size(&desc);
-        let frame = Frame::new(bytes, desc.try_into()?)?;
-        let mut g = self.lock();
-        if g.stills.is_none() {
-            g.stills = Some(build_tracker(&g.config, true)?);
-        }
-        let stills = g.stills.as_mut().ok_or_else(|| MonotrackError::Internal {
-            msg: "no image tracker".into(),
-        })?;
-        let r = stills.process_frame(&frame, 0)?;
-        Ok(result(r, w, h))
+        guard(|| {
+            let (w, h) = upright_size(&desc);
+            let frame = Frame::new(bytes, desc.try_into()?)?;
+            let mut g = self.lock();
+            if g.stills.is_none() {
+                g.stills = Some(build_tracker(&g.config, true)?);
+            }
+            let stills = g.stills.as_mut().ok_or_else(|| MonotrackError::Internal {
+                msg: "no image tracker".into(),
+            })?;
+            let r = stills.process_frame(&frame, 0)?;
+            Ok(result(r, w, h))
+        })
     }
 
     /// Ends every track and forgets the user's shape and the timestamp history.
     pub fn reset(&self) {
-        let mut g = self.lock();
-        g.video.reset();
-        if let Some(s) = g.stills.as_mut() {
-            s.reset();
-        }
+        guard_infallible(|| {
+            let mut g = self.lock();
+            g.video.reset();
+            if let Some(s) = g.stills.as_mut() {
+                s.reset();
+            }
+        });
     }
 
     /// The settings this tracker was built with.
@@ -509,29 +525,31 @@ pub fn run_camera_benchmark(
     camera: FrameDesc,
     frames: u32,
 ) -> Result<CameraBenchReport, MonotrackError> {
-    let source = monotrack_core::image::GrayImage::from_vec(
-        source_width as usize,
-        source_height as usize,
-        source_luma,
-    )
-    .filter(|s| s.width() > 0 && s.height() > 0)
-    .ok_or_else(|| MonotrackError::InvalidFrame {
-        msg: format!(
-            "the source picture must be a non-empty {source_width}x{source_height} luma buffer"
-        ),
-    })?;
-    let r = monotrack_core::bench::run_camera_benchmark(
-        &source,
-        &camera.try_into()?,
-        frames,
-        &core_track::TrackerConfig::default(),
-    )?;
-    Ok(CameraBenchReport {
-        path: r.path.to_string(),
-        cpu: r.cpu,
-        frames: r.frames,
-        tracked: r.tracked.into(),
-        detected: r.detected.into(),
+    guard(|| {
+        let source = monotrack_core::image::GrayImage::from_vec(
+            source_width as usize,
+            source_height as usize,
+            source_luma,
+        )
+        .filter(|s| s.width() > 0 && s.height() > 0)
+        .ok_or_else(|| MonotrackError::InvalidFrame {
+            msg: format!(
+                "the source picture must be a non-empty {source_width}x{source_height} luma buffer"
+            ),
+        })?;
+        let r = monotrack_core::bench::run_camera_benchmark(
+            &source,
+            &camera.try_into()?,
+            frames,
+            &core_track::TrackerConfig::default(),
+        )?;
+        Ok(CameraBenchReport {
+            path: r.path.to_string(),
+            cpu: r.cpu,
+            frames: r.frames,
+            tracked: r.tracked.into(),
+            detected: r.detected.into(),
+        })
     })
 }
 
@@ -558,24 +576,169 @@ pub fn run_benchmark(
     desc: FrameDesc,
     iterations: u32,
 ) -> Result<BenchReport, MonotrackError> {
-    let frame = Frame::new(bytes, desc.try_into()?)?;
-    let r = monotrack_core::bench::run_benchmark(
-        &frame,
-        iterations,
-        &core_track::TrackerConfig::default(),
-    )?;
-    Ok(BenchReport {
-        device: format!("{} {}", std::env::consts::OS, std::env::consts::ARCH),
-        iterations: r.iterations,
-        stages: r
-            .stages
-            .into_iter()
-            .map(|s| StageStat {
-                name: s.name,
-                median_us: s.median_us,
-                p90_us: s.p90_us,
-                mean_us: s.mean_us,
-            })
-            .collect(),
+    guard(|| {
+        let frame = Frame::new(bytes, desc.try_into()?)?;
+        let r = monotrack_core::bench::run_benchmark(
+            &frame,
+            iterations,
+            &core_track::TrackerConfig::default(),
+        )?;
+        Ok(BenchReport {
+            device: format!("{} {}", std::env::consts::OS, std::env::consts::ARCH),
+            iterations: r.iterations,
+            stages: r
+                .stages
+                .into_iter()
+                .map(|s| StageStat {
+                    name: s.name,
+                    median_us: s.median_us,
+                    p90_us: s.p90_us,
+                    mean_us: s.mean_us,
+                })
+                .collect(),
+        })
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::types::PixelFormat;
+    use monotrack_core::camera::Rotation;
+
+    /// The upright test picture: the sample face cropped to a landscape 512×400 (so quarter turns
+    /// swap the axes).
+    fn upright_face() -> (Vec<u8>, usize, usize) {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/data/astronaut.jpg");
+        let img = image::open(path).unwrap().to_luma8();
+        let (w, h) = (512usize, 400usize);
+        let mut out = vec![0u8; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                out[y * w + x] = img.get_pixel(x as u32, (y + 40) as u32)[0];
+            }
+        }
+        (out, w, h)
+    }
+
+    /// The sensor buffer that `rotation` then `mirrored` make into `upright` (the inverse of
+    /// `Frame::to_luma`'s mapping), with its width and height.
+    fn sensor_buffer(
+        upright: &[u8],
+        uw: usize,
+        uh: usize,
+        rotation: u32,
+        mirrored: bool,
+    ) -> (Vec<u8>, usize, usize) {
+        let (bw, bh) = if rotation % 180 == 90 {
+            (uh, uw)
+        } else {
+            (uw, uh)
+        };
+        let mut buf = vec![0u8; bw * bh];
+        for oy in 0..uh {
+            for ox in 0..uw {
+                let cx = if mirrored { uw - 1 - ox } else { ox };
+                let (x, y) = match rotation {
+                    0 => (cx, oy),
+                    90 => (oy, bh - 1 - cx),
+                    180 => (bw - 1 - cx, bh - 1 - oy),
+                    _ => (bw - 1 - oy, cx),
+                };
+                buf[y * bw + x] = upright[oy * uw + ox];
+            }
+        }
+        (buf, bw, bh)
+    }
+
+    fn pose_of(
+        buf: &[u8],
+        w: usize,
+        h: usize,
+        rotation: u32,
+        mirrored: bool,
+        k: Intrinsics,
+    ) -> HeadPose {
+        let config = TrackerConfig {
+            camera: Some(CameraIntrinsics {
+                fx: k.fx,
+                fy: k.fy,
+                cx: k.cx,
+                cy: k.cy,
+            }),
+            ..default_tracker_config()
+        };
+        let tracker = FaceTracker::new(config).unwrap();
+        let desc = FrameDesc {
+            width: w as u32,
+            height: h as u32,
+            format: PixelFormat::Gray8,
+            row_stride: w as u32,
+            uv_row_stride: 0,
+            uv_pixel_stride: 0,
+            rotation_degrees: rotation,
+            mirrored,
+        };
+        let r = tracker.process_frame(buf, desc, 1).unwrap();
+        assert_eq!(r.faces.len(), 1, "rotation {rotation} mirrored {mirrored}");
+        r.faces[0].pose.clone()
+    }
+
+    /// The same scene delivered in each of the four sensor orientations, mirrored or not, with the
+    /// sensor's intrinsics for each buffer, gives the same pose in the upright camera frame.
+    #[test]
+    fn sensor_intrinsics_turn_with_the_frame() {
+        let (upright, uw, uh) = upright_face();
+        // Off-centre and non-square on purpose: a convention slip moves the pose.
+        let k_upright = Intrinsics {
+            fx: 520.0,
+            fy: 545.0,
+            cx: 0.42 * uw as f64,
+            cy: 0.58 * uh as f64,
+        };
+        let reference = pose_of(&upright, uw, uh, 0, false, k_upright);
+        for rotation in [0u32, 90, 180, 270] {
+            for mirrored in [false, true] {
+                let (buf, bw, bh) = sensor_buffer(&upright, uw, uh, rotation, mirrored);
+                let rot = Rotation::from_degrees(rotation as i32).unwrap();
+                let undo = Rotation::from_degrees(360 - rotation as i32).unwrap();
+                let m = if mirrored {
+                    k_upright.mirrored(uw as u32)
+                } else {
+                    k_upright
+                };
+                // The sensor's intrinsics: the upright ones taken back through the mirror and turn.
+                let k_sensor = m.rotated(uw as u32, uh as u32, undo);
+                let back = k_sensor.for_upright(bw as u32, bh as u32, rot, mirrored);
+                for (a, b) in [
+                    (back.fx, k_upright.fx),
+                    (back.fy, k_upright.fy),
+                    (back.cx, k_upright.cx),
+                    (back.cy, k_upright.cy),
+                ] {
+                    assert!((a - b).abs() < 1e-9, "{rotation} {mirrored}: {back:?}");
+                }
+                let pose = pose_of(&buf, bw, bh, rotation, mirrored, k_sensor);
+                let t = |p: &HeadPose| [p.translation_mm.x, p.translation_mm.y, p.translation_mm.z];
+                for (a, b) in t(&pose).iter().zip(t(&reference)) {
+                    assert!((a - b).abs() < 1e-3, "{rotation} {mirrored}: t {a} vs {b}");
+                }
+                for (a, b) in pose.rotation.iter().zip(&reference.rotation) {
+                    assert!((a - b).abs() < 1e-6, "{rotation} {mirrored}: R {a} vs {b}");
+                }
+                if rotation == 90 && !mirrored {
+                    // Passing the upright intrinsics as if they were the sensor's (the mistake the
+                    // convention exists to prevent) moves the face by millimetres.
+                    let wrong = pose_of(&buf, bw, bh, rotation, mirrored, k_upright);
+                    let d = t(&wrong)
+                        .iter()
+                        .zip(t(&reference))
+                        .map(|(a, b)| (a - b).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
+                    assert!(d > 1.0, "the test cannot tell conventions apart: {d} mm");
+                }
+            }
+        }
+    }
 }

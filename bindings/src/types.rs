@@ -83,7 +83,10 @@ impl TryFrom<FrameDesc> for CoreFrameDesc {
     }
 }
 
-/// Pinhole intrinsics in pixels.
+/// Pinhole intrinsics in pixels of the buffer as delivered: the sensor's (Camera2's
+/// `LENS_INTRINSIC_CALIBRATION`, iOS's camera intrinsic matrix), scaled to the buffer's size, before
+/// any rotation or mirroring. The SDK turns and mirrors them with the frame (`FrameDesc`), so the
+/// pose comes out in the upright image's camera frame.
 #[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
 pub struct CameraIntrinsics {
     /// Focal length x.

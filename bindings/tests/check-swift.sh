@@ -12,8 +12,10 @@ GOLDEN="$ROOT/bindings/tests/swift-golden"
 OUT="$ROOT/target/swift-gen"
 # The whole workspace, as `cargo test --workspace` built it: same feature set, so nothing rebuilds.
 cargo build -q --workspace --lib
+TARGET_DIR=$(cargo metadata -q --format-version 1 --no-deps |
+  python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
 rm -rf "$OUT" && mkdir -p "$OUT"
-cargo run -q -p monotrack-uniffi-bindgen -- generate --library "$ROOT/target/debug/libmonotrack_ffi.so" \
+cargo run -q -p monotrack-uniffi-bindgen -- generate --library "$TARGET_DIR/debug/libmonotrack_ffi.so" \
   --language swift --out-dir "$OUT" --no-format
 if [ "${1:-}" = "--update" ]; then
   rm -rf "$GOLDEN" && mkdir -p "$GOLDEN" && cp "$OUT"/* "$GOLDEN"/

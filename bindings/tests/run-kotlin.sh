@@ -28,7 +28,12 @@ KOTLIN_LIB="$TOOLS/node_modules/kotlin-compiler/lib"
 echo "== building monotrack-ffi (host)"
 # The whole workspace, as `cargo test --workspace` built it: same feature set, so nothing rebuilds.
 cargo build -q --workspace --lib
-LIB="$ROOT/target/debug/libmonotrack_ffi.so"
+# Where cargo put it: CARGO_TARGET_DIR and cargo config are honoured.
+TARGET_DIR=$(cargo metadata -q --format-version 1 --no-deps |
+  python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
+LIBDIR="$TARGET_DIR/debug"
+LIB="$LIBDIR/libmonotrack_ffi.so"
+[ -f "$LIB" ] || { echo "no $LIB after the build"; echo "kotlin: 0 passed, 1 failed"; exit 1; }
 
 echo "== generating Kotlin"
 rm -rf "$WORK/gen" && mkdir -p "$WORK/gen"
@@ -38,18 +43,26 @@ cargo run -q -p monotrack-uniffi-bindgen -- generate --library "$LIB" \
 JNA=/usr/share/java/jna.jar
 JUNIT=/usr/share/java/junit-platform-console-standalone.jar
 echo "== compiling Kotlin"
-"$KOTLINC" -jvm-target 17 -nowarn -cp "$JNA:$JUNIT" \
+# From a clean folder, so classes of a previous run can never stand in for a failed compile.
+rm -rf "$WORK/classes"
+set +e
+"$KOTLINC" -jvm-target 17 -nowarn -cp "$JNA:$JUNIT:$KOTLIN_LIB/kotlinx-coroutines-core-jvm.jar" \
   $(find "$WORK/gen" -name '*.kt') $(find "$ROOT/bindings/tests/kotlin" -name '*.kt') \
-  $(find "$ROOT/android/monotrack/src/jvmMain" "$ROOT/android/monotrack/src/jvmTest" \( -name 'FrameMapping*.kt' -o -name 'Results*.kt' \)) \
+  $(find "$ROOT/android/monotrack/src/jvmMain" "$ROOT/android/monotrack/src/jvmTest" -name '*.kt') \
   $(find "$ROOT/samples/android-bench/src" -name 'BenchSummary*.kt') \
-  -d "$WORK/classes" 2>&1 | grep -v '^warning' || true
-[ -d "$WORK/classes" ] || { echo "kotlinc failed"; echo "0 passed, 1 failed"; exit 1; }
+  -d "$WORK/classes" > "$WORK/kotlinc.log" 2>&1
+krc=$?
+set -e
+grep -v '^warning' "$WORK/kotlinc.log" || true
+if [ "$krc" -ne 0 ] || [ ! -d "$WORK/classes" ]; then
+  echo "kotlinc failed (exit $krc)"; echo "kotlin: 0 passed, 1 failed"; exit 1
+fi
 
 echo "== running JVM tests"
 set +e
-java -Djna.library.path="$ROOT/target/debug" -Dmonotrack.root="$ROOT" \
+java -Djna.library.path="$LIBDIR" -Dmonotrack.root="$ROOT" \
   -jar "$JUNIT" --disable-banner --disable-ansi-colors --details=tree \
-  --class-path "$WORK/classes:$JNA:$KOTLIN_LIB/kotlin-stdlib.jar" \
+  --class-path "$WORK/classes:$JNA:$KOTLIN_LIB/kotlin-stdlib.jar:$KOTLIN_LIB/kotlinx-coroutines-core-jvm.jar" \
   --scan-class-path "$WORK/classes" > "$WORK/junit.log" 2>&1
 rc=$?
 set -e

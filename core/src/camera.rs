@@ -160,6 +160,28 @@ impl Intrinsics {
         }
     }
 
+    /// Intrinsics of the image mirrored left–right: a `width`-wide image's pixel x lands at
+    /// `width − x` (corner-origin convention above), so the principal point does too.
+    pub fn mirrored(&self, width: u32) -> Self {
+        Self {
+            cx: f64::from(width) - self.cx,
+            ..*self
+        }
+    }
+
+    /// Intrinsics of the upright image a `width`×`height` buffer becomes, given this buffer's
+    /// (the sensor's, for the buffer as delivered): turned by `rotation`, then mirrored when
+    /// `mirrored` — the order in which [`crate::image::Frame`] turns the pixels.
+    pub fn for_upright(&self, width: u32, height: u32, rotation: Rotation, mirrored: bool) -> Self {
+        let k = self.rotated(width, height, rotation);
+        if mirrored {
+            let upright_w = if rotation.swaps_axes() { height } else { width };
+            k.mirrored(upright_w)
+        } else {
+            k
+        }
+    }
+
     /// Project a camera-frame point (mm) to pixels. Points at or behind the camera give non-finite
     /// values; callers that care check `z > 0` first.
     #[inline]
@@ -209,6 +231,11 @@ mod tests {
             );
         }
         assert_eq!(Rotation::from_degrees(-90).unwrap(), Rotation::R270);
+        // Mirrored after the turn: the upright pixel (h − v, u) reflected about the upright width
+        // h, which is where the mirrored camera-frame point (x → −x) projects.
+        let km = k.for_upright(w, h, Rotation::R90, true);
+        let (um, vm) = km.project(p.1, p.0, p.2);
+        assert!((um - (hf - (hf - v))).abs() < 1e-9 && (vm - u).abs() < 1e-9);
         assert!(Rotation::from_degrees(45).is_err());
     }
 }

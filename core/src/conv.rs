@@ -3,7 +3,7 @@
 //! instead of by tract where the CPU has AVX2 and FMA.
 //!
 //! Why: tract lowers each such layer to an explicit `Pad` copy of its input, a lazily gathered
-//! im2col matrix and a matrix product; `perf` on `m3_per_face` (stop 26, AMD Zen 4) put the
+//! im2col matrix and a matrix product; `perf` on `m3_per_face` (AMD Zen 4, with tract running these layers) put the
 //! gather alone at 14 % of M3 and the copies around it (ndarray `Zip` 3.6 %, memmove and memset
 //! 3.9 %) at 5–8 %, for layers whose arithmetic its matrix kernels did in ≈ 30 %. Here each layer reads the previous
 //! layer's output in place — written with a zero border that is this layer's padding — and
@@ -21,14 +21,14 @@
 //!
 //! Where the CPU has AVX-512F but is not AMD's, the layers multiply in f32 on 512-bit registers
 //! instead: two blocks of sixteen output channels in one register each, eight output positions at
-//! a time. On the Intel Xeon (with AVX-512 BF16, FP16 and AMX) of stop 31 a loop of independent FMAs ran 0.121 ns per 256-bit and 0.130 ns per
+//! a time. On an Intel Xeon with AVX-512 BF16, FP16 and AMX a loop of independent FMAs ran 0.121 ns per 256-bit and 0.130 ns per
 //! 512-bit FMA (two 512-bit FMA units: 66 against 123 GMAC/s), while `vdpbf16ps` took 0.483 ns on
 //! 256 bits (33 GMAC/s, half the f32 rate): there bf16 made `m3_per_face` slower (551 / 573 µs
 //! against 413 µs in f32 on 256 bits). Where such a CPU also has AVX-512 VNNI (with BW), the
 //! layers of more than one input channel whose weights are int8 per output channel — the
 //! shipped M3 networks' storage — multiply in int8 instead ([`Quads`]): each layer's input
 //! rounded to u8 steps of 1/255 of its largest value, four u8 × i8 products summed in an i32
-//! lane by `vpdpbusd`. On the Intel Xeon of stop 34 a loop of independent 512-bit `vpdpbusd`
+//! lane by `vpdpbusd`. On an Intel Xeon with AVX-512 VNNI a loop of independent 512-bit `vpdpbusd`
 //! ran 0.135 ns each, the rate of the 512-bit FMA (0.133 ns) with four times its multiply-adds
 //! (474 against 120 GMAC/s): `m3_per_face` 236–237 → 164 µs, `m3_per_face_mirror_average`
 //! 356–375 → 244–251 µs in alternating runs, the validation NME 3.865 → 3.867 % in mirror
@@ -38,10 +38,10 @@
 //! With `MONOTRACK_CONV=maddubs` the same int8 layers run on 256-bit registers (AVX2,
 //! [`Products::Maddubs`]): `vpmaddubsw` sums two u8 × i8 products into an i16
 //! lane and `vpmaddwd` two of those into an i32 lane, three instructions for 32 multiply-adds
-//! where f32 takes four FMAs (on the AMD EPYC Zen 3 of stop 37 a loop of them ran 0.41 against
+//! where f32 takes four FMAs (on an AMD EPYC Zen 3 a loop of them ran 0.41 against
 //! 0.66 ns). The i16 sum saturates, so each layer's input keeps only as many steps as its widest
 //! pair of neighbouring weights allows ([`maddubs_levels`]: 131–160 for the shipped layers,
-//! against 255). On that Zen 3 (stop 38, one binary, `MONOTRACK_CONV` alternating):
+//! against 255). On that Zen 3 (one binary, `MONOTRACK_CONV` alternating):
 //! `m3_per_face` 484 / 483 → 395 / 377 µs, `m3_level1_face_confidence` 147 / 150 → 112 / 110 µs;
 //! the validation NME 3.979 → 3.986 % single-pass, 3.865 → 3.865 % in mirror average
 //! (`models/MODEL_CARD.md`). It is not the default anywhere: the brow net's gesture probability
@@ -56,8 +56,8 @@
 //! channels together. The first layer then stores each position's sixteen channels as they lie in
 //! its registers, and the second quantises them into its own layout on the way, or (f32)
 //! broadcasts each value from where it lies, so nothing is transposed or scattered value by value
-//! (`store_wide`, which turns a group's positions × channels into channel planes, was 16 % of
-//! `m3_per_face` in `perf` at stop 37 on the Intel Xeon; the 256-bit kernel's value-by-value
+//! (`store_wide`, which turns a group's positions × channels into channel planes, took 16 % of
+//! `m3_per_face` in `perf` on an Intel Xeon with channel planes between all layers; the 256-bit kernel's value-by-value
 //! stores about 30 % of its time on an AVX2-only AMD EPYC Zen 3, where `m3_per_face` went
 //! 551.9 / 536.7 → 460.8 / 461.9 / 492.6 µs in alternating runs). The values, the sums and the quantised words are the same in both
 //! layouts.
@@ -1514,7 +1514,7 @@ struct Block<'a, T> {
     /// Channels per position of an interleaved output ([`Layout::Interleaved`]); 0 for planes.
     width: usize,
     /// Per lane the largest bits stored interleaved so far: the next layer's quantisation scale
-    /// without a pass over its input (`nonnegative_max` was 2.5 % of `m3_per_face`, stop 37).
+    /// without a pass over its input (a separate `nonnegative_max` pass took 2.5 % of `m3_per_face` on an Intel Xeon).
     peak: std::cell::Cell<[u32; BLOCK]>,
 }
 
@@ -1913,7 +1913,7 @@ impl<T> Block<'_, T> {
     /// their output row (one run for a group along a row, two where it wraps to the next).
     ///
     /// Why: storing value by value (a store per channel and position, as the 256-bit kernels
-    /// do) was about a fifth of the 512-bit kernel's time in `perf` (stop 32).
+    /// do) takes about a fifth of the 512-bit kernel's time in `perf` on an Intel Xeon with AVX-512).
     #[target_feature(enable = "avx512f,avx2,fma")]
     #[inline]
     #[allow(unsafe_code)]

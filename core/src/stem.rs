@@ -296,7 +296,7 @@ const LANES: usize = 8;
 
 /// Channels computed together: independent sums the CPU overlaps, where one channel's nine
 /// dependent additions serialised (`m3_per_face` 626 / 615 → 618 / 599 µs in alternating runs;
-/// `detect_640x480` the same within its noise; stop 24).
+/// `detect_640x480` the same within its noise; Intel Xeon).
 const GROUP: usize = 4;
 
 /// `G` channels of one output block: each channel's bias plus its nine taps in kernel order (so

@@ -1,4 +1,4 @@
-//! Issue 4's tracking measurements with the shipped models (detector + M3 + MSBP): correct-frame
+//! Tracking measurements with the shipped models (detector + M3 + MSBP): correct-frame
 //! rate, per-frame time per stage and still-face jitter for tracking vs re-detect-every-frame, on
 //! synthetic sequences made from faces68 validation images and, optionally, on a real video scored
 //! against reference landmarks.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reference landmarks for a video without annotations, to score tracking (issue 4's "must show").
+"""Reference landmarks for a video without annotations, to score tracking (`track_eval --video`).
 
     python3 tests/scripts/video_reference.py VIDEO OUT.jsonl
 

@@ -1,5 +1,4 @@
-//! Scoring a [`FaceTracker`] against ground truth over a clip — the measurements issue 4 asks for:
-//! correct-frame rate, per-frame time per stage, and landmark jitter on still segments. Shared by
+//! Scoring a [`FaceTracker`] against ground truth over a clip: correct-frame rate, per-frame time per stage, and landmark jitter on still segments. Shared by
 //! the `track_models` test (quality bounds, CI) and the `track_eval` example (the reported numbers,
 //! run in the optimised `bench` profile).
 //!

@@ -9,7 +9,7 @@
 //!
 //! Run: `cargo test -p monotrack-tests --test body_h36m -- --nocapture`; `BODY_PRIOR=shipped` starts
 //! from the shipped (in-sample) table instead, `BODY_PRIOR_WEIGHT=W` sets the dimension search's
-//! proportion-prior weight, `POSE_PRIOR_WEIGHT=W` the pose prior's (README's experiments).
+//! proportion-prior weight, `POSE_PRIOR_WEIGHT=W` the pose prior's (BENCHMARKS.md's body experiments).
 
 mod body_common;
 
@@ -199,7 +199,7 @@ fn human36m_synthetic_projections() {
         "estimated body-part lengths vs truth: mean |error| {:.1} mm",
         len_abs / len_n
     );
-    // Regression bounds around what was measured (README): the absolute error is dominated by depth
+    // Regression bounds around what was measured (BENCHMARKS.md): the absolute error is dominated by depth
     // (the floor fixes it only through the assumed foot contact, wrong when sitting or mid-step).
     // Measured with the leave-one-subject-out pose prior: 135 mm absolute, 62.9 / 67.0 mm after
     // Procrustes (true / estimated dimensions); the full model 61.7 / 66.5 mm.

@@ -15,7 +15,7 @@
 //!    The test checks that table against the mocap.
 //! 4. The same with the floor-calibrated camera, for the absolute (non-Procrustes) 3D error.
 //!
-//! The printed tables are what README.md's body section reports. Run:
+//! The printed tables are what BENCHMARKS.md's body section reports. Run:
 //! `cargo test -p monotrack-tests --test body_humaneva -- --nocapture`.
 
 mod body_common;
@@ -139,8 +139,8 @@ fn humaneva_train_with_ground_truth_2d() {
     // The thesis' CLFBA reaches 5.96 px and 110.2 mm.
     assert!(r.reproj < 8.0, "reprojection {:.2} px", r.reproj);
     // Regression bounds around what was measured, frames tracked (`fit_tracked`): 68.3 mm, 60.2
-    // with the mocap dimensions (README; every frame from scratch: 79.8 and 71.2; the target
-    // is 80 mm; the isotropic prior before reached 102.0 from scratch).
+    // with the mocap dimensions (BENCHMARKS.md; every frame from scratch: 79.8 and 71.2; the target
+    // is 80 mm; the isotropic pose prior reaches 102.0 from scratch).
     assert!(r.pa < 71.0, "PA error {:.1} mm", r.pa);
     assert!(r.pa_true.unwrap() < 63.0, "PA error with mocap dimensions");
 
@@ -269,7 +269,7 @@ fn check_calibration(he: &HumanEva, refs: &BTreeMap<(String, usize), (BodyCamera
     }
 }
 
-/// The dimension-search experiments behind README's table (not run in CI: each row is a full pass
+/// The dimension-search experiments behind BENCHMARKS.md's body table (not run in CI: each row is a full pass
 /// over HumanEva Train). Run:
 /// `cargo test --release -p monotrack-tests --test body_humaneva -- --ignored --nocapture`.
 #[test]
@@ -593,7 +593,7 @@ fn evaluate(
     }
 }
 
-/// The pose-prior experiments behind README's table (not run in CI). With the mocap's own
+/// The pose-prior experiments behind BENCHMARKS.md's body table (not run in CI). With the mocap's own
 /// dimensions, for each prior: the 2D fit, the model fitted to the mocap joints themselves (what
 /// the 27-DoF model can represent) and the 2D fit started at that pose (what the objective itself
 /// costs, with no wrong depth branch); then full passes (leave-one-out dimensions) over prior

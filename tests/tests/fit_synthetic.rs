@@ -1,4 +1,4 @@
-//! Synthetic round trips for the 3D fits (issue 2's protocol): random poses (yaw, pitch ±60°,
+//! Synthetic round trips for the 3D fits: random poses (yaw, pitch ±60°,
 //! roll ±30°, depth 0.3–1.5 m), shapes and expressions (each unit ~ N(0, 0.5²) clipped to ±1),
 //! projected through a 1280×720 camera with the CONTRACT's default intrinsics, plus 1 px Gaussian
 //! noise. MSBP must recover rotation within 1° and depth within 2% (medians); FFBP's figures are

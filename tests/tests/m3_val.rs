@@ -22,9 +22,9 @@ const SEED: u64 = 2026;
 const CENTER_JITTER: f32 = 0.05;
 /// Box scale jitter, fraction (uniform ±).
 const SCALE_JITTER: f32 = 0.10;
-/// Bound on the overall mean NME: 3.97 % measured with the shipped weights, label offset and shape
-/// prior of stop 21 (128 faces, this seed; 4.12 % without the prior, 4.27 % without the offset
-/// either, 4.75 % with earlier weights, 5.28 % with the first) plus margin for retraining noise.
+/// Bound on the overall mean NME (single-pass, 128 faces, this seed): the shipped weights, label
+/// offset and shape prior measure 3.97 % (4.12 % without the prior, 4.27 % without the offset
+/// either); the bound adds margin for retraining noise.
 const MAX_MEAN_NME: f64 = 0.045;
 
 const ZONES: [(&str, std::ops::Range<usize>); 5] = [

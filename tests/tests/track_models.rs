@@ -2,7 +2,7 @@
 //! from faces68 validation images (`monotrack_tests::trackeval`): smooth random similarity motion,
 //! still parts, cuts, 2 grey levels of sensor noise, exact transformed ground truth.
 //!
-//! Checks issue 4's quality claims (timings are measured by the `track_eval` example in the
+//! Checks the tracker's quality bounds (timings are measured by the `track_eval` example in the
 //! optimised profile, not here): tracking finds correct faces at least as often as re-detecting
 //! every frame while running the detector only at cuts; the optical-flow filter reduces landmark
 //! jitter on still segments; and tracking reuses M3's level-1 face check (the landmarks of a tracked
@@ -14,8 +14,11 @@ use monotrack_tests::shared_data_or_skip;
 use monotrack_tests::synth::{SeqConfig, load_validation_faces};
 use monotrack_tests::trackeval::{ClipStats, run_clip, synthetic_clip, table_header, table_row};
 
-/// A frame is correct when its landmarks' NME (inter-ocular) is below this: twice M3's mean
-/// validation NME (5.2 %, `core/models/MODEL_CARD.md`), far below a wrong or missed face (> 30 %).
+/// A frame is correct when its landmarks' NME (inter-ocular) is below this: well above M3's mean
+/// validation NME (`core/models/MODEL_CARD.md`), far below a wrong or missed face (> 30 %). The test
+/// then bounds: re-detecting every frame is correct on more than 80 % of frames, tracking within 2
+/// frames of it, the detector runs only at the start, the cuts and a few more times, and the flow
+/// filter lowers still-segment jitter.
 const CORRECT_NME: f32 = 0.10;
 
 fn run(clip: &[monotrack_tests::trackeval::ClipFrame], cfg: TrackerConfig) -> ClipStats {

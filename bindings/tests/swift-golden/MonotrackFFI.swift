@@ -460,7 +460,13 @@ fileprivate final class UniffiHandleMap<T>: @unchecked Sendable {
 
 
 // Public interface members begin here.
-
+// Magic number for the Rust proxy to call using the same mechanism as every other method,
+// to free the callback once it's dropped by Rust.
+private let IDX_CALLBACK_FREE: Int32 = 0
+// Callback return codes
+private let UNIFFI_CALLBACK_SUCCESS: Int32 = 0
+private let UNIFFI_CALLBACK_ERROR: Int32 = 1
+private let UNIFFI_CALLBACK_UNEXPECTED_ERROR: Int32 = 2
 
 #if swift(>=5.8)
 @_documentation(visibility: private)
@@ -1042,6 +1048,474 @@ public func FfiConverterTypeFaceTracker_lift(_ handle: UInt64) throws -> FaceTra
 #endif
 public func FfiConverterTypeFaceTracker_lower(_ value: FaceTracker) -> UInt64 {
     return FfiConverterTypeFaceTracker.lower(value)
+}
+
+
+
+
+
+
+/**
+ * The face tracker in live-stream mode: `process_async` copies the frame and returns at once;
+ * one worker thread tracks (as in video mode) and calls the listener. While it is busy the newest
+ * frame waits and replaces any older waiting one (latest wins).
+ */
+public protocol LiveFaceTrackerProtocol: AnyObject, Sendable {
+    
+    /**
+     * The settings this tracker was built with.
+     */
+    func config()  -> TrackerConfig
+    
+    /**
+     * Submits one camera frame taken at `timestamp_ns` (strictly increasing) and returns without
+     * waiting: the bytes are copied, so the camera's buffer can be released on return. Returns
+     * `true` when a frame that was still waiting has been replaced by this one.
+     *
+     * # Errors
+     * `InvalidFrame` when the description does not match the bytes, the timestamp does not
+     * increase, or the tracker was shut down.
+     */
+    func processAsync(bytes: Data, desc: FrameDesc, timestampNs: Int64) throws  -> Bool
+    
+    /**
+     * Stops the worker: a frame being tracked finishes and is delivered, a waiting one is
+     * dropped, and the listener is not called afterwards. Idempotent; later frames are refused.
+     * Called from the listener itself, it returns at once and the worker stops after that call.
+     */
+    func shutdown() 
+    
+}
+/**
+ * The face tracker in live-stream mode: `process_async` copies the frame and returns at once;
+ * one worker thread tracks (as in video mode) and calls the listener. While it is busy the newest
+ * frame waits and replaces any older waiting one (latest wins).
+ */
+open class LiveFaceTracker: LiveFaceTrackerProtocol, @unchecked Sendable {
+    fileprivate let handle: UInt64
+
+    /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public struct NoHandle {
+        public init() {}
+    }
+
+    // TODO: We'd like this to be `private` but for Swifty reasons,
+    // we can't implement `FfiConverter` without making this `required` and we can't
+    // make it `required` without making it `public`.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    required public init(unsafeFromHandle handle: UInt64) {
+        self.handle = handle
+    }
+
+    // This constructor can be used to instantiate a fake object.
+    // - Parameter noHandle: Placeholder value so we can have a constructor separate from the default empty one that may be implemented for classes extending [FFIObject].
+    //
+    // - Warning:
+    //     Any object instantiated with this constructor cannot be passed to an actual Rust-backed object. Since there isn't a backing handle the FFI lower functions will crash.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public init(noHandle: NoHandle) {
+        self.handle = 0
+    }
+
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public func uniffiCloneHandle() -> UInt64 {
+        return try! rustCall { uniffi_monotrack_ffi_fn_clone_livefacetracker(self.handle, $0) }
+    }
+    /**
+     * Loads the models and starts the worker. `config.running_mode` is not read: a live stream
+     * always tracks between frames.
+     *
+     * # Errors
+     * `InvalidConfig` for out-of-range settings, `ModelLoad` if the embedded models cannot load,
+     * `Internal` if no thread can be started.
+     */
+public convenience init(config: TrackerConfig, listener: LiveStreamListener)throws  {
+    let handle =
+        try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_constructor_livefacetracker_new(
+        FfiConverterTypeTrackerConfig_lower(config),
+        FfiConverterTypeLiveStreamListener_lower(listener),uniffiCallStatus
+    )
+}
+    self.init(unsafeFromHandle: handle)
+}
+
+    deinit {
+        if handle == 0 {
+            // Mock objects have handle=0 don't try to free them
+            return
+        }
+
+        try! rustCall { uniffi_monotrack_ffi_fn_free_livefacetracker(handle, $0) }
+    }
+
+    
+
+    
+    /**
+     * The settings this tracker was built with.
+     */
+open func config() -> TrackerConfig  {
+    return try!  FfiConverterTypeTrackerConfig_lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_livefacetracker_config(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Submits one camera frame taken at `timestamp_ns` (strictly increasing) and returns without
+     * waiting: the bytes are copied, so the camera's buffer can be released on return. Returns
+     * `true` when a frame that was still waiting has been replaced by this one.
+     *
+     * # Errors
+     * `InvalidFrame` when the description does not match the bytes, the timestamp does not
+     * increase, or the tracker was shut down.
+     */
+open func processAsync(bytes: Data, desc: FrameDesc, timestampNs: Int64)throws  -> Bool  {
+    return try  FfiConverterBool.lift(try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+        FfiConverterByRefBytes.lower(bytes) { bytesFb in
+    uniffi_monotrack_ffi_fn_method_livefacetracker_process_async(
+            self.uniffiCloneHandle(),
+        bytesFb,
+        FfiConverterTypeFrameDesc_lower(desc),
+        FfiConverterInt64.lower(timestampNs),uniffiCallStatus
+    )
+        }
+})
+}
+    
+    /**
+     * Stops the worker: a frame being tracked finishes and is delivered, a waiting one is
+     * dropped, and the listener is not called afterwards. Idempotent; later frames are refused.
+     * Called from the listener itself, it returns at once and the worker stops after that call.
+     */
+open func shutdown()  {try! rustCall() {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_livefacetracker_shutdown(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+}
+}
+    
+
+    
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeLiveFaceTracker: FfiConverter {
+    typealias FfiType = UInt64
+    typealias SwiftType = LiveFaceTracker
+
+    public static func lift(_ handle: UInt64) throws -> LiveFaceTracker {
+        return LiveFaceTracker(unsafeFromHandle: handle)
+    }
+
+    public static func lower(_ value: LiveFaceTracker) -> UInt64 {
+        return value.uniffiCloneHandle()
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> LiveFaceTracker {
+        let handle: UInt64 = try readInt(&buf)
+        return try lift(handle)
+    }
+
+    public static func write(_ value: LiveFaceTracker, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeLiveFaceTracker_lift(_ handle: UInt64) throws -> LiveFaceTracker {
+    return try FfiConverterTypeLiveFaceTracker.lift(handle)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeLiveFaceTracker_lower(_ value: LiveFaceTracker) -> UInt64 {
+    return FfiConverterTypeLiveFaceTracker.lower(value)
+}
+
+
+
+
+
+
+/**
+ * Receives a `LiveFaceTracker`'s results, implemented by the app. Calls come from the tracker's
+ * worker thread, one at a time, in timestamp order; a slow listener makes the tracker skip
+ * frames, so hand the result to the UI thread and return. An exception thrown here is caught and
+ * does not stop the stream.
+ */
+public protocol LiveStreamListener: AnyObject, Sendable {
+    
+    /**
+     * The faces of one frame.
+     */
+    func onResult(result: LiveStreamResult) 
+    
+    /**
+     * Tracking the frame taken at `timestamp_ns` failed; the stream goes on with the next frame.
+     */
+    func onError(timestampNs: Int64, framesDropped: UInt64, error: MonotrackError) 
+    
+}
+/**
+ * Receives a `LiveFaceTracker`'s results, implemented by the app. Calls come from the tracker's
+ * worker thread, one at a time, in timestamp order; a slow listener makes the tracker skip
+ * frames, so hand the result to the UI thread and return. An exception thrown here is caught and
+ * does not stop the stream.
+ */
+open class LiveStreamListenerImpl: LiveStreamListener, @unchecked Sendable {
+    fileprivate let handle: UInt64
+
+    /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public struct NoHandle {
+        public init() {}
+    }
+
+    // TODO: We'd like this to be `private` but for Swifty reasons,
+    // we can't implement `FfiConverter` without making this `required` and we can't
+    // make it `required` without making it `public`.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    required public init(unsafeFromHandle handle: UInt64) {
+        self.handle = handle
+    }
+
+    // This constructor can be used to instantiate a fake object.
+    // - Parameter noHandle: Placeholder value so we can have a constructor separate from the default empty one that may be implemented for classes extending [FFIObject].
+    //
+    // - Warning:
+    //     Any object instantiated with this constructor cannot be passed to an actual Rust-backed object. Since there isn't a backing handle the FFI lower functions will crash.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public init(noHandle: NoHandle) {
+        self.handle = 0
+    }
+
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public func uniffiCloneHandle() -> UInt64 {
+        return try! rustCall { uniffi_monotrack_ffi_fn_clone_livestreamlistener(self.handle, $0) }
+    }
+    // No primary constructor declared for this class.
+
+    deinit {
+        if handle == 0 {
+            // Mock objects have handle=0 don't try to free them
+            return
+        }
+
+        try! rustCall { uniffi_monotrack_ffi_fn_free_livestreamlistener(handle, $0) }
+    }
+
+    
+
+    
+    /**
+     * The faces of one frame.
+     */
+open func onResult(result: LiveStreamResult)  {try! rustCall() {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_livestreamlistener_on_result(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeLiveStreamResult_lower(result),uniffiCallStatus
+    )
+}
+}
+    
+    /**
+     * Tracking the frame taken at `timestamp_ns` failed; the stream goes on with the next frame.
+     */
+open func onError(timestampNs: Int64, framesDropped: UInt64, error: MonotrackError)  {try! rustCall() {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_livestreamlistener_on_error(
+            self.uniffiCloneHandle(),
+        FfiConverterInt64.lower(timestampNs),
+        FfiConverterUInt64.lower(framesDropped),
+        FfiConverterTypeMonotrackError_lower(error),uniffiCallStatus
+    )
+}
+}
+    
+
+    
+}
+
+
+
+// Put the implementation in a struct so we don't pollute the top-level namespace
+fileprivate struct UniffiCallbackInterfaceLiveStreamListener {
+
+    // Create the VTable using a series of closures.
+    // Swift automatically converts these into C callback functions.
+    //
+    // Store the vtable directly.
+    static let vtable: UniffiVTableCallbackInterfaceLiveStreamListener = UniffiVTableCallbackInterfaceLiveStreamListener(
+        uniffiFree: { (uniffiHandle: UInt64) -> () in
+            do {
+                try FfiConverterTypeLiveStreamListener.handleMap.remove(handle: uniffiHandle)
+            } catch {
+                print("Uniffi callback interface LiveStreamListener: handle missing in uniffiFree")
+            }
+        },
+        uniffiClone: { (uniffiHandle: UInt64) -> UInt64 in
+            do {
+                return try FfiConverterTypeLiveStreamListener.handleMap.clone(handle: uniffiHandle)
+            } catch {
+                fatalError("Uniffi callback interface LiveStreamListener: handle missing in uniffiClone")
+            }
+        },
+        onResult: { (
+            uniffiHandle: UInt64,
+            result: RustBuffer,
+            uniffiOutReturn: UnsafeMutableRawPointer,
+            uniffiCallStatus: UnsafeMutablePointer<RustCallStatus>
+        ) in
+            let makeCall = {
+                () throws -> () in
+                guard let uniffiObj = try? FfiConverterTypeLiveStreamListener.handleMap.get(handle: uniffiHandle) else {
+                    throw UniffiInternalError.unexpectedStaleHandle
+                }
+                return uniffiObj.onResult(
+                     result: try FfiConverterTypeLiveStreamResult_lift(result)
+                )
+            }
+
+            
+            let writeReturn = { () }
+            uniffiTraitInterfaceCall(
+                callStatus: uniffiCallStatus,
+                makeCall: makeCall,
+                writeReturn: writeReturn
+            )
+        },
+        onError: { (
+            uniffiHandle: UInt64,
+            timestampNs: Int64,
+            framesDropped: UInt64,
+            error: RustBuffer,
+            uniffiOutReturn: UnsafeMutableRawPointer,
+            uniffiCallStatus: UnsafeMutablePointer<RustCallStatus>
+        ) in
+            let makeCall = {
+                () throws -> () in
+                guard let uniffiObj = try? FfiConverterTypeLiveStreamListener.handleMap.get(handle: uniffiHandle) else {
+                    throw UniffiInternalError.unexpectedStaleHandle
+                }
+                return uniffiObj.onError(
+                     timestampNs: try FfiConverterInt64.lift(timestampNs),
+                     framesDropped: try FfiConverterUInt64.lift(framesDropped),
+                     error: try FfiConverterTypeMonotrackError_lift(error)
+                )
+            }
+
+            
+            let writeReturn = { () }
+            uniffiTraitInterfaceCall(
+                callStatus: uniffiCallStatus,
+                makeCall: makeCall,
+                writeReturn: writeReturn
+            )
+        }
+    )
+
+    // Rust stores this pointer for future callback invocations, so it must live
+    // for the process lifetime (not just for the init function call).
+    //
+    // `nonisolated(unsafe)` is needed under Swift 6 strict concurrency.
+    // This is safe because the pointee is initialized once during static init
+    // and never mutated by either side of the FFI.  Its fields are C function pointers.
+    nonisolated(unsafe) static let vtablePtr: UnsafePointer<UniffiVTableCallbackInterfaceLiveStreamListener> = {
+        let ptr = UnsafeMutablePointer<UniffiVTableCallbackInterfaceLiveStreamListener>.allocate(capacity: 1)
+        ptr.initialize(to: vtable)
+        return UnsafePointer(ptr)
+    }()
+}
+
+private func uniffiCallbackInitLiveStreamListener() {
+    uniffi_monotrack_ffi_fn_init_callback_vtable_livestreamlistener(UniffiCallbackInterfaceLiveStreamListener.vtablePtr)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeLiveStreamListener: FfiConverter {
+    fileprivate static let handleMap = UniffiHandleMap<LiveStreamListener>()
+
+    typealias FfiType = UInt64
+    typealias SwiftType = LiveStreamListener
+
+    public static func lift(_ handle: UInt64) throws -> LiveStreamListener {
+        if ((handle & 1) == 0) {
+            // Rust-generated handle, construct a new class that uses the handle to implement the
+            // interface
+            return LiveStreamListenerImpl(unsafeFromHandle: handle)
+        } else {
+            // Swift-generated handle, get the object from the handle map
+            return try handleMap.remove(handle: handle)
+        }
+    }
+
+    public static func lower(_ value: LiveStreamListener) -> UInt64 {
+         if let rustImpl = value as? LiveStreamListenerImpl {
+             // Rust-implemented object.  Clone the handle and return it
+            return rustImpl.uniffiCloneHandle()
+         } else {
+            // Swift object, generate a new vtable handle and return that.
+            return handleMap.insert(obj: value)
+         }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> LiveStreamListener {
+        let handle: UInt64 = try readInt(&buf)
+        return try lift(handle)
+    }
+
+    public static func write(_ value: LiveStreamListener, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeLiveStreamListener_lift(_ handle: UInt64) throws -> LiveStreamListener {
+    return try FfiConverterTypeLiveStreamListener.lift(handle)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeLiveStreamListener_lower(_ value: LiveStreamListener) -> UInt64 {
+    return FfiConverterTypeLiveStreamListener.lower(value)
 }
 
 
@@ -1671,7 +2145,10 @@ public func FfiConverterTypeCameraBenchReport_lower(_ value: CameraBenchReport) 
 
 
 /**
- * Pinhole intrinsics in pixels.
+ * Pinhole intrinsics in pixels of the buffer as delivered: the sensor's (Camera2's
+ * `LENS_INTRINSIC_CALIBRATION`, iOS's camera intrinsic matrix), scaled to the buffer's size, before
+ * any rotation or mirroring. The SDK turns and mirrors them with the frame (`FrameDesc`), so the
+ * pose comes out in the upright image's camera frame.
  */
 public struct CameraIntrinsics: Equatable, Hashable {
     /**
@@ -2665,6 +3142,87 @@ public func FfiConverterTypeHeadPose_lower(_ value: HeadPose) -> RustBuffer {
 
 
 /**
+ * One live-stream result.
+ */
+public struct LiveStreamResult: Equatable, Hashable {
+    /**
+     * The timestamp the frame was submitted with.
+     */
+    public var timestampNs: Int64
+    /**
+     * Frames submitted since the previous delivery that were skipped because the tracker was
+     * busy (the newest frame is never the one skipped).
+     */
+    public var framesDropped: UInt64
+    /**
+     * The frame's faces.
+     */
+    public var result: TrackingResult
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The timestamp the frame was submitted with.
+         */timestampNs: Int64, 
+        /**
+         * Frames submitted since the previous delivery that were skipped because the tracker was
+         * busy (the newest frame is never the one skipped).
+         */framesDropped: UInt64, 
+        /**
+         * The frame's faces.
+         */result: TrackingResult) {
+        self.timestampNs = timestampNs
+        self.framesDropped = framesDropped
+        self.result = result
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension LiveStreamResult: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeLiveStreamResult: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> LiveStreamResult {
+        return
+            try LiveStreamResult(
+                timestampNs: FfiConverterInt64.read(from: &buf), 
+                framesDropped: FfiConverterUInt64.read(from: &buf), 
+                result: FfiConverterTypeTrackingResult.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: LiveStreamResult, into buf: inout [UInt8]) {
+        FfiConverterInt64.write(value.timestampNs, into: &buf)
+        FfiConverterUInt64.write(value.framesDropped, into: &buf)
+        FfiConverterTypeTrackingResult.write(value.result, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeLiveStreamResult_lift(_ buf: RustBuffer) throws -> LiveStreamResult {
+    return try FfiConverterTypeLiveStreamResult.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeLiveStreamResult_lower(_ value: LiveStreamResult) -> RustBuffer {
+    return FfiConverterTypeLiveStreamResult.lower(value)
+}
+
+
+/**
  * An upright 8-bit luma image (what the pipeline sees of a frame).
  */
 public struct LumaImage: Equatable, Hashable {
@@ -3260,7 +3818,9 @@ public struct TrackerConfig: Equatable, Hashable {
      */
     public var maxFaces: UInt32
     /**
-     * Intrinsics of the upright image, pixels; `None`: fx = fy = 0.9·max side, centred.
+     * The camera's intrinsics for the frames as passed in (the sensor's, before rotation and
+     * mirroring: `CameraIntrinsics`); `None`: fx = fy = 0.9·max side of the upright image,
+     * centred.
      */
     public var camera: CameraIntrinsics?
     /**
@@ -3300,7 +3860,9 @@ public struct TrackerConfig: Equatable, Hashable {
          * Most faces tracked at once (1..=16).
          */maxFaces: UInt32, 
         /**
-         * Intrinsics of the upright image, pixels; `None`: fx = fy = 0.9·max side, centred.
+         * The camera's intrinsics for the frames as passed in (the sensor's, before rotation and
+         * mirroring: `CameraIntrinsics`); `None`: fx = fy = 0.9·max side of the upright image,
+         * centred.
          */camera: CameraIntrinsics?, 
         /**
          * Smallest face the detector looks for, pixels of the upright image (16..=4096). Default 24;
@@ -4787,6 +5349,21 @@ private let initializationResult: InitializationResult = {
     if (uniffi_monotrack_ffi_checksum_method_bodytracker_reset() != 60972) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_monotrack_ffi_checksum_method_livefacetracker_config() != 56855) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_livefacetracker_process_async() != 1800) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_livefacetracker_shutdown() != 15644) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_result() != 52804) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_error() != 22839) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_monotrack_ffi_checksum_method_facetracker_config() != 53659) {
         return InitializationResult.apiChecksumMismatch
     }
@@ -4802,10 +5379,14 @@ private let initializationResult: InitializationResult = {
     if (uniffi_monotrack_ffi_checksum_constructor_bodytracker_new() != 21048) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_monotrack_ffi_checksum_constructor_livefacetracker_new() != 12329) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_monotrack_ffi_checksum_constructor_facetracker_new() != 34358) {
         return InitializationResult.apiChecksumMismatch
     }
 
+    uniffiCallbackInitLiveStreamListener()
     return InitializationResult.ok
 }()
 

@@ -243,6 +243,30 @@ typedef void (*UniffiForeignFutureCompleteVoid)(uint64_t, UniffiForeignFutureRes
     );
 
 #endif
+#ifndef UNIFFI_FFIDEF_CALLBACK_INTERFACE_LIVE_STREAM_LISTENER_METHOD0
+#define UNIFFI_FFIDEF_CALLBACK_INTERFACE_LIVE_STREAM_LISTENER_METHOD0
+typedef void (*UniffiCallbackInterfaceLiveStreamListenerMethod0)(uint64_t, RustBuffer, void* _Nonnull, 
+        RustCallStatus *_Nonnull uniffiCallStatus
+    );
+
+#endif
+#ifndef UNIFFI_FFIDEF_CALLBACK_INTERFACE_LIVE_STREAM_LISTENER_METHOD1
+#define UNIFFI_FFIDEF_CALLBACK_INTERFACE_LIVE_STREAM_LISTENER_METHOD1
+typedef void (*UniffiCallbackInterfaceLiveStreamListenerMethod1)(uint64_t, int64_t, uint64_t, RustBuffer, void* _Nonnull, 
+        RustCallStatus *_Nonnull uniffiCallStatus
+    );
+
+#endif
+#ifndef UNIFFI_FFIDEF_V_TABLE_CALLBACK_INTERFACE_LIVE_STREAM_LISTENER
+#define UNIFFI_FFIDEF_V_TABLE_CALLBACK_INTERFACE_LIVE_STREAM_LISTENER
+typedef struct UniffiVTableCallbackInterfaceLiveStreamListener {
+    UniffiCallbackInterfaceFree _Nonnull uniffiFree;
+    UniffiCallbackInterfaceClone _Nonnull uniffiClone;
+    UniffiCallbackInterfaceLiveStreamListenerMethod0 _Nonnull onResult;
+    UniffiCallbackInterfaceLiveStreamListenerMethod1 _Nonnull onError;
+} UniffiVTableCallbackInterfaceLiveStreamListener;
+
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_BODYTRACKER
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_BODYTRACKER
 uint64_t uniffi_monotrack_ffi_fn_clone_bodytracker(uint64_t handle, RustCallStatus *_Nonnull out_status
@@ -266,6 +290,61 @@ RustBuffer uniffi_monotrack_ffi_fn_method_bodytracker_fit(uint64_t ptr, RustBuff
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_BODYTRACKER_RESET
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_BODYTRACKER_RESET
 void uniffi_monotrack_ffi_fn_method_bodytracker_reset(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_LIVEFACETRACKER
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_LIVEFACETRACKER
+uint64_t uniffi_monotrack_ffi_fn_clone_livefacetracker(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FREE_LIVEFACETRACKER
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FREE_LIVEFACETRACKER
+void uniffi_monotrack_ffi_fn_free_livefacetracker(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CONSTRUCTOR_LIVEFACETRACKER_NEW
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CONSTRUCTOR_LIVEFACETRACKER_NEW
+uint64_t uniffi_monotrack_ffi_fn_constructor_livefacetracker_new(RustBuffer config, uint64_t listener, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVEFACETRACKER_CONFIG
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVEFACETRACKER_CONFIG
+RustBuffer uniffi_monotrack_ffi_fn_method_livefacetracker_config(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVEFACETRACKER_PROCESS_ASYNC
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVEFACETRACKER_PROCESS_ASYNC
+int8_t uniffi_monotrack_ffi_fn_method_livefacetracker_process_async(uint64_t ptr, ForeignBytes bytes, RustBuffer desc, int64_t timestamp_ns, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVEFACETRACKER_SHUTDOWN
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVEFACETRACKER_SHUTDOWN
+void uniffi_monotrack_ffi_fn_method_livefacetracker_shutdown(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_LIVESTREAMLISTENER
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_LIVESTREAMLISTENER
+uint64_t uniffi_monotrack_ffi_fn_clone_livestreamlistener(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FREE_LIVESTREAMLISTENER
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FREE_LIVESTREAMLISTENER
+void uniffi_monotrack_ffi_fn_free_livestreamlistener(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_INIT_CALLBACK_VTABLE_LIVESTREAMLISTENER
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_INIT_CALLBACK_VTABLE_LIVESTREAMLISTENER
+void uniffi_monotrack_ffi_fn_init_callback_vtable_livestreamlistener(const UniffiVTableCallbackInterfaceLiveStreamListener* _Nonnull vtable
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVESTREAMLISTENER_ON_RESULT
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVESTREAMLISTENER_ON_RESULT
+void uniffi_monotrack_ffi_fn_method_livestreamlistener_on_result(uint64_t ptr, RustBuffer result, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVESTREAMLISTENER_ON_ERROR
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVESTREAMLISTENER_ON_ERROR
+void uniffi_monotrack_ffi_fn_method_livestreamlistener_on_error(uint64_t ptr, int64_t timestamp_ns, uint64_t frames_dropped, RustBuffer error, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_FACETRACKER
@@ -677,6 +756,36 @@ uint16_t uniffi_monotrack_ffi_checksum_method_bodytracker_reset(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVEFACETRACKER_CONFIG
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVEFACETRACKER_CONFIG
+uint16_t uniffi_monotrack_ffi_checksum_method_livefacetracker_config(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVEFACETRACKER_PROCESS_ASYNC
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVEFACETRACKER_PROCESS_ASYNC
+uint16_t uniffi_monotrack_ffi_checksum_method_livefacetracker_process_async(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVEFACETRACKER_SHUTDOWN
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVEFACETRACKER_SHUTDOWN
+uint16_t uniffi_monotrack_ffi_checksum_method_livefacetracker_shutdown(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVESTREAMLISTENER_ON_RESULT
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVESTREAMLISTENER_ON_RESULT
+uint16_t uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_result(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVESTREAMLISTENER_ON_ERROR
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVESTREAMLISTENER_ON_ERROR
+uint16_t uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_error(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_CONFIG
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_CONFIG
 uint16_t uniffi_monotrack_ffi_checksum_method_facetracker_config(void
@@ -704,6 +813,12 @@ uint16_t uniffi_monotrack_ffi_checksum_method_facetracker_reset(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_CONSTRUCTOR_BODYTRACKER_NEW
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_CONSTRUCTOR_BODYTRACKER_NEW
 uint16_t uniffi_monotrack_ffi_checksum_constructor_bodytracker_new(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_CONSTRUCTOR_LIVEFACETRACKER_NEW
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_CONSTRUCTOR_LIVEFACETRACKER_NEW
+uint16_t uniffi_monotrack_ffi_checksum_constructor_livefacetracker_new(void
     
 );
 #endif

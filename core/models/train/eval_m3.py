@@ -8,7 +8,7 @@
 - Ours: the Python reference (m3_reference.py, onnxruntime) and, with --monotrack, the shipped Rust
   implementation through `monotrack landmarks` (the CLI's own timings); both in single-pass mode
   (`--single-pass`, the video tracker's; `metrics.json`'s top level) and in mirror-average mode
-  (M3_IO.md; the CLI's and the image mode's default since stop 32; `metrics.json`'s "mirror_average").
+  (M3_IO.md; the default of the CLI and of the image mode; `metrics.json`'s "mirror_average").
 - Peers (--peers): ../shared/tools/peer_landmarks.py (dlib's 68-point predictor, PFLD) on the same
   manifest; dlib also in its fair setting (boxes from its own HOG detector).
 - NME: CONTRACT.md (mean over 68 points / distance between points 36 and 45), overall and per zone.

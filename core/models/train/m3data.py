@@ -95,10 +95,9 @@ LEVEL1 = {"input_size": 64, "crop_scale": 1.3}
 
 # The nets that run a second time on their mirrored input in mirror-average mode (M3_IO.md), written
 # into m3.json as `"mirror_average": true`: level 1 and zones but the eye (mirrored per side
-# already). Validation NME with the stop-21 weights (stop 27, MODEL_CARD.md): 3.98 % in the default
-# mode; 3.875 % with level 1 and all five other zones; 3.890 % with level 1, brows, mouth and
-# mouth_fine; 3.925 % with the five zones without level 1. Stop 33 (Python reference, eight box
-# jitter seeds): 3.9074 % with all six, 3.9066 % without mouth_fine's second run (the set below: it
+# already). Validation NME (MODEL_CARD.md): 3.98 % in the default mode; 3.875 % with level 1 and
+# all five other zones; 3.890 % with level 1, brows, mouth and mouth_fine; 3.925 % with the five
+# zones without level 1. Over eight box-jitter seeds (Python reference): 3.9074 % with all six, 3.9066 % without mouth_fine's second run (the set below: it
 # gains nothing; in two warm per-face timing runs it cost 14 µs in one and nothing measurable in the
 # other), 3.9167 % without face's too (58–61 µs less in those runs; kept: the margin over PFLD is a
 # few hundredths of a point).

@@ -2,13 +2,13 @@
 //! trunk already runs outside it ([`crate::stem`]).
 //!
 //! Why: after the trunks moved to [`crate::conv`], tract's part of `m3_per_face` was the heads —
-//! `perf` on an Intel Xeon (stop 31) put its matrix–vector kernels at 12 % of the per-face time and
+//! `perf` on an Intel Xeon put its matrix–vector kernels at 12 % of the per-face time and
 //! its per-run bookkeeping (plan walk, tensor allocation, copies) at several % more, for 0.38 M
 //! multiply-adds per face (counted from the shipped graphs). Here each layer is one pass over its
 //! weights, stored input-major so the outputs are the vector lanes, in buffers allocated once.
 //! Where the trunks multiply in int8 ([`crate::conv::int8_products`]: AVX-512 VNNI), int8 layers
 //! do too ([`int8_product`]): their input rounded per run to 16-bit steps (two u8 digits), the
-//! same weights; on the Intel Xeon of stop 34 `m3_per_face` 162.6–164.1 → 151.5–155.1 µs in
+//! same weights; on an Intel Xeon with AVX-512 VNNI `m3_per_face` 162.6–164.1 → 151.5–155.1 µs in
 //! alternating runs with one digit, the second digit then +4.8 µs in one pair of runs and none in the other (noisy).
 //!
 //! What a graph may hold after its trunk was cut: `Flatten` of the trunk's output, `Gemm` (α = β =

@@ -166,7 +166,7 @@ impl Bilateral {
     /// come from one hardware gather per tap, the sums stay in registers over the taps, each pixel
     /// adds its taps in the same order with the same operations (the same bytes; unit test). The
     /// portable loop's table lookups were scalar loads: `bilateral_64x32_d5` 14.3 / 13.9 → 7.4 /
-    /// 7.1 µs, `m3_per_face` 656 / 639 → 623 / 635 µs (two alternating runs each, stop 24).
+    /// 7.1 µs, `m3_per_face` 656 / 639 → 623 / 635 µs (two alternating runs each, Intel Xeon).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn filter_avx2(&self, width: usize, height: usize, dst: &mut [u8]) {

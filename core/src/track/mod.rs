@@ -23,6 +23,7 @@
 //! allocated (the result's face list keeps its capacity).
 
 pub mod flow;
+pub mod live;
 pub mod models;
 pub mod ncc;
 
@@ -55,7 +56,7 @@ pub const DEFAULT_MIN_DETECTION_SCORE: f32 = 0.4;
 /// false positives per image (`models/MODEL_CARD.md`, face detector), against 123 at 0.009 for the
 /// default min face, which skips the 17–23 px faces of group photos. A 640×480 frame runs at
 /// 400×300, and more candidates get face checks: the whole detection took 4.6–5.0 ms against
-/// 3.1–3.2 ms at the default (criterion, an Intel Xeon with AVX-512, stop 31). The defaults keep the
+/// 3.1–3.2 ms at the default (criterion, an Intel Xeon with AVX-512). The defaults keep the
 /// point with fewer false positives and less clutter; `monotrack landmarks --small-faces` detects
 /// at this one. Apps choose it through `DetectorConfig::min_face_px` and
 /// [`TrackerConfig::min_detection_score`].
@@ -213,7 +214,12 @@ pub struct TrackerConfig {
     /// accepted faces than free slots, those with the highest detector score × face confidence
     /// take them.
     pub max_faces: usize,
-    /// Camera intrinsics of the upright image; `None` = the CONTRACT default for its size.
+    /// Camera intrinsics, pixels, of the frames as they are passed in: for
+    /// [`FaceTracker::process_frame`], the sensor's, for the buffer as delivered (what Camera2's
+    /// `LENS_INTRINSIC_CALIBRATION` and `AVCameraCalibrationData` give, scaled to the buffer): the
+    /// tracker turns and mirrors them with the frame ([`Intrinsics::for_upright`]); for
+    /// [`FaceTracker::process`], the upright image's. `None` = the CONTRACT default for the upright
+    /// image's size (a field of view, so no turn is needed).
     pub camera: Option<Intrinsics>,
     /// Detections scoring below this are ignored. The detector proposes, M3's face check decides
     /// ([`Self::min_detection_confidence`]), so this sits below the detector's standalone operating
@@ -258,7 +264,7 @@ pub struct TrackerConfig {
     pub new_face_interval: u32,
     /// Re-detect in the same frame when tracking fails (`false`: in the next frame, as the thesis
     /// does because its detector cost 500 ms). Default `true`: our detector costs about 3 ms on a
-    /// 640×480 frame (2.8–3.0 ms in `track_eval`, stop 25), and re-detecting at once keeps the
+    /// 640×480 frame (2.8–3.0 ms in `track_eval` on an Intel Xeon), and re-detecting at once keeps the
     /// frame where a face reappears elsewhere (98.6 → 100 % correct frames on the synthetic
     /// sequences of `track_eval`).
     pub redetect_immediately: bool,
@@ -719,7 +725,12 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         let mut luma = std::mem::take(&mut self.luma);
         frame.to_luma(&mut luma);
         let image_us = us(t0);
-        let r = self.process_inner(&luma, timestamp_ns, t0);
+        let d = frame.desc();
+        let camera = self
+            .config
+            .camera
+            .map(|k| k.for_upright(d.width, d.height, d.rotation, d.mirrored));
+        let r = self.process_inner(&luma, timestamp_ns, t0, camera);
         self.luma = luma;
         r?;
         self.result.timings.image_us = image_us;
@@ -734,11 +745,19 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
     /// estimator or the fit (non-finite landmarks) pass through. After an error the tracker's
     /// tracks are unchanged where the error came before any update, and may have ended otherwise.
     pub fn process(&mut self, image: &GrayImage, timestamp_ns: i64) -> Result<&TrackingResult> {
-        self.process_inner(image, timestamp_ns, Instant::now())?;
+        let camera = self.config.camera;
+        self.process_inner(image, timestamp_ns, Instant::now(), camera)?;
         Ok(&self.result)
     }
 
-    fn process_inner(&mut self, image: &GrayImage, timestamp_ns: i64, t0: Instant) -> Result<()> {
+    /// `camera`: the upright image's intrinsics, `None` for the default.
+    fn process_inner(
+        &mut self,
+        image: &GrayImage,
+        timestamp_ns: i64,
+        t0: Instant,
+        camera: Option<Intrinsics>,
+    ) -> Result<()> {
         let (w, h) = (image.width(), image.height());
         if w == 0 || h == 0 || image.data().len() != w * h {
             return Err(Error::InvalidFrame(format!(
@@ -765,7 +784,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             }
         }
         self.frame_size = (w, h);
-        let camera = match self.config.camera {
+        let camera = match camera {
             Some(c) => c,
             None => Intrinsics::default_for(w as u32, h as u32)?,
         };

@@ -78,7 +78,7 @@ impl FaceTracker<ModelDetector, M3> {
     /// Why by mode: on still images the mode's two runs per net are more accurate (faces68
     /// validation NME 4.06 → 3.89 % on detected faces, 3.98 → 3.87 % on jittered landmark boxes,
     /// `models/MODEL_CARD.md`), while in a video track it gains nothing (synthetic sequences
-    /// 3.57 → 3.58 %) for 0.14–0.16 ms more per face (criterion and the CLI, stop 32).
+    /// 3.57 → 3.58 %) for 0.14–0.16 ms more per face (criterion and the CLI, Intel Xeon with AVX-512).
     ///
     /// # Errors
     /// As [`FaceTracker::new`], plus [`crate::Error::ModelLoad`] if an embedded model cannot be

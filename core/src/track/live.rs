@@ -1,0 +1,378 @@
+//! Live-stream mode: frames handed over from the camera thread, tracked on one worker thread,
+//! results delivered to a listener. The camera thread never waits for tracking: while the worker is
+//! busy the newest frame waits in one slot and replaces any older frame there (latest wins), and
+//! each result says how many frames were dropped since the previous one.
+//!
+//! Frames are copied into buffers the stream keeps (two, swapped between the camera thread and the
+//! worker), because a camera's buffer goes back to the camera when the call returns; after the
+//! first frames nothing is allocated per frame. Results come out in timestamp order, on the worker
+//! thread.
+
+use super::{FaceTracker, LandmarkEstimator, RegionDetector, TrackingResult};
+use crate::error::{Error, Result};
+use crate::image::{Frame, FrameDesc};
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::{self, JoinHandle, ThreadId};
+
+/// Receives the stream's results, on the worker thread, in timestamp order.
+pub trait LiveListener: Send {
+    /// The faces of the frame taken at `timestamp_ns` and described by `frame`; `frames_dropped`
+    /// frames submitted since the previous delivery (result or error) were skipped because the
+    /// worker was busy.
+    fn on_result(
+        &mut self,
+        timestamp_ns: i64,
+        frames_dropped: u64,
+        frame: &FrameDesc,
+        result: &TrackingResult,
+    );
+
+    /// Tracking the frame taken at `timestamp_ns` failed (a bug caught as [`Error::Internal`], or
+    /// an error of the pipeline); the stream goes on with the next frame.
+    fn on_error(&mut self, timestamp_ns: i64, frames_dropped: u64, error: Error);
+}
+
+/// What the worker runs on each frame: a [`FaceTracker`] (the SDK's), or in tests a stand-in.
+pub trait FrameProcessor: Send + 'static {
+    /// Tracks `frame`, taken at `timestamp_ns`.
+    ///
+    /// # Errors
+    /// As [`FaceTracker::process_frame`].
+    fn process(&mut self, frame: &Frame<'_>, timestamp_ns: i64) -> Result<&TrackingResult>;
+
+    /// Ends every track (after a caught panic, whose state is unknown).
+    fn reset(&mut self);
+}
+
+impl<D, L> FrameProcessor for FaceTracker<D, L>
+where
+    D: RegionDetector + Send + 'static,
+    L: LandmarkEstimator + Send + 'static,
+{
+    fn process(&mut self, frame: &Frame<'_>, timestamp_ns: i64) -> Result<&TrackingResult> {
+        self.process_frame(frame, timestamp_ns)
+    }
+
+    fn reset(&mut self) {
+        FaceTracker::reset(self);
+    }
+}
+
+/// What [`LiveStream::submit`] did with a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Submitted {
+    /// The worker was idle or finishing a frame: this one is next.
+    Queued,
+    /// A frame already waited: this one took its place (the older one is dropped).
+    Replaced,
+}
+
+/// One waiting frame: its bytes (a buffer kept across frames), description and timestamp.
+#[derive(Debug, Default)]
+struct Pending {
+    bytes: Vec<u8>,
+    desc: Option<FrameDesc>,
+    timestamp_ns: i64,
+}
+
+#[derive(Debug, Default)]
+struct Slot {
+    /// The frame waiting for the worker (`desc` set), or an empty buffer to fill.
+    waiting: Pending,
+    /// Frames replaced in the slot since the last delivery.
+    dropped: u64,
+    /// The last accepted timestamp: submitted frames must come after it.
+    last_timestamp_ns: Option<i64>,
+    shutdown: bool,
+}
+
+#[derive(Debug, Default)]
+struct Shared {
+    slot: Mutex<Slot>,
+    wake: Condvar,
+}
+
+impl Shared {
+    fn lock(&self) -> MutexGuard<'_, Slot> {
+        // Nothing runs user code or panics while the slot is held; recover anyway.
+        self.slot.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// A tracker running on its own worker thread (see the module docs). Dropping it (or
+/// [`Self::close`]) stops the worker: a frame being tracked finishes and is delivered, a waiting
+/// one is dropped, and no listener call happens afterwards.
+#[derive(Debug)]
+pub struct LiveStream {
+    shared: Arc<Shared>,
+    worker: Option<JoinHandle<()>>,
+    worker_id: ThreadId,
+}
+
+impl LiveStream {
+    /// Starts the worker with `tracker` (a [`FaceTracker`] in video mode) and `listener`.
+    ///
+    /// # Errors
+    /// [`Error::Internal`] when the operating system refuses a thread.
+    pub fn start(tracker: impl FrameProcessor, listener: Box<dyn LiveListener>) -> Result<Self> {
+        let shared = Arc::new(Shared::default());
+        let for_worker = Arc::clone(&shared);
+        let worker = thread::Builder::new()
+            .name("monotrack-live".into())
+            .spawn(move || run_worker(&for_worker, tracker, listener))
+            .map_err(|e| Error::Internal(format!("cannot start the live-stream worker: {e}")))?;
+        let worker_id = worker.thread().id();
+        Ok(Self {
+            shared,
+            worker: Some(worker),
+            worker_id,
+        })
+    }
+
+    /// Hands `frame`, taken at `timestamp_ns`, to the worker and returns at once (the bytes are
+    /// copied).
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] when `timestamp_ns` is not after the last submitted frame's, or the
+    /// stream is closed.
+    pub fn submit(&self, frame: &Frame<'_>, timestamp_ns: i64) -> Result<Submitted> {
+        let mut slot = self.shared.lock();
+        if slot.shutdown {
+            return Err(Error::InvalidInput("the live stream is closed".into()));
+        }
+        if let Some(last) = slot.last_timestamp_ns
+            && timestamp_ns <= last
+        {
+            return Err(Error::InvalidInput(format!(
+                "live-stream frames need strictly increasing timestamps: got {timestamp_ns} ns after {last} ns"
+            )));
+        }
+        slot.last_timestamp_ns = Some(timestamp_ns);
+        let outcome = if slot.waiting.desc.is_some() {
+            slot.dropped += 1;
+            Submitted::Replaced
+        } else {
+            Submitted::Queued
+        };
+        let w = &mut slot.waiting;
+        w.bytes.clear();
+        // Frame::new checked the length; the slice past it is not the frame's.
+        let len = frame.desc().required_len()?.min(frame.data().len());
+        w.bytes.extend_from_slice(&frame.data()[..len]);
+        w.desc = Some(*frame.desc());
+        w.timestamp_ns = timestamp_ns;
+        drop(slot);
+        self.shared.wake.notify_one();
+        Ok(outcome)
+    }
+
+    /// Stops the worker (see the type's docs) and waits for it, unless called from the listener
+    /// itself (on the worker thread), where it only asks the worker to stop after this delivery.
+    pub fn close(&mut self) {
+        self.shared.lock().shutdown = true;
+        self.shared.wake.notify_all();
+        if thread::current().id() == self.worker_id {
+            return;
+        }
+        if let Some(worker) = self.worker.take() {
+            // The worker catches the pipeline's and the listener's panics itself.
+            let _ = worker.join();
+        }
+    }
+}
+
+impl Drop for LiveStream {
+    fn drop(&mut self) {
+        self.close();
+    }
+}
+
+fn run_worker(
+    shared: &Shared,
+    mut tracker: impl FrameProcessor,
+    mut listener: Box<dyn LiveListener>,
+) {
+    let mut working = Pending::default();
+    loop {
+        let dropped = {
+            let mut slot = shared.lock();
+            while slot.waiting.desc.is_none() && !slot.shutdown {
+                slot = shared.wake.wait(slot).unwrap_or_else(|p| p.into_inner());
+            }
+            if slot.shutdown {
+                return;
+            }
+            std::mem::swap(&mut slot.waiting, &mut working);
+            std::mem::take(&mut slot.dropped)
+        };
+        let Some(desc) = working.desc.take() else {
+            continue;
+        };
+        let ts = working.timestamp_ns;
+        let delivered = catch_unwind(AssertUnwindSafe(|| {
+            match Frame::new(&working.bytes, desc).and_then(|f| tracker.process(&f, ts)) {
+                Ok(result) => listener.on_result(ts, dropped, &desc, result),
+                Err(e) => listener.on_error(ts, dropped, e),
+            }
+        }));
+        if let Err(panic) = delivered {
+            // A panic in the pipeline or the listener: the tracker may be half-updated, so its
+            // tracks start again, and the listener hears of it if it can.
+            tracker.reset();
+            let msg = panic
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_default();
+            let _ = catch_unwind(AssertUnwindSafe(|| {
+                listener.on_error(ts, dropped, Error::Internal(format!("panic: {msg}")));
+            }));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::PixelFormat;
+    use std::sync::mpsc;
+    use std::time::Duration;
+
+    #[derive(Debug, PartialEq)]
+    enum Event {
+        Result(i64, u64),
+        Error(i64, u64, String),
+    }
+
+    /// A stand-in tracker: takes `delay` per frame, fails on frames whose first byte is 1 and
+    /// panics on 2 (the tracker's own behaviour is tested in `track` and `tests/`).
+    struct Slow {
+        delay: Duration,
+        result: TrackingResult,
+        resets: Arc<Mutex<u32>>,
+    }
+
+    impl FrameProcessor for Slow {
+        fn process(&mut self, frame: &Frame<'_>, _ts: i64) -> Result<&TrackingResult> {
+            thread::sleep(self.delay);
+            match frame.data()[0] {
+                1 => Err(Error::InvalidInput("refused".into())),
+                2 => panic!("boom"),
+                _ => Ok(&self.result),
+            }
+        }
+        fn reset(&mut self) {
+            *self.resets.lock().unwrap() += 1;
+        }
+    }
+
+    struct ToChannel(mpsc::Sender<Event>);
+
+    impl LiveListener for ToChannel {
+        fn on_result(&mut self, ts: i64, dropped: u64, _: &FrameDesc, _: &TrackingResult) {
+            let _ = self.0.send(Event::Result(ts, dropped));
+        }
+        fn on_error(&mut self, ts: i64, dropped: u64, error: Error) {
+            let _ = self.0.send(Event::Error(ts, dropped, error.to_string()));
+        }
+    }
+
+    fn stream(delay_ms: u64) -> (LiveStream, mpsc::Receiver<Event>, Arc<Mutex<u32>>) {
+        let resets = Arc::new(Mutex::new(0));
+        let slow = Slow {
+            delay: Duration::from_millis(delay_ms),
+            result: TrackingResult::default(),
+            resets: Arc::clone(&resets),
+        };
+        let (tx, rx) = mpsc::channel();
+        let live = LiveStream::start(slow, Box::new(ToChannel(tx))).unwrap();
+        (live, rx, resets)
+    }
+
+    fn gray(first: u8) -> (Vec<u8>, FrameDesc) {
+        let mut bytes = vec![0u8; 8 * 4];
+        bytes[0] = first;
+        (bytes, FrameDesc::packed(8, 4, PixelFormat::Gray8))
+    }
+
+    #[test]
+    fn frames_are_dropped_while_busy_and_results_stay_in_order() {
+        let (mut live, rx, _) = stream(20);
+        let (bytes, desc) = gray(0);
+        let frame = Frame::new(&bytes, desc).unwrap();
+        let mut replaced = 0;
+        for ts in 1..=30 {
+            if live.submit(&frame, ts).unwrap() == Submitted::Replaced {
+                replaced += 1;
+            }
+            thread::sleep(Duration::from_millis(2));
+        }
+        assert!(
+            live.submit(&frame, 30).is_err(),
+            "a repeated timestamp is refused"
+        );
+        let mut last = 0;
+        let (mut delivered, mut dropped) = (0u64, 0u64);
+        while last < 30 {
+            match rx.recv_timeout(Duration::from_secs(10)).unwrap() {
+                Event::Result(ts, d) => {
+                    assert!(ts > last, "out of order: {ts} after {last}");
+                    last = ts;
+                    delivered += 1;
+                    dropped += d;
+                }
+                e => panic!("unexpected {e:?}"),
+            }
+        }
+        live.close();
+        assert!(
+            replaced > 5,
+            "a 20 ms tracker fed every 2 ms drops frames ({replaced})"
+        );
+        assert_eq!(dropped, replaced, "every replaced frame is counted once");
+        assert_eq!(
+            delivered + dropped,
+            30,
+            "every frame is delivered or counted dropped"
+        );
+        assert!(live.submit(&frame, 31).is_err(), "closed");
+    }
+
+    #[test]
+    fn errors_and_panics_reach_the_listener_and_the_stream_goes_on() {
+        let (mut live, rx, resets) = stream(0);
+        for (ts, first) in [(1, 1u8), (2, 2), (3, 0)] {
+            let (bytes, desc) = gray(first);
+            live.submit(&Frame::new(&bytes, desc).unwrap(), ts).unwrap();
+            // One at a time, so none is dropped.
+            let e = rx.recv_timeout(Duration::from_secs(10)).unwrap();
+            match (ts, e) {
+                (1, Event::Error(1, 0, msg)) => assert!(msg.contains("refused"), "{msg}"),
+                (2, Event::Error(2, 0, msg)) => assert!(msg.contains("panic: boom"), "{msg}"),
+                (3, Event::Result(3, 0)) => {}
+                (ts, e) => panic!("frame {ts}: {e:?}"),
+            }
+        }
+        assert_eq!(*resets.lock().unwrap(), 1, "the panic reset the tracker");
+        live.close();
+    }
+
+    #[test]
+    fn closing_while_busy_waits_for_the_frame_and_drops_the_waiting_one() {
+        let (mut live, rx, _) = stream(100);
+        let (bytes, desc) = gray(0);
+        let frame = Frame::new(&bytes, desc).unwrap();
+        live.submit(&frame, 1).unwrap();
+        thread::sleep(Duration::from_millis(20));
+        live.submit(&frame, 2).unwrap();
+        live.close();
+        live.close();
+        let events: Vec<Event> = rx.try_iter().collect();
+        assert_eq!(
+            events,
+            vec![Event::Result(1, 0)],
+            "frame 1 finished, frame 2 dropped"
+        );
+    }
+}
