@@ -60,6 +60,8 @@ dependencies {
     // (not the jar) carries libjnidispatch.so for each Android ABI.
     api(libs.jna) { artifact { type = "aar" } }
     api(libs.androidx.camera.core)
+    // Camera2 interop: the device's lens calibration for the SDK's intrinsics.
+    implementation(libs.androidx.camera.camera2)
 
     // The JVM tests touch only the generated records and the wrappers' pure logic, never native code.
     testImplementation(libs.junit.jupiter)

@@ -4,11 +4,10 @@
 
 use crate::MonotrackError;
 use crate::error::{guard, guard_infallible};
-use crate::types::{CameraIntrinsics, FrameDesc, HeadPose, NamedValue, Point2, Vec3, named};
+use crate::types::{ActionUnits, CameraIntrinsics, FrameDesc, HeadPose, Point2, ShapeUnits, Vec3};
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::detect::DetectorConfig;
 use monotrack_core::image::{Frame, Rect as CoreRect};
-use monotrack_core::model::{ANIM_UNIT_NAMES, SHAPE_UNIT_NAMES};
 use monotrack_core::track::{self as core_track, TrackedFace, Tracker};
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -39,6 +38,19 @@ pub struct TrackerConfig {
     /// Detector candidates scoring below this (0..=1) are not checked as faces. Default 0.4;
     /// 0.25 at the small-faces operating point.
     pub min_detection_score: f32,
+    /// Face presence: a detection becomes a face when M3's face confidence on its box is at least
+    /// this (0..=1; default 0.95). Lower finds more faces and more false ones.
+    pub min_detection_confidence: f32,
+    /// Tracking confidence: a tracked face is kept while M3's face confidence in its window is at
+    /// least this (0..=1; default 0.5, the classifier's decision point); below it the face is
+    /// re-detected.
+    pub min_tracking_confidence: f32,
+    /// The fast tracker's template match must score at least this (normalised cross-correlation,
+    /// -1..=1; default 0.5); below it the face is re-detected.
+    pub min_match_score: f32,
+    /// How far the fast tracker searches around the last face, as a fraction of the face's larger
+    /// side in each direction (0 < margin ≤ 4; default 0.5: half a face width per frame).
+    pub search_margin: f32,
     /// Optical-flow landmark filter on or off.
     pub flow_filter: bool,
     /// Frames over which a new track's shape units are estimated before being held (1..=1000).
@@ -60,6 +72,10 @@ pub fn default_tracker_config() -> TrackerConfig {
         camera: None,
         min_face_size_px: DetectorConfig::default().min_face_px.round() as u32,
         min_detection_score: c.min_detection_score,
+        min_detection_confidence: c.min_detection_confidence,
+        min_tracking_confidence: c.min_face_confidence,
+        min_match_score: c.min_ncc_score,
+        search_margin: c.search_margin,
         flow_filter: c.flow_filter,
         shape_frames: c.shape_frames as u32,
         mirror_average: None,
@@ -104,6 +120,10 @@ fn to_core(
         flow_filter: c.flow_filter,
         shape_frames: c.shape_frames as usize,
         min_detection_score: c.min_detection_score,
+        min_detection_confidence: c.min_detection_confidence,
+        min_face_confidence: c.min_tracking_confidence,
+        min_ncc_score: c.min_match_score,
+        search_margin: c.search_margin,
         ..core_track::TrackerConfig::default()
     };
     core.validate()?;
@@ -204,9 +224,9 @@ pub struct Face {
     /// Head pose.
     pub pose: HeadPose,
     /// The 11 shape units.
-    pub shape_units: Vec<NamedValue>,
+    pub shape_units: ShapeUnits,
     /// The 6 action (animation) units.
-    pub action_units: Vec<NamedValue>,
+    pub action_units: ActionUnits,
     /// RMS reprojection error of the 3D fit, pixels.
     pub fit_rms_px: f64,
 }
@@ -252,8 +272,8 @@ impl From<&TrackedFace> for Face {
                 combined: v3(&l.gaze_combined),
             },
             pose: HeadPose::from(&f.fit.pose),
-            shape_units: named(&SHAPE_UNIT_NAMES, &f.fit.shape),
-            action_units: named(&ANIM_UNIT_NAMES, &f.fit.animation),
+            shape_units: ShapeUnits::from(&f.fit.shape[..]),
+            action_units: ActionUnits::from(&f.fit.animation[..]),
             fit_rms_px: f.fit.report.rms_px,
         }
     }
@@ -560,6 +580,9 @@ pub struct BenchReport {
     pub device: String,
     /// Iterations per path.
     pub iterations: u32,
+    /// Building the tracker (loading and optimising the embedded models), microseconds: what an
+    /// app's `FaceTracker` constructor costs, and why it belongs off the main thread.
+    pub model_load_us: f64,
     /// Per-stage statistics: the tracking path, then the re-detect path (empty stages measure 0
     /// when the frame holds no face).
     pub stages: Vec<StageStat>,
@@ -586,6 +609,7 @@ pub fn run_benchmark(
         Ok(BenchReport {
             device: format!("{} {}", std::env::consts::OS, std::env::consts::ARCH),
             iterations: r.iterations,
+            model_load_us: r.load_us,
             stages: r
                 .stages
                 .into_iter()

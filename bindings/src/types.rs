@@ -5,7 +5,6 @@ use crate::MonotrackError;
 use monotrack_core::camera::{Intrinsics, Rotation};
 use monotrack_core::fit::{FaceFit, Pose};
 use monotrack_core::image::{FrameDesc as CoreFrameDesc, PixelFormat as CorePixelFormat};
-use monotrack_core::model::{ANIM_UNIT_NAMES, SHAPE_UNIT_NAMES};
 
 /// Pixel formats a frame may arrive in (see `FrameDesc`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
@@ -182,6 +181,85 @@ pub struct NamedValue {
     pub value: f64,
 }
 
+/// The user's face shape: the 11 shape units (±1 spans the plausible range; 0 is the mean face).
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct ShapeUnits {
+    /// `eyes_height` (`SHAPE_UNIT_NAMES`).
+    pub eyes_height: f64,
+    /// `eyes_separation_distance` (`SHAPE_UNIT_NAMES`).
+    pub eyes_separation_distance: f64,
+    /// `eyes_vertical_position` (`SHAPE_UNIT_NAMES`).
+    pub eyes_vertical_position: f64,
+    /// `eyes_width` (`SHAPE_UNIT_NAMES`).
+    pub eyes_width: f64,
+    /// `face_length` (`SHAPE_UNIT_NAMES`).
+    pub face_length: f64,
+    /// `face_roundness` (`SHAPE_UNIT_NAMES`).
+    pub face_roundness: f64,
+    /// `lip_thickness` (`SHAPE_UNIT_NAMES`).
+    pub lip_thickness: f64,
+    /// `mouth_vertical_position` (`SHAPE_UNIT_NAMES`).
+    pub mouth_vertical_position: f64,
+    /// `mouth_width` (`SHAPE_UNIT_NAMES`).
+    pub mouth_width: f64,
+    /// `nose_width` (`SHAPE_UNIT_NAMES`).
+    pub nose_width: f64,
+    /// `nose_z_extension` (`SHAPE_UNIT_NAMES`).
+    pub nose_z_extension: f64,
+}
+
+impl From<&[f64]> for ShapeUnits {
+    fn from(v: &[f64]) -> Self {
+        // The model's order (`SHAPE_UNIT_NAMES`); a shorter slice cannot occur (fixed-size arrays upstream).
+        let at = |i: usize| v.get(i).copied().unwrap_or(0.0);
+        Self {
+            eyes_height: at(0),
+            eyes_separation_distance: at(1),
+            eyes_vertical_position: at(2),
+            eyes_width: at(3),
+            face_length: at(4),
+            face_roundness: at(5),
+            lip_thickness: at(6),
+            mouth_vertical_position: at(7),
+            mouth_width: at(8),
+            nose_width: at(9),
+            nose_z_extension: at(10),
+        }
+    }
+}
+
+/// The expression: the 6 animation units (0 neutral, 1 the unit's full extent).
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct ActionUnits {
+    /// `open_mouth` (`ANIM_UNIT_NAMES`).
+    pub open_mouth: f64,
+    /// `raise_left_outer_eyebrow` (`ANIM_UNIT_NAMES`).
+    pub raise_left_outer_eyebrow: f64,
+    /// `raise_nose_bridge` (`ANIM_UNIT_NAMES`).
+    pub raise_nose_bridge: f64,
+    /// `raise_right_outer_eyebrow` (`ANIM_UNIT_NAMES`).
+    pub raise_right_outer_eyebrow: f64,
+    /// `smile` (`ANIM_UNIT_NAMES`).
+    pub smile: f64,
+    /// `stretch_lips` (`ANIM_UNIT_NAMES`).
+    pub stretch_lips: f64,
+}
+
+impl From<&[f64]> for ActionUnits {
+    fn from(v: &[f64]) -> Self {
+        // The model's order (`ANIM_UNIT_NAMES`); a shorter slice cannot occur (fixed-size arrays upstream).
+        let at = |i: usize| v.get(i).copied().unwrap_or(0.0);
+        Self {
+            open_mouth: at(0),
+            raise_left_outer_eyebrow: at(1),
+            raise_nose_bridge: at(2),
+            raise_right_outer_eyebrow: at(3),
+            smile: at(4),
+            stretch_lips: at(5),
+        }
+    }
+}
+
 /// Which 3D fit to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
 pub enum FitMethod {
@@ -197,9 +275,9 @@ pub struct FitResult {
     /// Head pose.
     pub pose: HeadPose,
     /// The 11 shape units.
-    pub shape_units: Vec<NamedValue>,
+    pub shape_units: ShapeUnits,
     /// The 6 animation (action) units.
-    pub action_units: Vec<NamedValue>,
+    pub action_units: ActionUnits,
     /// RMS reprojection error, pixels.
     pub fit_rms_px: f64,
     /// Solver iterations.
@@ -224,8 +302,8 @@ impl From<&FaceFit> for FitResult {
     fn from(f: &FaceFit) -> Self {
         Self {
             pose: HeadPose::from(&f.pose),
-            shape_units: named(&SHAPE_UNIT_NAMES, &f.shape),
-            action_units: named(&ANIM_UNIT_NAMES, &f.animation),
+            shape_units: ShapeUnits::from(&f.shape[..]),
+            action_units: ActionUnits::from(&f.animation[..]),
             fit_rms_px: f.report.rms_px,
             iterations: f.report.iterations,
             converged: f.report.converged,
@@ -242,4 +320,50 @@ pub struct LumaImage {
     pub height: u32,
     /// Row-major pixels, `width * height` bytes.
     pub pixels: Vec<u8>,
+}
+
+#[cfg(test)]
+mod unit_tests {
+    use super::*;
+    use monotrack_core::model::{ANIM_UNIT_NAMES, SHAPE_UNIT_NAMES};
+
+    /// The records' fields are the model's units, by name and in order.
+    #[test]
+    fn unit_records_follow_the_model_order() {
+        assert_eq!(
+            SHAPE_UNIT_NAMES,
+            [
+                "eyes_height",
+                "eyes_separation_distance",
+                "eyes_vertical_position",
+                "eyes_width",
+                "face_length",
+                "face_roundness",
+                "lip_thickness",
+                "mouth_vertical_position",
+                "mouth_width",
+                "nose_width",
+                "nose_z_extension",
+            ]
+        );
+        assert_eq!(
+            ANIM_UNIT_NAMES,
+            [
+                "open_mouth",
+                "raise_left_outer_eyebrow",
+                "raise_nose_bridge",
+                "raise_right_outer_eyebrow",
+                "smile",
+                "stretch_lips",
+            ]
+        );
+        let v: Vec<f64> = (0..11).map(f64::from).collect();
+        let s = ShapeUnits::from(&v[..]);
+        assert_eq!(
+            (s.eyes_height, s.face_roundness, s.nose_z_extension),
+            (0.0, 5.0, 10.0)
+        );
+        let a = ActionUnits::from(&v[..6]);
+        assert_eq!((a.open_mouth, a.smile, a.stretch_lips), (0.0, 4.0, 5.0));
+    }
 }

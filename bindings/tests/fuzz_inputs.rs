@@ -99,6 +99,29 @@ fn no_panic(what: &str, case: usize, f: impl FnOnce()) {
     }
 }
 
+/// The FFI turns a panic into `MonotrackError::Internal` (`error::guard`), so a panic inside a
+/// call shows up here as that error: bad input must give the other, typed errors.
+fn typed<T>(what: &str, case: usize, r: Result<T, MonotrackError>) {
+    if let Err(MonotrackError::Internal { msg }) = r {
+        panic!("{what} failed internally on case {case}: {msg}");
+    }
+}
+
+static LIVE_INTERNAL: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// A live-stream listener that drops what it gets (the fuzzing is of the inputs).
+struct Ignore;
+
+impl LiveStreamListener for Ignore {
+    fn on_result(&self, _: LiveStreamResult) {}
+    fn on_error(&self, _: i64, _: u64, error: MonotrackError) {
+        // Read by the test after the worker stopped (a panic here would only reach the worker).
+        if matches!(error, MonotrackError::Internal { .. }) {
+            LIVE_INTERNAL.store(true, std::sync::atomic::Ordering::SeqCst);
+        }
+    }
+}
+
 #[test]
 fn frames_and_trackers_never_panic() {
     let mut r = Rng(1);
@@ -108,6 +131,7 @@ fn frames_and_trackers_never_panic() {
         ..default_tracker_config()
     })
     .unwrap();
+    let live = LiveFaceTracker::new(default_tracker_config(), std::sync::Arc::new(Ignore)).unwrap();
     let mut ok_frames = 0;
     for case in 0..300 {
         let d = desc(&mut r);
@@ -117,10 +141,13 @@ fn frames_and_trackers_never_panic() {
         });
         let ts = r.next() as i64;
         no_panic("process_frame", case, || {
-            let _ = tracker.process_frame(&b, d, ts);
+            typed("process_frame", case, tracker.process_frame(&b, d, ts));
+        });
+        no_panic("process_async", case, || {
+            typed("process_async", case, live.process_async(&b, d, ts));
         });
         no_panic("process_image", case, || {
-            let _ = image.process_image(&b, d);
+            typed("process_image", case, image.process_image(&b, d));
         });
         let cfg = TrackerConfig {
             running_mode: RunningMode::Video,
@@ -128,18 +155,27 @@ fn frames_and_trackers_never_panic() {
             camera: (r.below(2) == 0).then(|| intrinsics(&mut r)),
             min_face_size_px: r.small(),
             min_detection_score: r.float(1.5) as f32,
+            min_detection_confidence: r.float(1.5) as f32,
+            min_tracking_confidence: r.float(1.5) as f32,
+            min_match_score: r.float(3.0) as f32 - 1.0,
+            search_margin: r.float(6.0) as f32 - 1.0,
             flow_filter: r.below(2) == 0,
             shape_frames: r.small(),
             mirror_average: [None, Some(false), Some(true)][r.below(3) as usize],
         };
         no_panic("FaceTracker::new", case, || {
-            let _ = FaceTracker::new(cfg);
+            typed("FaceTracker::new", case, FaceTracker::new(cfg));
         });
         let (w, h) = (r.small(), r.small());
         no_panic("default_camera", case, || {
-            let _ = default_camera(w, h);
+            typed("default_camera", case, default_camera(w, h));
         });
     }
+    live.shutdown();
+    assert!(
+        !LIVE_INTERNAL.load(std::sync::atomic::Ordering::SeqCst),
+        "the live worker failed internally"
+    );
     // Some cases must be valid, or the error paths alone were exercised.
     assert!(ok_frames >= 20, "only {ok_frames} valid frames");
 }
@@ -223,7 +259,11 @@ fn body_calls_never_panic() {
         let k = (r.below(2) == 0).then(|| intrinsics(&mut r));
         let (sw, sd, w, h) = (r.float(5000.0), r.float(5000.0), r.small(), r.small());
         no_panic("calibrate_floor_camera", case, || {
-            let _ = calibrate_floor_camera(corners, sw, sd, w, h, k);
+            typed(
+                "calibrate_floor_camera",
+                case,
+                calibrate_floor_camera(corners, sw, sd, w, h, k),
+            );
         });
         let mut cam = camera.clone();
         if r.below(2) == 0 {
@@ -244,7 +284,7 @@ fn body_calls_never_panic() {
             full_model: r.below(2) == 0,
         };
         no_panic("BodyTracker::new", case, || {
-            let _ = BodyTracker::new(cam, cfg);
+            typed("BodyTracker::new", case, BodyTracker::new(cam, cfg));
         });
         // Mostly plausible bodies (jittered around a standing figure), sometimes garbage.
         let mut obs = Vec::new();

@@ -1522,6 +1522,115 @@ public func FfiConverterTypeLiveStreamListener_lower(_ value: LiveStreamListener
 
 
 /**
+ * The expression: the 6 animation units (0 neutral, 1 the unit's full extent).
+ */
+public struct ActionUnits: Equatable, Hashable {
+    /**
+     * `open_mouth` (`ANIM_UNIT_NAMES`).
+     */
+    public var openMouth: Double
+    /**
+     * `raise_left_outer_eyebrow` (`ANIM_UNIT_NAMES`).
+     */
+    public var raiseLeftOuterEyebrow: Double
+    /**
+     * `raise_nose_bridge` (`ANIM_UNIT_NAMES`).
+     */
+    public var raiseNoseBridge: Double
+    /**
+     * `raise_right_outer_eyebrow` (`ANIM_UNIT_NAMES`).
+     */
+    public var raiseRightOuterEyebrow: Double
+    /**
+     * `smile` (`ANIM_UNIT_NAMES`).
+     */
+    public var smile: Double
+    /**
+     * `stretch_lips` (`ANIM_UNIT_NAMES`).
+     */
+    public var stretchLips: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * `open_mouth` (`ANIM_UNIT_NAMES`).
+         */openMouth: Double, 
+        /**
+         * `raise_left_outer_eyebrow` (`ANIM_UNIT_NAMES`).
+         */raiseLeftOuterEyebrow: Double, 
+        /**
+         * `raise_nose_bridge` (`ANIM_UNIT_NAMES`).
+         */raiseNoseBridge: Double, 
+        /**
+         * `raise_right_outer_eyebrow` (`ANIM_UNIT_NAMES`).
+         */raiseRightOuterEyebrow: Double, 
+        /**
+         * `smile` (`ANIM_UNIT_NAMES`).
+         */smile: Double, 
+        /**
+         * `stretch_lips` (`ANIM_UNIT_NAMES`).
+         */stretchLips: Double) {
+        self.openMouth = openMouth
+        self.raiseLeftOuterEyebrow = raiseLeftOuterEyebrow
+        self.raiseNoseBridge = raiseNoseBridge
+        self.raiseRightOuterEyebrow = raiseRightOuterEyebrow
+        self.smile = smile
+        self.stretchLips = stretchLips
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension ActionUnits: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeActionUnits: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> ActionUnits {
+        return
+            try ActionUnits(
+                openMouth: FfiConverterDouble.read(from: &buf), 
+                raiseLeftOuterEyebrow: FfiConverterDouble.read(from: &buf), 
+                raiseNoseBridge: FfiConverterDouble.read(from: &buf), 
+                raiseRightOuterEyebrow: FfiConverterDouble.read(from: &buf), 
+                smile: FfiConverterDouble.read(from: &buf), 
+                stretchLips: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: ActionUnits, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.openMouth, into: &buf)
+        FfiConverterDouble.write(value.raiseLeftOuterEyebrow, into: &buf)
+        FfiConverterDouble.write(value.raiseNoseBridge, into: &buf)
+        FfiConverterDouble.write(value.raiseRightOuterEyebrow, into: &buf)
+        FfiConverterDouble.write(value.smile, into: &buf)
+        FfiConverterDouble.write(value.stretchLips, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeActionUnits_lift(_ buf: RustBuffer) throws -> ActionUnits {
+    return try FfiConverterTypeActionUnits.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeActionUnits_lower(_ value: ActionUnits) -> RustBuffer {
+    return FfiConverterTypeActionUnits.lower(value)
+}
+
+
+/**
  * What `run_benchmark` measured.
  */
 public struct BenchReport: Equatable, Hashable {
@@ -1533,6 +1642,11 @@ public struct BenchReport: Equatable, Hashable {
      * Iterations per path.
      */
     public var iterations: UInt32
+    /**
+     * Building the tracker (loading and optimising the embedded models), microseconds: what an
+     * app's `FaceTracker` constructor costs, and why it belongs off the main thread.
+     */
+    public var modelLoadUs: Double
     /**
      * Per-stage statistics: the tracking path, then the re-detect path (empty stages measure 0
      * when the frame holds no face).
@@ -1549,11 +1663,16 @@ public struct BenchReport: Equatable, Hashable {
          * Iterations per path.
          */iterations: UInt32, 
         /**
+         * Building the tracker (loading and optimising the embedded models), microseconds: what an
+         * app's `FaceTracker` constructor costs, and why it belongs off the main thread.
+         */modelLoadUs: Double, 
+        /**
          * Per-stage statistics: the tracking path, then the re-detect path (empty stages measure 0
          * when the frame holds no face).
          */stages: [StageStat]) {
         self.device = device
         self.iterations = iterations
+        self.modelLoadUs = modelLoadUs
         self.stages = stages
     }
 
@@ -1575,6 +1694,7 @@ public struct FfiConverterTypeBenchReport: FfiConverterRustBuffer {
             try BenchReport(
                 device: FfiConverterString.read(from: &buf), 
                 iterations: FfiConverterUInt32.read(from: &buf), 
+                modelLoadUs: FfiConverterDouble.read(from: &buf), 
                 stages: FfiConverterSequenceTypeStageStat.read(from: &buf)
         )
     }
@@ -1582,6 +1702,7 @@ public struct FfiConverterTypeBenchReport: FfiConverterRustBuffer {
     public static func write(_ value: BenchReport, into buf: inout [UInt8]) {
         FfiConverterString.write(value.device, into: &buf)
         FfiConverterUInt32.write(value.iterations, into: &buf)
+        FfiConverterDouble.write(value.modelLoadUs, into: &buf)
         FfiConverterSequenceTypeStageStat.write(value.stages, into: &buf)
     }
 }
@@ -2283,11 +2404,11 @@ public struct Face: Equatable, Hashable {
     /**
      * The 11 shape units.
      */
-    public var shapeUnits: [NamedValue]
+    public var shapeUnits: ShapeUnits
     /**
      * The 6 action (animation) units.
      */
-    public var actionUnits: [NamedValue]
+    public var actionUnits: ActionUnits
     /**
      * RMS reprojection error of the 3D fit, pixels.
      */
@@ -2328,10 +2449,10 @@ public struct Face: Equatable, Hashable {
          */pose: HeadPose, 
         /**
          * The 11 shape units.
-         */shapeUnits: [NamedValue], 
+         */shapeUnits: ShapeUnits, 
         /**
          * The 6 action (animation) units.
-         */actionUnits: [NamedValue], 
+         */actionUnits: ActionUnits, 
         /**
          * RMS reprojection error of the 3D fit, pixels.
          */fitRmsPx: Double) {
@@ -2376,8 +2497,8 @@ public struct FfiConverterTypeFace: FfiConverterRustBuffer {
                 gestures: FfiConverterTypeGestures.read(from: &buf), 
                 gaze: FfiConverterTypeGaze.read(from: &buf), 
                 pose: FfiConverterTypeHeadPose.read(from: &buf), 
-                shapeUnits: FfiConverterSequenceTypeNamedValue.read(from: &buf), 
-                actionUnits: FfiConverterSequenceTypeNamedValue.read(from: &buf), 
+                shapeUnits: FfiConverterTypeShapeUnits.read(from: &buf), 
+                actionUnits: FfiConverterTypeActionUnits.read(from: &buf), 
                 fitRmsPx: FfiConverterDouble.read(from: &buf)
         )
     }
@@ -2393,8 +2514,8 @@ public struct FfiConverterTypeFace: FfiConverterRustBuffer {
         FfiConverterTypeGestures.write(value.gestures, into: &buf)
         FfiConverterTypeGaze.write(value.gaze, into: &buf)
         FfiConverterTypeHeadPose.write(value.pose, into: &buf)
-        FfiConverterSequenceTypeNamedValue.write(value.shapeUnits, into: &buf)
-        FfiConverterSequenceTypeNamedValue.write(value.actionUnits, into: &buf)
+        FfiConverterTypeShapeUnits.write(value.shapeUnits, into: &buf)
+        FfiConverterTypeActionUnits.write(value.actionUnits, into: &buf)
         FfiConverterDouble.write(value.fitRmsPx, into: &buf)
     }
 }
@@ -2426,11 +2547,11 @@ public struct FitResult: Equatable, Hashable {
     /**
      * The 11 shape units.
      */
-    public var shapeUnits: [NamedValue]
+    public var shapeUnits: ShapeUnits
     /**
      * The 6 animation (action) units.
      */
-    public var actionUnits: [NamedValue]
+    public var actionUnits: ActionUnits
     /**
      * RMS reprojection error, pixels.
      */
@@ -2452,10 +2573,10 @@ public struct FitResult: Equatable, Hashable {
          */pose: HeadPose, 
         /**
          * The 11 shape units.
-         */shapeUnits: [NamedValue], 
+         */shapeUnits: ShapeUnits, 
         /**
          * The 6 animation (action) units.
-         */actionUnits: [NamedValue], 
+         */actionUnits: ActionUnits, 
         /**
          * RMS reprojection error, pixels.
          */fitRmsPx: Double, 
@@ -2490,8 +2611,8 @@ public struct FfiConverterTypeFitResult: FfiConverterRustBuffer {
         return
             try FitResult(
                 pose: FfiConverterTypeHeadPose.read(from: &buf), 
-                shapeUnits: FfiConverterSequenceTypeNamedValue.read(from: &buf), 
-                actionUnits: FfiConverterSequenceTypeNamedValue.read(from: &buf), 
+                shapeUnits: FfiConverterTypeShapeUnits.read(from: &buf), 
+                actionUnits: FfiConverterTypeActionUnits.read(from: &buf), 
                 fitRmsPx: FfiConverterDouble.read(from: &buf), 
                 iterations: FfiConverterUInt32.read(from: &buf), 
                 converged: FfiConverterBool.read(from: &buf)
@@ -2500,8 +2621,8 @@ public struct FfiConverterTypeFitResult: FfiConverterRustBuffer {
 
     public static func write(_ value: FitResult, into buf: inout [UInt8]) {
         FfiConverterTypeHeadPose.write(value.pose, into: &buf)
-        FfiConverterSequenceTypeNamedValue.write(value.shapeUnits, into: &buf)
-        FfiConverterSequenceTypeNamedValue.write(value.actionUnits, into: &buf)
+        FfiConverterTypeShapeUnits.write(value.shapeUnits, into: &buf)
+        FfiConverterTypeActionUnits.write(value.actionUnits, into: &buf)
         FfiConverterDouble.write(value.fitRmsPx, into: &buf)
         FfiConverterUInt32.write(value.iterations, into: &buf)
         FfiConverterBool.write(value.converged, into: &buf)
@@ -3529,6 +3650,165 @@ public func FfiConverterTypeRect_lower(_ value: Rect) -> RustBuffer {
 
 
 /**
+ * The user's face shape: the 11 shape units (±1 spans the plausible range; 0 is the mean face).
+ */
+public struct ShapeUnits: Equatable, Hashable {
+    /**
+     * `eyes_height` (`SHAPE_UNIT_NAMES`).
+     */
+    public var eyesHeight: Double
+    /**
+     * `eyes_separation_distance` (`SHAPE_UNIT_NAMES`).
+     */
+    public var eyesSeparationDistance: Double
+    /**
+     * `eyes_vertical_position` (`SHAPE_UNIT_NAMES`).
+     */
+    public var eyesVerticalPosition: Double
+    /**
+     * `eyes_width` (`SHAPE_UNIT_NAMES`).
+     */
+    public var eyesWidth: Double
+    /**
+     * `face_length` (`SHAPE_UNIT_NAMES`).
+     */
+    public var faceLength: Double
+    /**
+     * `face_roundness` (`SHAPE_UNIT_NAMES`).
+     */
+    public var faceRoundness: Double
+    /**
+     * `lip_thickness` (`SHAPE_UNIT_NAMES`).
+     */
+    public var lipThickness: Double
+    /**
+     * `mouth_vertical_position` (`SHAPE_UNIT_NAMES`).
+     */
+    public var mouthVerticalPosition: Double
+    /**
+     * `mouth_width` (`SHAPE_UNIT_NAMES`).
+     */
+    public var mouthWidth: Double
+    /**
+     * `nose_width` (`SHAPE_UNIT_NAMES`).
+     */
+    public var noseWidth: Double
+    /**
+     * `nose_z_extension` (`SHAPE_UNIT_NAMES`).
+     */
+    public var noseZExtension: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * `eyes_height` (`SHAPE_UNIT_NAMES`).
+         */eyesHeight: Double, 
+        /**
+         * `eyes_separation_distance` (`SHAPE_UNIT_NAMES`).
+         */eyesSeparationDistance: Double, 
+        /**
+         * `eyes_vertical_position` (`SHAPE_UNIT_NAMES`).
+         */eyesVerticalPosition: Double, 
+        /**
+         * `eyes_width` (`SHAPE_UNIT_NAMES`).
+         */eyesWidth: Double, 
+        /**
+         * `face_length` (`SHAPE_UNIT_NAMES`).
+         */faceLength: Double, 
+        /**
+         * `face_roundness` (`SHAPE_UNIT_NAMES`).
+         */faceRoundness: Double, 
+        /**
+         * `lip_thickness` (`SHAPE_UNIT_NAMES`).
+         */lipThickness: Double, 
+        /**
+         * `mouth_vertical_position` (`SHAPE_UNIT_NAMES`).
+         */mouthVerticalPosition: Double, 
+        /**
+         * `mouth_width` (`SHAPE_UNIT_NAMES`).
+         */mouthWidth: Double, 
+        /**
+         * `nose_width` (`SHAPE_UNIT_NAMES`).
+         */noseWidth: Double, 
+        /**
+         * `nose_z_extension` (`SHAPE_UNIT_NAMES`).
+         */noseZExtension: Double) {
+        self.eyesHeight = eyesHeight
+        self.eyesSeparationDistance = eyesSeparationDistance
+        self.eyesVerticalPosition = eyesVerticalPosition
+        self.eyesWidth = eyesWidth
+        self.faceLength = faceLength
+        self.faceRoundness = faceRoundness
+        self.lipThickness = lipThickness
+        self.mouthVerticalPosition = mouthVerticalPosition
+        self.mouthWidth = mouthWidth
+        self.noseWidth = noseWidth
+        self.noseZExtension = noseZExtension
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension ShapeUnits: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeShapeUnits: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> ShapeUnits {
+        return
+            try ShapeUnits(
+                eyesHeight: FfiConverterDouble.read(from: &buf), 
+                eyesSeparationDistance: FfiConverterDouble.read(from: &buf), 
+                eyesVerticalPosition: FfiConverterDouble.read(from: &buf), 
+                eyesWidth: FfiConverterDouble.read(from: &buf), 
+                faceLength: FfiConverterDouble.read(from: &buf), 
+                faceRoundness: FfiConverterDouble.read(from: &buf), 
+                lipThickness: FfiConverterDouble.read(from: &buf), 
+                mouthVerticalPosition: FfiConverterDouble.read(from: &buf), 
+                mouthWidth: FfiConverterDouble.read(from: &buf), 
+                noseWidth: FfiConverterDouble.read(from: &buf), 
+                noseZExtension: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: ShapeUnits, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.eyesHeight, into: &buf)
+        FfiConverterDouble.write(value.eyesSeparationDistance, into: &buf)
+        FfiConverterDouble.write(value.eyesVerticalPosition, into: &buf)
+        FfiConverterDouble.write(value.eyesWidth, into: &buf)
+        FfiConverterDouble.write(value.faceLength, into: &buf)
+        FfiConverterDouble.write(value.faceRoundness, into: &buf)
+        FfiConverterDouble.write(value.lipThickness, into: &buf)
+        FfiConverterDouble.write(value.mouthVerticalPosition, into: &buf)
+        FfiConverterDouble.write(value.mouthWidth, into: &buf)
+        FfiConverterDouble.write(value.noseWidth, into: &buf)
+        FfiConverterDouble.write(value.noseZExtension, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeShapeUnits_lift(_ buf: RustBuffer) throws -> ShapeUnits {
+    return try FfiConverterTypeShapeUnits.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeShapeUnits_lower(_ value: ShapeUnits) -> RustBuffer {
+    return FfiConverterTypeShapeUnits.lower(value)
+}
+
+
+/**
  * One stage's median and 90th percentile, microseconds.
  */
 public struct StagePercentiles: Equatable, Hashable {
@@ -3835,6 +4115,27 @@ public struct TrackerConfig: Equatable, Hashable {
      */
     public var minDetectionScore: Float
     /**
+     * Face presence: a detection becomes a face when M3's face confidence on its box is at least
+     * this (0..=1; default 0.95). Lower finds more faces and more false ones.
+     */
+    public var minDetectionConfidence: Float
+    /**
+     * Tracking confidence: a tracked face is kept while M3's face confidence in its window is at
+     * least this (0..=1; default 0.5, the classifier's decision point); below it the face is
+     * re-detected.
+     */
+    public var minTrackingConfidence: Float
+    /**
+     * The fast tracker's template match must score at least this (normalised cross-correlation,
+     * -1..=1; default 0.5); below it the face is re-detected.
+     */
+    public var minMatchScore: Float
+    /**
+     * How far the fast tracker searches around the last face, as a fraction of the face's larger
+     * side in each direction (0 < margin ≤ 4; default 0.5: half a face width per frame).
+     */
+    public var searchMargin: Float
+    /**
      * Optical-flow landmark filter on or off.
      */
     public var flowFilter: Bool
@@ -3874,6 +4175,23 @@ public struct TrackerConfig: Equatable, Hashable {
          * 0.25 at the small-faces operating point.
          */minDetectionScore: Float, 
         /**
+         * Face presence: a detection becomes a face when M3's face confidence on its box is at least
+         * this (0..=1; default 0.95). Lower finds more faces and more false ones.
+         */minDetectionConfidence: Float, 
+        /**
+         * Tracking confidence: a tracked face is kept while M3's face confidence in its window is at
+         * least this (0..=1; default 0.5, the classifier's decision point); below it the face is
+         * re-detected.
+         */minTrackingConfidence: Float, 
+        /**
+         * The fast tracker's template match must score at least this (normalised cross-correlation,
+         * -1..=1; default 0.5); below it the face is re-detected.
+         */minMatchScore: Float, 
+        /**
+         * How far the fast tracker searches around the last face, as a fraction of the face's larger
+         * side in each direction (0 < margin ≤ 4; default 0.5: half a face width per frame).
+         */searchMargin: Float, 
+        /**
          * Optical-flow landmark filter on or off.
          */flowFilter: Bool, 
         /**
@@ -3890,6 +4208,10 @@ public struct TrackerConfig: Equatable, Hashable {
         self.camera = camera
         self.minFaceSizePx = minFaceSizePx
         self.minDetectionScore = minDetectionScore
+        self.minDetectionConfidence = minDetectionConfidence
+        self.minTrackingConfidence = minTrackingConfidence
+        self.minMatchScore = minMatchScore
+        self.searchMargin = searchMargin
         self.flowFilter = flowFilter
         self.shapeFrames = shapeFrames
         self.mirrorAverage = mirrorAverage
@@ -3916,6 +4238,10 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
                 camera: FfiConverterOptionTypeCameraIntrinsics.read(from: &buf), 
                 minFaceSizePx: FfiConverterUInt32.read(from: &buf), 
                 minDetectionScore: FfiConverterFloat.read(from: &buf), 
+                minDetectionConfidence: FfiConverterFloat.read(from: &buf), 
+                minTrackingConfidence: FfiConverterFloat.read(from: &buf), 
+                minMatchScore: FfiConverterFloat.read(from: &buf), 
+                searchMargin: FfiConverterFloat.read(from: &buf), 
                 flowFilter: FfiConverterBool.read(from: &buf), 
                 shapeFrames: FfiConverterUInt32.read(from: &buf), 
                 mirrorAverage: FfiConverterOptionBool.read(from: &buf)
@@ -3928,6 +4254,10 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
         FfiConverterOptionTypeCameraIntrinsics.write(value.camera, into: &buf)
         FfiConverterUInt32.write(value.minFaceSizePx, into: &buf)
         FfiConverterFloat.write(value.minDetectionScore, into: &buf)
+        FfiConverterFloat.write(value.minDetectionConfidence, into: &buf)
+        FfiConverterFloat.write(value.minTrackingConfidence, into: &buf)
+        FfiConverterFloat.write(value.minMatchScore, into: &buf)
+        FfiConverterFloat.write(value.searchMargin, into: &buf)
         FfiConverterBool.write(value.flowFilter, into: &buf)
         FfiConverterUInt32.write(value.shapeFrames, into: &buf)
         FfiConverterOptionBool.write(value.mirrorAverage, into: &buf)

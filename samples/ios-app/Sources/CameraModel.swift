@@ -2,7 +2,8 @@ import AVFoundation
 import Monotrack
 import SwiftUI
 
-/// Owns the capture session and the tracker. Frames arrive on `frameQueue` (a serial queue), are
+/// Owns the capture session and the tracker (built on `frameQueue`, which is also the only queue
+/// that reads it). Frames arrive on `frameQueue` (a serial queue), are
 /// tracked there synchronously and the results are published on the main queue. Late frames are
 /// dropped (`alwaysDiscardsLateVideoFrames`), so a slow frame costs frames, not latency.
 final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSampleBufferDelegate {
@@ -34,22 +35,36 @@ final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSam
             message = "Camera access is off: enable it in Settings to track your face."
             return
         }
+        let intrinsics: CameraIntrinsics?
         do {
-            tracker = try Monotrack.FaceTracker()
-            try configureSession()
+            intrinsics = try configureSession()
         } catch {
             message = "Could not start: \(error)"
             return
         }
-        frameQueue.async { [session] in session.startRunning() }
+        // Loading the models takes a while: on the frame queue, never the main thread. Frames that
+        // arrive before it is done find no tracker and are skipped.
+        frameQueue.async { [weak self, session] in
+            var config = defaultTrackerConfig()
+            config.camera = intrinsics
+            do {
+                self?.tracker = try Monotrack.FaceTracker(config: config)
+            } catch {
+                DispatchQueue.main.async { self?.message = "Could not load the tracker: \(error)" }
+                return
+            }
+            session.startRunning()
+        }
     }
 
     func stop() {
         frameQueue.async { [session] in session.stopRunning() }
     }
 
+    /// Sets up the session; returns the intrinsics of the 640×480 buffers the camera will deliver
+    /// (from the format's field of view), or `nil` to leave the SDK's default.
     @MainActor
-    private func configureSession() throws {
+    private func configureSession() throws -> CameraIntrinsics? {
         let device = AVCaptureDevice.default(.builtInWideAngleCamera, for: .video, position: .front)
             ?? AVCaptureDevice.default(for: .video)
         guard let device else { throw FrameError.invalidLayout("no camera") }
@@ -70,6 +85,8 @@ final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSam
         output.setSampleBufferDelegate(self, queue: frameQueue)
         guard session.canAddOutput(output) else { throw FrameError.invalidLayout("video output refused") }
         session.addOutput(output)
+        let intrinsics = CameraIntrinsics(fieldOfViewDegrees: Double(device.activeFormat.videoFieldOfView),
+                                          width: 640, height: 480)
         // The connection is left unrotated: the SDK rotates while converting, which avoids a copy.
 
         let coordinator = AVCaptureDevice.RotationCoordinator(device: device, previewLayer: nil)
@@ -85,6 +102,7 @@ final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSam
                 DispatchQueue.main.async { self?.previewRotationAngle = angle }
             },
         ]
+        return intrinsics
     }
 
     private func setCaptureAngle(_ angle: CGFloat) {

@@ -12,6 +12,8 @@ import io.monotrack.Point2
 import io.monotrack.Rect
 import io.monotrack.StageStat
 import io.monotrack.Vec3
+import io.monotrack.ShapeUnits
+import io.monotrack.ActionUnits
 import org.junit.jupiter.api.Assertions.assertEquals
 import org.junit.jupiter.api.Assertions.assertNotNull
 import org.junit.jupiter.api.Assertions.assertNull
@@ -36,8 +38,8 @@ private fun face(landmarks: List<Point2>, gaze: Gaze) = Face(
     gestures = Gestures(0.7f, 0.1f, 0.1f, 0.1f, 0.2f, 0.3f, 0.5f),
     gaze = gaze,
     pose = pose(IDENTITY, Vec3(0.0, 0.0, 500.0)),
-    shapeUnits = emptyList(),
-    actionUnits = emptyList(),
+    shapeUnits = ShapeUnits(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+    actionUnits = ActionUnits(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
     fitRmsPx = 0.5,
 )
 
@@ -139,6 +141,7 @@ class ResultsTest {
         val r = BenchReport(
             device = "test",
             iterations = 10u,
+            modelLoadUs = 0.0,
             stages = listOf(StageStat("landmarks", 1234.0, 2000.0, 1300.0), StageStat("fit", 500.0, 750.0, 520.0)),
         )
         val lines = r.toTable().trimEnd().lines()

@@ -9,6 +9,7 @@ import androidx.activity.result.contract.ActivityResultContracts
 import androidx.appcompat.app.AppCompatActivity
 import androidx.camera.core.CameraSelector
 import androidx.camera.core.ImageAnalysis
+import androidx.camera.core.ImageProxy
 import androidx.camera.core.Preview
 import androidx.camera.core.resolutionselector.ResolutionSelector
 import androidx.camera.core.resolutionselector.ResolutionStrategy
@@ -17,6 +18,8 @@ import androidx.camera.view.PreviewView
 import androidx.core.content.ContextCompat
 import io.monotrack.MonotrackException
 import io.monotrack.android.FaceTracker
+import io.monotrack.android.monotrackIntrinsics
+import io.monotrack.defaultTrackerConfig
 import java.util.concurrent.ExecutorService
 import java.util.concurrent.Executors
 import java.util.concurrent.TimeUnit
@@ -31,6 +34,7 @@ class MainActivity : AppCompatActivity() {
     private lateinit var overlay: OverlayView
     private lateinit var status: TextView
     private lateinit var analysisExecutor: ExecutorService
+    @Volatile
     private var tracker: FaceTracker? = null
     private val fps = FpsMeter()
 
@@ -54,13 +58,6 @@ class MainActivity : AppCompatActivity() {
     }
 
     private fun startCamera() {
-        val tracker = try {
-            FaceTracker()
-        } catch (e: MonotrackException) {
-            status.text = getString(R.string.tracker_failed, e.message)
-            return
-        }
-        this.tracker = tracker
         val providerFuture = ProcessCameraProvider.getInstance(this)
         providerFuture.addListener({
             val provider = providerFuture.get()
@@ -80,23 +77,40 @@ class MainActivity : AppCompatActivity() {
                 .setBackpressureStrategy(ImageAnalysis.STRATEGY_KEEP_ONLY_LATEST)
                 .setOutputImageFormat(ImageAnalysis.OUTPUT_IMAGE_FORMAT_YUV_420_888)
                 .build()
-            analysis.setAnalyzer(analysisExecutor) { image ->
-                image.use {
-                    try {
-                        // The front preview is mirrored; mirror the results the same way.
-                        val result = tracker.process(it, mirrored = front)
-                        val rate = fps.tick(System.nanoTime())
-                        overlay.post { overlay.show(result, rate) }
-                    } catch (e: MonotrackException) {
-                        Log.w(TAG, "frame skipped", e)
-                    } catch (e: IllegalStateException) {
-                        // The tracker was closed while this frame was in flight (activity finishing).
-                    }
-                }
-            }
             provider.unbindAll()
-            provider.bindToLifecycle(this, selector, preview, analysis)
+            val camera = provider.bindToLifecycle(this, selector, preview, analysis)
+            // The analysis buffer's size as delivered (before rotation): what the intrinsics are for.
+            val size = analysis.resolutionInfo?.resolution ?: ANALYSIS_SIZE
+            val intrinsics = camera.cameraInfo.monotrackIntrinsics(size.width, size.height)
+            // Loading the models takes a while: never on the main thread. The analyzer is set once
+            // the tracker exists; until then CameraX drops the frames.
+            analysisExecutor.execute {
+                val tracker = try {
+                    FaceTracker(defaultTrackerConfig().copy(camera = intrinsics))
+                } catch (e: MonotrackException) {
+                    runOnUiThread { status.text = getString(R.string.tracker_failed, e.message) }
+                    return@execute
+                }
+                this.tracker = tracker
+                analysis.setAnalyzer(analysisExecutor) { image -> analyze(tracker, image, front) }
+            }
         }, ContextCompat.getMainExecutor(this))
+    }
+
+    private fun analyze(tracker: FaceTracker, image: ImageProxy, front: Boolean) {
+        image.use {
+            try {
+                // The front preview is mirrored; mirror the results the same way.
+                val result = tracker.process(it, mirrored = front)
+                val rate = fps.tick(System.nanoTime())
+                overlay.post { overlay.show(result, rate) }
+            } catch (e: MonotrackException) {
+                // Every error the SDK raises, a caught internal fault included: skip the frame.
+                Log.w(TAG, "frame skipped", e)
+            } catch (e: IllegalStateException) {
+                // The tracker was closed while this frame was in flight (activity finishing).
+            }
+        }
     }
 
     override fun onDestroy() {

@@ -104,7 +104,8 @@ object BenchSummary {
      */
     fun imageBlock(image: String, width: Int, height: Int, report: BenchReport): String {
         val sb = StringBuilder()
-        sb.append("$image ${width}x$height, ${report.iterations} iterations per path, ${report.device}\n")
+        sb.append("$image ${width}x$height, ${report.iterations} iterations per path, ${report.device}, ")
+        sb.append(String.format(Locale.ROOT, "models loaded in %.1f ms\n", report.modelLoadUs / 1000.0))
         sb.append(table(report))
         if (!faceFound(report)) {
             sb.append("no face found: the landmark and fit stages did not run, the paths are not comparable\n")

@@ -23,7 +23,7 @@ class BenchSummaryTest {
                 StageStat("$path/$n", us, us * 1.5, us * 1.2)
             }
         }
-        return BenchReport("android aarch64", 100u, stages)
+        return BenchReport("android aarch64", 100u, 250_000.0, stages)
     }
 
     @Test
@@ -47,13 +47,13 @@ class BenchSummaryTest {
             BenchSummary.totalsLine(r),
         )
         assertNull(PathTotals(0.0, 5.0).ratio)
-        assertNull(BenchSummary.totals(BenchReport("x", 1u, emptyList())))
+        assertNull(BenchSummary.totals(BenchReport("x", 1u, 0.0, emptyList())))
     }
 
     @Test
     fun imageBlockWarnsWhenNoFaceWasFound() {
         val withFace = BenchSummary.imageBlock("astronaut.jpg", 512, 512, report(3000.0, 4000.0))
-        assertTrue(withFace.startsWith("astronaut.jpg 512x512, 100 iterations per path, android aarch64\n"), withFace)
+        assertTrue(withFace.startsWith("astronaut.jpg 512x512, 100 iterations per path, android aarch64, models loaded in 250.0 ms\n"), withFace)
         assertFalse(withFace.contains("no face"), withFace)
         val noFace = BenchSummary.imageBlock("blank.png", 64, 64, report(900.0, 900.0, landmarksUs = 0.0))
         assertTrue(noFace.contains("no face found"), noFace)

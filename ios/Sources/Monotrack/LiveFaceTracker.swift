@@ -1,0 +1,97 @@
+import CoreMedia
+import CoreVideo
+import Foundation
+@_exported import MonotrackFFI
+
+/// What a `LiveTracker` delivers for one frame.
+public enum LiveEvent: Sendable {
+    /// The frame's faces; `framesDropped` frames were skipped before it because the tracker was busy.
+    case faces(LiveStreamResult)
+    /// Tracking the frame taken at `timestampNs` failed; the stream goes on with the next one.
+    case failed(timestampNs: Int64, framesDropped: UInt64, error: MonotrackError)
+}
+
+/// The face tracker in live-stream mode (as MediaPipe's `liveStream`): `process` copies the frame and
+/// returns at once, one native worker thread tracks it, and the result arrives later on `events`.
+/// While the worker is busy the newest frame waits and replaces any older waiting one, so a slow
+/// device skips frames instead of falling behind; each event says how many were skipped.
+///
+/// ```swift
+/// let tracker = try await Task.detached { try LiveTracker() }.value   // loads models: off the main actor
+/// Task { for await event in tracker.events { if case .faces(let r) = event { show(r.result) } } }
+/// // in captureOutput(_:didOutput:from:)
+/// try tracker.process(sampleBuffer, orientation: orientation)
+/// ```
+public final class LiveTracker: @unchecked Sendable {
+    private let native: MonotrackFFI.LiveFaceTracker
+    private let continuation: AsyncStream<LiveEvent>.Continuation
+    private let lock = NSLock()
+    private var lastTimestampNs: Int64?
+
+    /// Every event, in timestamp order. Buffers the newest 8 for a slow consumer; the stream
+    /// finishes when the tracker is shut down.
+    public let events: AsyncStream<LiveEvent>
+
+    /// Creates the tracker and starts its worker. `config.runningMode` is not read.
+    ///
+    /// - Throws: `MonotrackError` (invalid config, model load).
+    public init(config: TrackerConfig = defaultTrackerConfig()) throws {
+        let (stream, continuation) = AsyncStream<LiveEvent>.makeStream(bufferingPolicy: .bufferingNewest(8))
+        events = stream
+        self.continuation = continuation
+        native = try MonotrackFFI.LiveFaceTracker(config: config, listener: Forward(continuation))
+    }
+
+    deinit {
+        native.shutdown()
+        continuation.finish()
+    }
+
+    /// Submits a camera sample buffer (its image buffer and presentation time) and returns at once.
+    ///
+    /// - Returns: `true` when a frame still waiting was replaced by this one.
+    /// - Throws: `FrameError` for a buffer without an image or of an unsupported format;
+    ///   `MonotrackError.InvalidFrame` for bytes that do not match their description.
+    @discardableResult
+    public func process(_ sampleBuffer: CMSampleBuffer, orientation: FrameOrientation) throws -> Bool {
+        guard let pixelBuffer = CMSampleBufferGetImageBuffer(sampleBuffer) else {
+            throw FrameError.invalidLayout("sample buffer has no image buffer")
+        }
+        let t = FaceTracker.nanoseconds(CMSampleBufferGetPresentationTimeStamp(sampleBuffer))
+        return try pixelBuffer.withMonotrackFrame(orientation: orientation) { data, desc in
+            try native.processAsync(bytes: data, desc: desc, timestampNs: nextTimestamp(t))
+        }
+    }
+
+    /// Stops the worker (a frame being tracked finishes and is delivered, a waiting one is dropped)
+    /// and finishes `events`. Idempotent.
+    public func shutdown() {
+        native.shutdown()
+        continuation.finish()
+    }
+
+    private func nextTimestamp(_ t: Int64) -> Int64 {
+        lock.lock()
+        defer { lock.unlock() }
+        let next = lastTimestampNs.map { t <= $0 ? $0 + 1 : t } ?? t
+        lastTimestampNs = next
+        return next
+    }
+}
+
+/// Hands the native worker's calls to the stream.
+private final class Forward: LiveStreamListener, @unchecked Sendable {
+    private let continuation: AsyncStream<LiveEvent>.Continuation
+
+    init(_ continuation: AsyncStream<LiveEvent>.Continuation) {
+        self.continuation = continuation
+    }
+
+    func onResult(result: LiveStreamResult) {
+        continuation.yield(.faces(result))
+    }
+
+    func onError(timestampNs: Int64, framesDropped: UInt64, error: MonotrackError) {
+        continuation.yield(.failed(timestampNs: timestampNs, framesDropped: framesDropped, error: error))
+    }
+}
