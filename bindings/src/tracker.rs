@@ -8,6 +8,7 @@ use crate::types::{ActionUnits, CameraIntrinsics, FrameDesc, HeadPose, Point2, S
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::detect::DetectorConfig;
 use monotrack_core::image::{Frame, Rect as CoreRect};
+use monotrack_core::model::{FaceModel, N_LANDMARKS};
 use monotrack_core::track::{self as core_track, TrackedFace, Tracker};
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -229,6 +230,10 @@ pub struct Face {
     pub action_units: ActionUnits,
     /// RMS reprojection error of the 3D fit, pixels.
     pub fit_rms_px: f64,
+    /// The fitted face model's 68 vertices (iBUG order, the landmarks' points on the 3D face),
+    /// camera frame, millimetres: with `face_mesh_triangles()` and the intrinsics, the mesh an AR
+    /// overlay draws over the upright image.
+    pub vertices_mm: Vec<Vec3>,
 }
 
 fn v3(v: &[f32; 3]) -> Vec3 {
@@ -275,8 +280,38 @@ impl From<&TrackedFace> for Face {
             shape_units: ShapeUnits::from(&f.fit.shape[..]),
             action_units: ActionUnits::from(&f.fit.animation[..]),
             fit_rms_px: f.fit.report.rms_px,
+            vertices_mm: {
+                let fit = &f.fit;
+                let mut v = [nalgebra::Vector3::zeros(); N_LANDMARKS];
+                FaceModel::builtin().posed_into(
+                    &fit.shape,
+                    &fit.animation,
+                    &fit.pose.rotation,
+                    &fit.pose.translation,
+                    &mut v,
+                );
+                v.iter()
+                    .map(|p| Vec3 {
+                        x: p.x,
+                        y: p.y,
+                        z: p.z,
+                    })
+                    .collect()
+            },
         }
     }
+}
+
+/// The face model's mesh over its 68 vertices (`Face::vertices_mm`, and so over the 68 landmarks):
+/// vertex indices, three per triangle. The triangles' winding is not consistent: draw them with
+/// back-face culling off.
+#[uniffi::export]
+pub fn face_mesh_triangles() -> Vec<u32> {
+    FaceModel::builtin()
+        .triangles()
+        .iter()
+        .flat_map(|t| t.iter().map(|&i| u32::from(i)))
+        .collect()
 }
 
 /// Per-stage wall time of one call, microseconds.
@@ -764,5 +799,46 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The posed vertices project onto the landmarks (within the fit's error), and the mesh
+    /// indexes them.
+    #[test]
+    fn vertices_and_mesh_overlay_the_face() {
+        let (upright, w, h) = upright_face();
+        let k = Intrinsics::default_for(w as u32, h as u32).unwrap();
+        let face = {
+            let tracker = FaceTracker::new(default_tracker_config()).unwrap();
+            let desc = FrameDesc {
+                width: w as u32,
+                height: h as u32,
+                format: PixelFormat::Gray8,
+                row_stride: w as u32,
+                uv_row_stride: 0,
+                uv_pixel_stride: 0,
+                rotation_degrees: 0,
+                mirrored: false,
+            };
+            tracker.process_frame(&upright, desc, 1).unwrap().faces[0].clone()
+        };
+        assert_eq!(face.vertices_mm.len(), 68);
+        let se: f64 = face
+            .vertices_mm
+            .iter()
+            .zip(&face.landmarks)
+            .map(|(v, l)| {
+                let (u, vv) = k.project(v.x, v.y, v.z);
+                (u - f64::from(l.x)).powi(2) + (vv - f64::from(l.y)).powi(2)
+            })
+            .sum();
+        let rms = (se / 68.0).sqrt();
+        assert!(
+            rms < 2.0 * face.fit_rms_px + 0.5 && rms < 8.0,
+            "rms {rms} px, fit {}",
+            face.fit_rms_px
+        );
+        let mesh = face_mesh_triangles();
+        assert!(mesh.len() >= 90 * 3 && mesh.len() % 3 == 0);
+        assert!(mesh.iter().all(|&i| i < 68));
     }
 }

@@ -2413,6 +2413,12 @@ public struct Face: Equatable, Hashable {
      * RMS reprojection error of the 3D fit, pixels.
      */
     public var fitRmsPx: Double
+    /**
+     * The fitted face model's 68 vertices (iBUG order, the landmarks' points on the 3D face),
+     * camera frame, millimetres: with `face_mesh_triangles()` and the intrinsics, the mesh an AR
+     * overlay draws over the upright image.
+     */
+    public var verticesMm: [Vec3]
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -2455,7 +2461,12 @@ public struct Face: Equatable, Hashable {
          */actionUnits: ActionUnits, 
         /**
          * RMS reprojection error of the 3D fit, pixels.
-         */fitRmsPx: Double) {
+         */fitRmsPx: Double, 
+        /**
+         * The fitted face model's 68 vertices (iBUG order, the landmarks' points on the 3D face),
+         * camera frame, millimetres: with `face_mesh_triangles()` and the intrinsics, the mesh an AR
+         * overlay draws over the upright image.
+         */verticesMm: [Vec3]) {
         self.id = id
         self.state = state
         self.bbox = bbox
@@ -2469,6 +2480,7 @@ public struct Face: Equatable, Hashable {
         self.shapeUnits = shapeUnits
         self.actionUnits = actionUnits
         self.fitRmsPx = fitRmsPx
+        self.verticesMm = verticesMm
     }
 
     
@@ -2499,7 +2511,8 @@ public struct FfiConverterTypeFace: FfiConverterRustBuffer {
                 pose: FfiConverterTypeHeadPose.read(from: &buf), 
                 shapeUnits: FfiConverterTypeShapeUnits.read(from: &buf), 
                 actionUnits: FfiConverterTypeActionUnits.read(from: &buf), 
-                fitRmsPx: FfiConverterDouble.read(from: &buf)
+                fitRmsPx: FfiConverterDouble.read(from: &buf), 
+                verticesMm: FfiConverterSequenceTypeVec3.read(from: &buf)
         )
     }
 
@@ -2517,6 +2530,7 @@ public struct FfiConverterTypeFace: FfiConverterRustBuffer {
         FfiConverterTypeShapeUnits.write(value.shapeUnits, into: &buf)
         FfiConverterTypeActionUnits.write(value.actionUnits, into: &buf)
         FfiConverterDouble.write(value.fitRmsPx, into: &buf)
+        FfiConverterSequenceTypeVec3.write(value.verticesMm, into: &buf)
     }
 }
 
@@ -5286,6 +5300,31 @@ fileprivate struct FfiConverterOptionTypeBodyJoint: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterSequenceUInt32: FfiConverterRustBuffer {
+    typealias SwiftType = [UInt32]
+
+    public static func write(_ value: [UInt32], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterUInt32.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [UInt32] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [UInt32]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterUInt32.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceFloat: FfiConverterRustBuffer {
     typealias SwiftType = [Float]
 
@@ -5482,6 +5521,31 @@ fileprivate struct FfiConverterSequenceTypeStageStat: FfiConverterRustBuffer {
         return seq
     }
 }
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeVec3: FfiConverterRustBuffer {
+    typealias SwiftType = [Vec3]
+
+    public static func write(_ value: [Vec3], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeVec3.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [Vec3] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [Vec3]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeVec3.read(from: &buf))
+        }
+        return seq
+    }
+}
 /**
  * The intrinsics the SDK assumes for a `width`×`height` upright image when none are given
  * (fx = fy = 0.9·max side, centred principal point).
@@ -5589,6 +5653,18 @@ public func defaultTrackerConfig() -> TrackerConfig  {
 })
 }
 /**
+ * The face model's mesh over its 68 vertices (`Face::vertices_mm`, and so over the 68 landmarks):
+ * vertex indices, three per triangle. The triangles' winding is not consistent: draw them with
+ * back-face culling off.
+ */
+public func faceMeshTriangles() -> [UInt32]  {
+    return try!  FfiConverterSequenceUInt32.lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_func_face_mesh_triangles(uniffiCallStatus
+    )
+})
+}
+/**
  * The shared benchmark (the same code as `monotrack bench`): `iterations` tracked frames and
  * `iterations` re-detect frames of this frame, per-stage median / p90 / mean.
  *
@@ -5665,6 +5741,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_func_default_tracker_config() != 13976) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_func_face_mesh_triangles() != 36945) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_func_run_benchmark() != 17130) {

@@ -420,6 +420,12 @@ RustBuffer uniffi_monotrack_ffi_fn_func_default_tracker_config(RustCallStatus *_
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_FACE_MESH_TRIANGLES
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_FACE_MESH_TRIANGLES
+RustBuffer uniffi_monotrack_ffi_fn_func_face_mesh_triangles(RustCallStatus *_Nonnull out_status
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_RUN_BENCHMARK
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_RUN_BENCHMARK
 RustBuffer uniffi_monotrack_ffi_fn_func_run_benchmark(ForeignBytes bytes, RustBuffer desc, uint32_t iterations, RustCallStatus *_Nonnull out_status
@@ -729,6 +735,12 @@ uint16_t uniffi_monotrack_ffi_checksum_func_default_body_tracker_config(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_DEFAULT_TRACKER_CONFIG
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_DEFAULT_TRACKER_CONFIG
 uint16_t uniffi_monotrack_ffi_checksum_func_default_tracker_config(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_FACE_MESH_TRIANGLES
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_FACE_MESH_TRIANGLES
+uint16_t uniffi_monotrack_ffi_checksum_func_face_mesh_triangles(void
     
 );
 #endif

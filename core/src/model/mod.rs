@@ -227,6 +227,22 @@ impl FaceModel {
         }
     }
 
+    /// The deformed model placed by pose (R, t): its 68 vertices in camera coordinates (mm), into
+    /// `out` — what an AR overlay draws with [`Self::triangles`].
+    pub fn posed_into(
+        &self,
+        shape: &[f64; N_SHAPE],
+        anim: &[f64; N_ANIM],
+        rotation: &Matrix3<f64>,
+        translation: &Vector3<f64>,
+        out: &mut [Vector3<f64>; N_LANDMARKS],
+    ) {
+        self.shape_into(shape, anim, out);
+        for p in out.iter_mut() {
+            *p = rotation * *p + translation;
+        }
+    }
+
     /// Projects the deformed model through pose (R, t) and intrinsics into `out` (pixels).
     pub fn project_into(
         &self,

@@ -41,6 +41,7 @@ private fun face(landmarks: List<Point2>, gaze: Gaze) = Face(
     shapeUnits = ShapeUnits(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
     actionUnits = ActionUnits(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
     fitRmsPx = 0.5,
+    verticesMm = emptyList(),
 )
 
 class ResultsTest {
