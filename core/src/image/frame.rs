@@ -116,33 +116,55 @@ impl FrameDesc {
     /// [`Error::InvalidFrame`] for a zero size, a stride too small for the width, or sizes that
     /// overflow.
     pub fn required_len(&self) -> Result<usize> {
-        let (w, h) = (self.width as usize, self.height as usize);
+        let (w, h) = (u64::from(self.width), u64::from(self.height));
         if w == 0 || h == 0 {
             return Err(Error::InvalidFrame(format!(
                 "zero-size frame {}x{}",
                 self.width, self.height
             )));
         }
-        let row = w * self.format.luma_bytes_per_pixel();
-        if self.row_stride < row {
+        if w > MAX_FRAME_SIDE || h > MAX_FRAME_SIDE {
             return Err(Error::InvalidFrame(format!(
-                "row stride {} is smaller than width {} x {} bytes per pixel",
-                self.row_stride,
-                w,
-                self.format.luma_bytes_per_pixel()
+                "frame {}x{} is larger than {MAX_FRAME_SIDE} pixels a side",
+                self.width, self.height
             )));
         }
-        let overflow = || Error::InvalidFrame("frame size overflows".into());
-        let y_plane = self
-            .row_stride
-            .checked_mul(h - 1)
-            .and_then(|v| v.checked_add(row))
-            .ok_or_else(overflow)?;
+        // In u64 with checked steps, and refused above MAX_FRAME_BYTES, so that a 32-bit phone
+        // (armv7: usize is 32 bits) and a 64-bit one accept and refuse exactly the same frames.
+        let overflow = || {
+            Error::InvalidFrame(format!(
+                "{:?} {}x{} with strides {}/{}/{} needs more than {MAX_FRAME_BYTES} bytes",
+                self.format,
+                self.width,
+                self.height,
+                self.row_stride,
+                self.chroma_row_stride,
+                self.chroma_pixel_stride
+            ))
+        };
+        let bpp = self.format.luma_bytes_per_pixel() as u64;
+        let row = w * bpp;
+        let stride = self.row_stride as u64;
+        if stride < row {
+            return Err(Error::InvalidFrame(format!(
+                "row stride {} is smaller than width {} x {} bytes per pixel",
+                self.row_stride, w, bpp
+            )));
+        }
+        let fits = |v: Option<u64>| {
+            v.filter(|&v| v <= MAX_FRAME_BYTES)
+                .and_then(|v| usize::try_from(v).ok())
+                .ok_or_else(overflow)
+        };
+        let y_plane = stride.checked_mul(h - 1).and_then(|v| v.checked_add(row));
         if !self.format.is_yuv() {
-            return Ok(y_plane);
+            return fits(y_plane);
         }
         let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
-        let (crs, cps) = (self.chroma_row_stride, self.chroma_pixel_stride);
+        let (crs, cps) = (
+            self.chroma_row_stride as u64,
+            self.chroma_pixel_stride as u64,
+        );
         let interleaved = matches!(self.format, PixelFormat::Nv21 | PixelFormat::Nv12);
         let min_cps = if interleaved { 2 } else { 1 };
         if cps < min_cps {
@@ -152,27 +174,38 @@ impl FrameDesc {
             )));
         }
         // Bytes one chroma row needs: the last sample's offset plus its size.
-        let chroma_row = (cw - 1) * cps + if interleaved { 2 } else { 1 };
+        let chroma_row = (cw - 1)
+            .checked_mul(cps)
+            .and_then(|v| v.checked_add(if interleaved { 2 } else { 1 }))
+            .ok_or_else(overflow)?;
         if crs < chroma_row {
             return Err(Error::InvalidFrame(format!(
                 "chroma row stride {crs} is smaller than the {chroma_row} bytes a chroma row needs"
             )));
         }
-        let y_full = self.row_stride.checked_mul(h).ok_or_else(overflow)?;
+        let y_full = stride.checked_mul(h);
         let plane = crs
             .checked_mul(ch - 1)
-            .and_then(|v| v.checked_add(chroma_row))
-            .ok_or_else(overflow)?;
+            .and_then(|v| v.checked_add(chroma_row));
         let total = if interleaved {
-            y_full.checked_add(plane)
+            y_full.zip(plane).and_then(|(y, p)| y.checked_add(p))
         } else {
             crs.checked_mul(ch)
-                .and_then(|u| y_full.checked_add(u))
-                .and_then(|v| v.checked_add(plane))
+                .zip(y_full)
+                .and_then(|(u, y)| y.checked_add(u))
+                .zip(plane)
+                .and_then(|(v, p)| v.checked_add(p))
         };
-        total.ok_or_else(overflow)
+        fits(total)
     }
 }
+
+/// Largest frame side accepted, pixels (camera frames are far smaller; the bound keeps every size
+/// computation in range on 32-bit targets).
+pub const MAX_FRAME_SIDE: u64 = 1 << 15;
+
+/// Largest frame buffer accepted, bytes (1 GiB), on every target alike.
+pub const MAX_FRAME_BYTES: u64 = 1 << 30;
 
 /// BT.601 full-range luma in 8-bit fixed point (weights sum to 256).
 #[inline]
@@ -382,6 +415,47 @@ mod tests {
                 assert!(Frame::new(&buf, bad).is_err());
             }
         }
+    }
+
+    /// The size arithmetic gives the same answers on 32- and 64-bit targets: everything past the
+    /// stated bounds is refused, never wrapped or panicking.
+    #[test]
+    fn sizes_past_the_bounds_are_refused_alike_on_every_target() {
+        let side = MAX_FRAME_SIDE as u32;
+        let gray = FrameDesc::packed(side, side, PixelFormat::Gray8);
+        assert_eq!(gray.required_len().unwrap() as u64, MAX_FRAME_BYTES);
+        // 4 GiB of RGBA: past the byte bound (and past a 32-bit usize).
+        assert!(
+            FrameDesc::packed(side, side, PixelFormat::Rgba8)
+                .required_len()
+                .is_err()
+        );
+        assert!(
+            FrameDesc::packed(side + 1, 1, PixelFormat::Gray8)
+                .required_len()
+                .is_err()
+        );
+        assert!(
+            FrameDesc::packed(u32::MAX, u32::MAX, PixelFormat::Rgba8)
+                .required_len()
+                .is_err()
+        );
+        let mut huge = FrameDesc::packed(640, 480, PixelFormat::Gray8);
+        huge.row_stride = usize::MAX;
+        assert!(huge.required_len().is_err());
+        let mut nv = FrameDesc::packed(side, 2, PixelFormat::Nv21);
+        nv.chroma_pixel_stride = u32::MAX as usize;
+        nv.chroma_row_stride = usize::MAX;
+        assert!(nv.required_len().is_err());
+        let mut i420 = FrameDesc::packed(640, 480, PixelFormat::I420);
+        i420.chroma_row_stride = 1 << 31;
+        assert!(i420.required_len().is_err());
+        assert_eq!(
+            FrameDesc::packed(640, 480, PixelFormat::Nv21)
+                .required_len()
+                .unwrap(),
+            640 * 480 * 3 / 2
+        );
     }
 
     #[test]
