@@ -841,4 +841,46 @@ mod tests {
         assert!(mesh.len() >= 90 * 3 && mesh.len() % 3 == 0);
         assert!(mesh.iter().all(|&i| i < 68));
     }
+
+    /// One tracker shared by threads (uniffi objects are shared across threads): stills always
+    /// find the face, video calls succeed or report a timestamp that lost the race, nothing else.
+    #[test]
+    fn one_tracker_serves_several_threads() {
+        let (upright, w, h) = upright_face();
+        let tracker = FaceTracker::new(default_tracker_config()).unwrap();
+        let desc = FrameDesc {
+            width: w as u32,
+            height: h as u32,
+            format: PixelFormat::Gray8,
+            row_stride: w as u32,
+            uv_row_stride: 0,
+            uv_pixel_stride: 0,
+            rotation_degrees: 0,
+            mirrored: false,
+        };
+        let clock = std::sync::atomic::AtomicI64::new(0);
+        std::thread::scope(|scope| {
+            for t in 0..4 {
+                let (tracker, upright, clock) = (&tracker, &upright, &clock);
+                scope.spawn(move || {
+                    for _ in 0..3 {
+                        if t % 2 == 0 {
+                            let r = tracker.process_image(upright, desc).unwrap();
+                            assert_eq!(r.faces.len(), 1);
+                        } else {
+                            let ts =
+                                clock.fetch_add(1_000_000, std::sync::atomic::Ordering::SeqCst);
+                            match tracker.process_frame(upright, desc, ts + 1) {
+                                Ok(r) => assert_eq!(r.faces.len(), 1),
+                                Err(MonotrackError::InvalidFrame { msg }) => {
+                                    assert!(msg.contains("increasing"), "{msg}")
+                                }
+                                Err(e) => panic!("{e}"),
+                            }
+                        }
+                    }
+                });
+            }
+        });
+    }
 }

@@ -79,7 +79,58 @@ pub enum FrameSource {
         frames: Option<usize>,
         /// Next index.
         next: usize,
+        /// A second ffmpeg giving the same frames as RGB, when colour was asked for (overlays):
+        /// the luma the tracker reads stays the video's own in either case.
+        colour: Option<(Child, ChildStdout)>,
     },
+}
+
+/// Spawns `ffmpeg` decoding `path` to raw frames of `pix_fmt` on its stdout.
+fn ffmpeg_raw(path: &Path, pix_fmt: &str) -> Result<(Child, ChildStdout), String> {
+    // -noautorotate: frames keep the stream's stored size, the one ffprobe reported.
+    let mut child = Command::new("ffmpeg")
+        .args(["-v", "error", "-noautorotate", "-i"])
+        .arg(path)
+        .args(["-f", "rawvideo", "-pix_fmt", pix_fmt, "-"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .map_err(|e| {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                NO_FFMPEG.to_string()
+            } else {
+                format!("ffmpeg: {e}")
+            }
+        })?;
+    let stdout = child
+        .stdout
+        .take()
+        .ok_or_else(|| "ffmpeg: no stdout".to_string())?;
+    Ok((child, stdout))
+}
+
+/// Fills `buf` from `r`; `Ok(false)` at a clean end (nothing read).
+fn read_frame(r: &mut ChildStdout, buf: &mut [u8], index: usize) -> Result<bool, String> {
+    let mut filled = 0;
+    while filled < buf.len() {
+        match r.read(&mut buf[filled..]) {
+            Ok(0) => break,
+            Ok(n) => filled += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(format!("reading ffmpeg output: {e}")),
+        }
+    }
+    if filled == 0 {
+        return Ok(false);
+    }
+    if filled < buf.len() {
+        return Err(format!(
+            "ffmpeg output ended inside frame {index} ({filled} of {} bytes)",
+            buf.len()
+        ));
+    }
+    Ok(true)
 }
 
 /// Runs ffprobe for width, height, frame rate and (if known) frame count of the first video stream.
@@ -156,6 +207,14 @@ impl FrameSource {
     /// # Errors
     /// A message for an unreadable path, an empty directory, or a video without ffmpeg installed.
     pub fn open(path: &Path) -> Result<Self, String> {
+        Self::open_with(path, false)
+    }
+
+    /// [`Self::open`]; with `colour`, [`Self::next_frame`] can also give each frame as RGB.
+    ///
+    /// # Errors
+    /// As [`Self::open`].
+    pub fn open_with(path: &Path, colour: bool) -> Result<Self, String> {
         if path.is_dir() {
             return Ok(Self::Dir {
                 files: list_frames(path)?,
@@ -169,26 +228,12 @@ impl FrameSource {
             ));
         }
         let (width, height, fps, frames) = probe(path)?;
-        // -noautorotate: frames keep the stream's stored size, the one ffprobe reported.
-        let mut child = Command::new("ffmpeg")
-            .args(["-v", "error", "-noautorotate", "-i"])
-            .arg(path)
-            .args(["-f", "rawvideo", "-pix_fmt", "gray", "-"])
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .map_err(|e| {
-                if e.kind() == std::io::ErrorKind::NotFound {
-                    NO_FFMPEG.to_string()
-                } else {
-                    format!("ffmpeg: {e}")
-                }
-            })?;
-        let stdout = child
-            .stdout
-            .take()
-            .ok_or_else(|| "ffmpeg: no stdout".to_string())?;
+        let (child, stdout) = ffmpeg_raw(path, "gray")?;
+        let colour = if colour {
+            Some(ffmpeg_raw(path, "rgb24")?)
+        } else {
+            None
+        };
         Ok(Self::Video {
             child,
             stdout,
@@ -197,6 +242,7 @@ impl FrameSource {
             fps,
             frames,
             next: 0,
+            colour,
         })
     }
 
@@ -213,12 +259,31 @@ impl FrameSource {
     /// # Errors
     /// A message when a frame cannot be read or decoded.
     pub fn next_frame(&mut self, out: &mut GrayImage) -> Result<Option<(usize, i64)>, String> {
+        self.next_frame_with(out, None)
+    }
+
+    /// [`Self::next_frame`], also filling `rgb` (resized; 3 bytes a pixel, rows packed) with the
+    /// frame in colour when given: image files as decoded, videos when opened with colour.
+    ///
+    /// # Errors
+    /// As [`Self::next_frame`]; a video opened without colour when `rgb` is asked for.
+    pub fn next_frame_with(
+        &mut self,
+        out: &mut GrayImage,
+        rgb: Option<&mut Vec<u8>>,
+    ) -> Result<Option<(usize, i64)>, String> {
         match self {
             Self::Dir { files, next } => {
                 let Some(path) = files.get(*next) else {
                     return Ok(None);
                 };
-                crate::luma::load_luma(path, out)?;
+                let img = image::open(path)
+                    .map_err(|e| format!("cannot read image {}: {e}", path.display()))?;
+                crate::luma::to_luma(&img, out);
+                if let Some(rgb) = rgb {
+                    rgb.clear();
+                    rgb.extend_from_slice(img.to_rgb8().as_raw());
+                }
                 let i = *next;
                 *next += 1;
                 Ok(Some((i, (i as f64 * 1e9 / DIR_FPS).round() as i64)))
@@ -229,27 +294,21 @@ impl FrameSource {
                 height,
                 fps,
                 next,
+                colour,
                 ..
             } => {
                 out.resize(*width, *height);
-                let buf = out.data_mut();
-                let mut filled = 0;
-                while filled < buf.len() {
-                    match stdout.read(&mut buf[filled..]) {
-                        Ok(0) => break,
-                        Ok(n) => filled += n,
-                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                        Err(e) => return Err(format!("reading ffmpeg output: {e}")),
-                    }
-                }
-                if filled == 0 {
+                if !read_frame(stdout, out.data_mut(), *next)? {
                     return Ok(None);
                 }
-                if filled < buf.len() {
-                    return Err(format!(
-                        "ffmpeg output ended inside frame {next} ({filled} of {} bytes)",
-                        buf.len()
-                    ));
+                if let Some(rgb) = rgb {
+                    let (_, colour_out) = colour
+                        .as_mut()
+                        .ok_or_else(|| "the video was opened without colour".to_string())?;
+                    rgb.resize(*width * *height * 3, 0);
+                    if !read_frame(colour_out, rgb, *next)? {
+                        return Err(format!("ffmpeg's colour output ended at frame {next}"));
+                    }
                 }
                 let i = *next;
                 *next += 1;
@@ -261,10 +320,14 @@ impl FrameSource {
 
 impl Drop for FrameSource {
     fn drop(&mut self) {
-        if let Self::Video { child, .. } = self {
+        if let Self::Video { child, colour, .. } = self {
             // Stop ffmpeg if we quit early; it exits on its own at the end of the video.
             let _ = child.kill();
             let _ = child.wait();
+            if let Some((c, _)) = colour {
+                let _ = c.kill();
+                let _ = c.wait();
+            }
         }
     }
 }
@@ -456,6 +519,15 @@ impl Canvas {
         c
     }
 
+    /// Replaces the contents with a `width`×`height` RGB image (3 bytes a pixel, rows packed;
+    /// allocation reused).
+    pub fn set_rgb(&mut self, width: usize, height: usize, rgb: &[u8]) {
+        self.width = width;
+        self.height = height;
+        self.rgb.clear();
+        self.rgb.extend_from_slice(&rgb[..width * height * 3]);
+    }
+
     /// Replaces the contents with a gray image (allocation reused).
     pub fn set_gray(&mut self, img: &GrayImage) {
         self.width = img.width();
@@ -602,7 +674,9 @@ pub fn run<D: RegionDetector, L: LandmarkEstimator>(
     out: Option<&Path>,
     overlay: Option<&Path>,
 ) -> Result<bool, String> {
-    let mut source = FrameSource::open(input)?;
+    // Overlays are drawn on the frame in colour; the tracker reads its luma either way.
+    let mut source = FrameSource::open_with(input, overlay.is_some())?;
+    let mut rgb = Vec::new();
     let mut sink = LineSink::new(out)?;
     if let Some(dir) = overlay {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
@@ -612,7 +686,7 @@ pub fn run<D: RegionDetector, L: LandmarkEstimator>(
     let mut canvas = Canvas::from_gray(&frame);
     let mut all_ok = true;
     let mut done = 0;
-    while let Some((i, ts)) = source.next_frame(&mut frame)? {
+    while let Some((i, ts)) = source.next_frame_with(&mut frame, overlay.map(|_| &mut rgb))? {
         match tracker.process(&frame, ts) {
             Ok(result) => {
                 let mut line = frame_json(result);
@@ -627,7 +701,7 @@ pub fn run<D: RegionDetector, L: LandmarkEstimator>(
                                 .map_err(|e| e.to_string())?
                         }
                     };
-                    canvas.set_gray(&frame);
+                    canvas.set_rgb(frame.width(), frame.height(), &rgb);
                     draw_overlay(&mut canvas, tracker.result(), &camera);
                     canvas.save_png(&dir.join(format!("frame_{i:06}.png")))?;
                 }
@@ -809,6 +883,16 @@ mod tests {
         assert_eq!(got[0], (0, 0, 76));
         assert_eq!(got[1], (1, 33_333_333, 124));
         assert_eq!(got[2].2, 2);
+        // In colour too, for overlays: the decoded pixels.
+        let mut src = FrameSource::open_with(&dir, true).unwrap();
+        let mut rgb = Vec::new();
+        src.next_frame_with(&mut g, Some(&mut rgb))
+            .unwrap()
+            .unwrap();
+        assert_eq!((rgb.len(), &rgb[..3]), (4 * 3 * 3, &[255u8, 0, 0][..]));
+        let mut canvas = Canvas::from_gray(&g);
+        canvas.set_rgb(g.width(), g.height(), &rgb);
+        assert_eq!(canvas.get(3, 2), Some([255, 0, 0]));
         std::fs::remove_dir_all(&dir).unwrap();
         assert!(FrameSource::open(Path::new("/nonexistent/monotrack")).is_err());
     }
@@ -847,6 +931,14 @@ mod tests {
             n += 1;
         }
         assert_eq!(n, 5);
+        drop(src);
+        let mut src = FrameSource::open_with(&path, true).unwrap();
+        let mut rgb = Vec::new();
+        src.next_frame_with(&mut g, Some(&mut rgb))
+            .unwrap()
+            .unwrap();
+        assert_eq!(rgb.len(), 64 * 48 * 3);
+        assert!((i32::from(rgb[0]) - 128).abs() <= 2, "{}", rgb[0]);
         drop(src);
         std::fs::remove_dir_all(&dir).unwrap();
     }
