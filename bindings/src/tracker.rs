@@ -838,7 +838,7 @@ mod tests {
             face.fit_rms_px
         );
         let mesh = face_mesh_triangles();
-        assert!(mesh.len() >= 90 * 3 && mesh.len() % 3 == 0);
+        assert!(mesh.len() >= 90 * 3 && mesh.len().is_multiple_of(3));
         assert!(mesh.iter().all(|&i| i < 68));
     }
 
@@ -864,7 +864,7 @@ mod tests {
                 let (tracker, upright, clock) = (&tracker, &upright, &clock);
                 scope.spawn(move || {
                     for _ in 0..3 {
-                        if t % 2 == 0 {
+                        if t.is_multiple_of(2) {
                             let r = tracker.process_image(upright, desc).unwrap();
                             assert_eq!(r.faces.len(), 1);
                         } else {
