@@ -860,7 +860,7 @@ mod tests {
         };
         let clock = std::sync::atomic::AtomicI64::new(0);
         std::thread::scope(|scope| {
-            for t in 0..4 {
+            for t in 0..4u32 {
                 let (tracker, upright, clock) = (&tracker, &upright, &clock);
                 scope.spawn(move || {
                     for _ in 0..3 {
