@@ -19,6 +19,7 @@ pub mod cpu;
 pub mod detect;
 pub mod error;
 pub mod fit;
+pub mod gaze;
 pub mod image;
 mod kernels;
 pub mod landmarks;

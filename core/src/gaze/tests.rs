@@ -1,0 +1,306 @@
+use super::*;
+
+fn ray(o: [f64; 3], d: [f64; 3]) -> GazeRay {
+    GazeRay {
+        origin: Vector3::from(o),
+        direction: Vector3::from(d).normalize(),
+    }
+}
+
+/// A 100 × 60 mm rectangle at depth `z`, centred on (cx, cy), facing the camera.
+fn rect(id: &str, cx: f64, cy: f64, z: f64) -> Target {
+    Target::new(
+        id,
+        &[
+            [cx - 50.0, cy - 30.0, z],
+            [cx + 50.0, cy - 30.0, z],
+            [cx + 50.0, cy + 30.0, z],
+            [cx - 50.0, cy + 30.0, z],
+        ],
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_ray_through_a_target_hits_it_at_the_expected_point() {
+    let t = [rect("a", 0.0, 0.0, 0.0)];
+    // Eyes 400 mm in front of the camera looking back at (10, -5) on the plane z = 0.
+    let r = ray([0.0, 0.0, 400.0], [10.0, -5.0, -400.0]);
+    let h = locate(&t, &r).unwrap();
+    assert_eq!(h.target, Some(0));
+    assert_eq!(h.distance_mm, 0.0);
+    // u from corner 0 (−50, −30) along +x, v along +y.
+    assert!((h.point_mm[0] - 60.0).abs() < 1e-9 && (h.point_mm[1] - 25.0).abs() < 1e-9);
+    assert!((t[0].point_at(h.point_mm) - Vector3::new(10.0, -5.0, 0.0)).norm() < 1e-9);
+    assert!((h.range_mm - (10f64.powi(2) + 25.0 + 160_000.0).sqrt()).abs() < 1e-9);
+}
+
+#[test]
+fn the_nearest_of_several_hits_along_the_ray_wins() {
+    // A near pane in front of a far one, both on the ray.
+    let t = [rect("far", 0.0, 0.0, -500.0), rect("near", 0.0, 0.0, 0.0)];
+    let h = locate(&t, &ray([0.0, 0.0, 400.0], [0.0, 0.0, -1.0])).unwrap();
+    assert_eq!(h.target, Some(1));
+}
+
+#[test]
+fn a_miss_names_the_nearest_target_and_its_distance() {
+    let t = [
+        rect("left", -200.0, 0.0, 0.0),
+        rect("right", 200.0, 0.0, 0.0),
+    ];
+    // Lands at (120, 0): 30 mm from the right pane's left edge (x = 150), 270 from the left's.
+    let h = locate(&t, &ray([0.0, 0.0, 400.0], [120.0, 0.0, -400.0])).unwrap();
+    assert_eq!((h.target, h.nearest), (None, 1));
+    assert!((h.distance_mm - 30.0).abs() < 1e-9, "{}", h.distance_mm);
+    // A corner miss measures to the corner: (290, 70) from (250, 30).
+    let h = locate(&t, &ray([0.0, 0.0, 400.0], [290.0, 70.0, -400.0])).unwrap();
+    assert!((h.distance_mm - 40.0 * 2f64.sqrt()).abs() < 1e-9, "{}", h.distance_mm);
+}
+
+#[test]
+fn targets_behind_the_eyes_or_parallel_are_never_hit() {
+    let t = [rect("behind", 0.0, 0.0, 800.0)];
+    let h = locate(&t, &ray([0.0, 0.0, 400.0], [0.0, 0.0, -1.0])).unwrap();
+    assert_eq!(h.target, None);
+    assert!(h.range_mm.is_infinite());
+    // Its centroid is straight behind: as far as from the eyes.
+    assert!((h.distance_mm - 400.0).abs() < 1e-9);
+    // A ray in the plane's direction never meets it.
+    let side = [rect("side", 0.0, 0.0, 0.0)];
+    let h = locate(&side, &ray([0.0, 0.0, 400.0], [1.0, 0.0, 0.0])).unwrap();
+    assert_eq!(h.target, None);
+    assert!((h.distance_mm - 400.0).abs() < 1e-9);
+    assert!(locate(&[], &ray([0.0; 3], [0.0, 0.0, 1.0])).is_none());
+}
+
+#[test]
+fn bad_targets_are_refused() {
+    assert!(Target::new("two", &[[0.0; 3], [1.0, 0.0, 0.0]]).is_err());
+    assert!(Target::new("line", &[[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]).is_err());
+    assert!(
+        Target::new(
+            "nan",
+            &[[f64::NAN, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+        )
+        .is_err()
+    );
+    let bent = [
+        [0.0, 0.0, 0.0],
+        [100.0, 0.0, 0.0],
+        [100.0, 100.0, 10.0],
+        [0.0, 100.0, 0.0],
+    ];
+    assert!(Target::new("bent", &bent).is_err());
+    assert!(Target::screen("s", 0.0, 100.0, [0.0, 0.0]).is_err());
+    // A non-convex (L-shaped) polygon: the notch is outside.
+    let l = Target::new(
+        "L",
+        &[
+            [0.0, 0.0, 0.0],
+            [100.0, 0.0, 0.0],
+            [100.0, 40.0, 0.0],
+            [40.0, 40.0, 0.0],
+            [40.0, 100.0, 0.0],
+            [0.0, 100.0, 0.0],
+        ],
+    )
+    .unwrap();
+    let into = |x: f64, y: f64| {
+        locate(
+            std::slice::from_ref(&l),
+            &ray([x, y, 300.0], [0.0, 0.0, -1.0]),
+        )
+        .unwrap()
+    };
+    assert_eq!(into(20.0, 80.0).target, Some(0));
+    assert_eq!(into(80.0, 80.0).target, None);
+    assert!((into(80.0, 80.0).distance_mm - 40.0).abs() < 1e-9);
+}
+
+#[test]
+fn a_screen_gives_user_coordinates_from_its_top_left() {
+    // A 70 × 150 mm phone screen, the camera 35 mm right of its top-left corner, 8 mm above it.
+    let s = Target::screen("phone", 70.0, 150.0, [35.0, -8.0]).unwrap();
+    let h = locate(
+        std::slice::from_ref(&s),
+        &ray([0.0, 0.0, 350.0], [0.0, 58.0, -350.0]),
+    )
+    .unwrap();
+    assert_eq!(h.target, Some(0));
+    assert!(
+        (h.point_mm[0] - 35.0).abs() < 1e-9 && (h.point_mm[1] - 50.0).abs() < 1e-9,
+        "{:?}",
+        h.point_mm
+    );
+}
+
+/// Deterministic normal noise (Box–Muller over an xorshift).
+struct Noise(u64);
+
+impl Noise {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn normal(&mut self) -> f64 {
+        let (a, b) = (self.uniform().max(1e-12), self.uniform());
+        (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+    }
+}
+
+/// A simulated user in front of a phone: per-eye offsets between where the estimate points and
+/// where they look (the visual-axis angle and the estimate's bias), gaze noise per frame; each
+/// tap is a look at a random screen point. Returns the mean screen error (mm) after each number
+/// of taps in `counts`.
+fn tap_curve(counts: &[usize], noise_deg: f64, seed: u64) -> Vec<f64> {
+    let screen = Target::screen("phone", 70.0, 150.0, [35.0, -8.0]).unwrap();
+    let eyes = [
+        Vector3::new(-31.0, 40.0, 340.0),
+        Vector3::new(31.0, 40.0, 340.0),
+    ];
+    // Estimate = truth rotated by these (yaw, pitch) degrees, per eye: a user whose estimates
+    // point about 3° right of and above where they look (their visual axes' angle plus the
+    // estimator's bias for their eyes).
+    let bias = [[4.0, -3.0], [2.0, -3.5]];
+    let mut rng = Noise(seed);
+    let mut look = |rng: &mut Noise, uv: [f64; 2]| -> [GazeRay; 2] {
+        let p = screen.point_at(uv);
+        [0, 1].map(|e| {
+            let truth = (p - eyes[e]).normalize();
+            let off = [
+                (bias[e][0] + noise_deg * rng.normal()).to_radians(),
+                (bias[e][1] + noise_deg * rng.normal()).to_radians(),
+            ];
+            GazeRay {
+                origin: eyes[e],
+                direction: rotate_by(&truth, off),
+            }
+        })
+    };
+    let mut out = Vec::new();
+    for &n in counts {
+        let mut cal = GazeCalibration::default();
+        for _ in 0..n {
+            let uv = [70.0 * rng.uniform(), 150.0 * rng.uniform()];
+            let rays = look(&mut rng, uv);
+            cal.add_tap(&rays, &screen.point_at(uv)).unwrap();
+        }
+        let mut err = 0.0;
+        let trials = 400;
+        for _ in 0..trials {
+            let uv = [70.0 * rng.uniform(), 150.0 * rng.uniform()];
+            let raw = look(&mut rng, uv);
+            let d =
+                (cal.correct(0, &raw[0].direction) + cal.correct(1, &raw[1].direction)).normalize();
+            let r = GazeRay {
+                origin: (eyes[0] + eyes[1]) / 2.0,
+                direction: d,
+            };
+            let h = locate(std::slice::from_ref(&screen), &r).unwrap();
+            let q = if h.range_mm.is_finite() {
+                h.point_mm
+            } else {
+                [f64::INFINITY; 2]
+            };
+            err += ((q[0] - uv[0]).powi(2) + (q[1] - uv[1]).powi(2)).sqrt();
+        }
+        out.push(err / f64::from(trials));
+    }
+    out
+}
+
+#[test]
+fn taps_learn_the_users_offset_and_the_screen_error_falls() {
+    let counts = [0, 1, 2, 3, 5, 10, 20];
+    let curve = tap_curve(&counts, 2.0, 7);
+    eprintln!("screen error (mm) after {counts:?} taps, 2° noise: {curve:.1?}");
+    assert!(curve[0] > 25.0, "the simulated bias must matter: {curve:?}");
+    assert!(curve[4] < 0.6 * curve[0], "{curve:?}");
+    assert!(
+        curve[6] < curve[1] && curve[6] < 0.5 * curve[0],
+        "{curve:?}"
+    );
+    // With no noise, one tap recovers the offsets exactly; what is left is geometry: the mean of
+    // two eye directions, drawn from the eyes' midpoint, passes the fixated point within a
+    // fraction of a millimetre unless both eyes are equally far from it.
+    let exact = tap_curve(&[1], 0.0, 3);
+    assert!(exact[0] < 0.5, "{exact:?}");
+    // Outlier taps (the user looked elsewhere) barely move a median over many.
+    let screen = Target::screen("phone", 70.0, 150.0, [35.0, -8.0]).unwrap();
+    let mut cal = GazeCalibration::default();
+    let eyes = [
+        Vector3::new(-31.0, 40.0, 340.0),
+        Vector3::new(31.0, 40.0, 340.0),
+    ];
+    for k in 0..12 {
+        let p = screen.point_at([10.0 + 4.0 * f64::from(k), 20.0 + 9.0 * f64::from(k)]);
+        let mut rays = [0, 1].map(|e| GazeRay {
+            origin: eyes[e],
+            direction: rotate_by(&(p - eyes[e]).normalize(), [0.05, -0.03]),
+        });
+        if k % 4 == 0 {
+            rays[0].direction = Vector3::new(0.3, 0.2, -1.0).normalize();
+        }
+        cal.add_tap(&rays, &p).unwrap();
+    }
+    let off = cal.offsets_deg();
+    assert!((off[1][0] + 0.05f64.to_degrees()).abs() < 1e-6, "{off:?}");
+    assert!((off[0][0] + 0.05f64.to_degrees()).abs() < 0.5, "{off:?}");
+    cal.reset();
+    assert_eq!(cal.taps(), 0);
+    assert!(
+        cal.add_tap(
+            &[ray([0.0; 3], [f64::NAN, 0.0, -1.0]); 2],
+            &Vector3::new(0.0, 0.0, -10.0)
+        )
+        .is_err()
+    );
+}
+
+#[test]
+fn the_filter_smooths_fixations_and_passes_saccades() {
+    let f = GazeFilter::default();
+    let a = Vector3::new(0.0, 0.0, -1.0);
+    let small = rotate_by(&a, [2f64.to_radians(), 0.0]);
+    let smoothed = f.apply(Some(&a), &small);
+    assert!(smoothed.angle(&a) < small.angle(&a) && smoothed.angle(&a) > 0.0);
+    let jump = rotate_by(&a, [20f64.to_radians(), 0.0]);
+    assert_eq!(f.apply(Some(&a), &jump), jump);
+    assert_eq!(f.apply(None, &small), small);
+}
+
+#[test]
+fn the_driver_zones_example_is_hit_zone_by_zone() {
+    let json = include_str!("../../../examples/driver_zones.json");
+    let targets = targets_from_json(json.as_bytes()).unwrap();
+    let ids: Vec<&str> = targets.iter().map(|t| t.id.as_str()).collect();
+    assert_eq!(
+        ids,
+        [
+            "left_window",
+            "left_mirror",
+            "road",
+            "navigation",
+            "rear_mirror",
+            "right_mirror",
+            "right_window"
+        ]
+    );
+    // The driver's eyes, per the file's description; a look at each zone's centre hits it.
+    let eyes = Vector3::new(0.0, 0.0, 600.0);
+    for (i, t) in targets.iter().enumerate() {
+        let c = t.centroid();
+        let h = locate(
+            &targets,
+            &GazeRay {
+                origin: eyes,
+                direction: (c - eyes).normalize(),
+            },
+        )
+        .unwrap();
+        assert_eq!(h.target, Some(i), "{}", t.id);
+    }
+}
