@@ -166,7 +166,7 @@ fn tap_curve(counts: &[usize], noise_deg: f64, seed: u64) -> Vec<f64> {
     // estimator's bias for their eyes).
     let bias = [[4.0, -3.0], [2.0, -3.5]];
     let mut rng = Noise(seed);
-    let mut look = |rng: &mut Noise, uv: [f64; 2]| -> [GazeRay; 2] {
+    let look = |rng: &mut Noise, uv: [f64; 2]| -> [GazeRay; 2] {
         let p = screen.point_at(uv);
         [0, 1].map(|e| {
             let truth = (p - eyes[e]).normalize();

@@ -32,10 +32,14 @@ pub use models::{ModelDetector, Tracker, detector_config_for};
 use crate::camera::Intrinsics;
 use crate::error::{Error, Result};
 use crate::fit::{FaceFit, Msbp, MsbpConfig, ShapeAccumulator};
+use crate::gaze::{
+    GazeCalibration, GazeConfig, GazeRay, PointOfGaze, Target, point_of_gaze, raw_eye_rays,
+};
 use crate::image::{Frame, GrayImage, Rect};
 use crate::landmarks::{FaceLandmarks, N_POINTS};
 use crate::model::{FaceModel, N_LANDMARKS};
 use flow::{FlowFilter, LkConfig, Pyramid};
+use nalgebra::Vector3;
 use ncc::NccMatcher;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -422,6 +426,8 @@ pub struct StageTimings {
     pub flow_us: u64,
     /// MSBP (+ projecting the model for the next region).
     pub fit_us: u64,
+    /// Point of gaze (eye rays, calibration, targets).
+    pub gaze_us: u64,
     /// The whole call.
     pub total_us: u64,
 }
@@ -446,6 +452,10 @@ pub struct TrackedFace {
     pub shape_held: bool,
     /// Landmarks that came from the optical flow rather than the detection this frame.
     pub flow_points: u32,
+    /// Where the face looks: the gaze ray from between its eyes (corrected by the tap
+    /// calibration), its source and confidence, and the target it lands on when targets are set
+    /// ([`FaceTracker::set_gaze_targets`]).
+    pub gaze: PointOfGaze,
 }
 
 /// The result of one [`FaceTracker::process`] call; owned by the tracker and refilled each call.
@@ -541,6 +551,8 @@ struct Slot {
     shape_acc: ShapeAccumulator,
     msbp_init: Msbp,
     msbp_track: Msbp,
+    /// The last frame's gaze direction, for the optional gaze filter.
+    gaze_dir: Option<Vector3<f64>>,
 }
 
 impl Slot {
@@ -567,6 +579,7 @@ impl Slot {
                 outer_iterations: cfg.tracking_fit_rounds,
                 ..cfg.msbp
             }),
+            gaze_dir: None,
         })
     }
 
@@ -596,6 +609,7 @@ impl Slot {
         self.fit = None;
         self.ncc.clear();
         self.filter.reset();
+        self.gaze_dir = None;
     }
 }
 
@@ -626,6 +640,53 @@ pub struct FaceTracker<D: RegionDetector, L: LandmarkEstimator> {
     projected: [[f64; 2]; N_LANDMARKS],
     result: TrackingResult,
     frame_size: (usize, usize),
+    gaze: GazeState,
+}
+
+/// Frames of eye rays kept for taps ([`FaceTracker::add_calibration_point`]): a tap is matched
+/// with the frame nearest its time, and reaches the app a few frames after the look.
+const GAZE_HISTORY: usize = 32;
+
+/// A tap's time may be this far from the nearest recorded frame, nanoseconds.
+const TAP_MATCH_NS: u64 = 250_000_000;
+
+/// One frame's uncorrected eye rays per face.
+#[derive(Debug, Clone, Copy)]
+struct GazeFrame {
+    timestamp_ns: i64,
+    faces: usize,
+    rays: [[GazeRay; 2]; MAX_FACES_LIMIT],
+}
+
+/// Targets, settings, the user's calibration and recent eye rays.
+#[derive(Debug, Clone)]
+struct GazeState {
+    targets: Vec<Target>,
+    config: GazeConfig,
+    calibration: GazeCalibration,
+    history: Vec<GazeFrame>,
+    next: usize,
+}
+
+impl GazeState {
+    fn new() -> Self {
+        Self {
+            targets: Vec::new(),
+            config: GazeConfig::default(),
+            calibration: GazeCalibration::default(),
+            history: Vec::with_capacity(GAZE_HISTORY),
+            next: 0,
+        }
+    }
+
+    fn record(&mut self, frame: GazeFrame) {
+        if self.history.len() < GAZE_HISTORY {
+            self.history.push(frame);
+        } else {
+            self.history[self.next] = frame;
+        }
+        self.next = (self.next + 1) % GAZE_HISTORY;
+    }
 }
 
 fn us(t: Instant) -> u64 {
@@ -667,7 +728,86 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 ..Default::default()
             },
             frame_size: (0, 0),
+            gaze: GazeState::new(),
         })
+    }
+
+    /// Sets the targets the point of gaze is located among (screens, mirrors, zones; camera
+    /// frame), replacing any before; an empty list turns location off. The tap calibration stays.
+    pub fn set_gaze_targets(&mut self, targets: Vec<Target>) {
+        self.gaze.targets = targets;
+    }
+
+    /// The targets set.
+    pub fn gaze_targets(&self) -> &[Target] {
+        &self.gaze.targets
+    }
+
+    /// Point-of-gaze settings (eye confidence, head fallback, temporal filter).
+    pub fn set_gaze_config(&mut self, config: GazeConfig) {
+        self.gaze.config = config;
+    }
+
+    /// Tells the tracker the user looked at `point_mm` (u, v) on target `target` (an index into
+    /// the targets set) at `timestamp_ns` — a tap, a button press. The face whose uncorrected gaze
+    /// at the frame nearest that time points closest to the point teaches the per-user
+    /// correction, applied from the next frame. Returns the taps recorded so far.
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] for an unknown target, a non-finite point, or no frame with a face
+    /// within 250 ms of `timestamp_ns`.
+    pub fn add_calibration_point(
+        &mut self,
+        target: usize,
+        point_mm: [f64; 2],
+        timestamp_ns: i64,
+    ) -> Result<usize> {
+        let t = self.gaze.targets.get(target).ok_or_else(|| {
+            Error::InvalidInput(format!(
+                "no gaze target {target} ({} set)",
+                self.gaze.targets.len()
+            ))
+        })?;
+        if !point_mm.iter().all(|v| v.is_finite()) {
+            return Err(Error::InvalidInput(format!(
+                "calibration point {point_mm:?} is not finite"
+            )));
+        }
+        let p = t.point_at(point_mm);
+        let frame = self
+            .gaze
+            .history
+            .iter()
+            .filter(|f| f.faces > 0)
+            .min_by_key(|f| f.timestamp_ns.abs_diff(timestamp_ns))
+            .filter(|f| f.timestamp_ns.abs_diff(timestamp_ns) <= TAP_MATCH_NS)
+            .copied()
+            .ok_or_else(|| {
+                Error::InvalidInput(format!(
+                    "no frame with a face within 250 ms of the tap at {timestamp_ns} ns"
+                ))
+            })?;
+        let miss = |rays: &[GazeRay; 2]| {
+            let o = (rays[0].origin + rays[1].origin) / 2.0;
+            (rays[0].direction + rays[1].direction).angle(&(p - o))
+        };
+        let rays = frame.rays[..frame.faces]
+            .iter()
+            .min_by(|a, b| miss(a).total_cmp(&miss(b)))
+            .copied()
+            .ok_or_else(|| Error::Internal("empty gaze frame".into()))?;
+        self.gaze.calibration.add_tap(&rays, &p)?;
+        Ok(self.gaze.calibration.taps())
+    }
+
+    /// The tap calibration learnt so far.
+    pub fn gaze_calibration(&self) -> &GazeCalibration {
+        &self.gaze.calibration
+    }
+
+    /// Forgets the tap calibration (a new user).
+    pub fn reset_gaze_calibration(&mut self) {
+        self.gaze.calibration.reset();
     }
 
     /// Settings.
@@ -1002,10 +1142,34 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             timings.fit_us += us(t);
         }
 
-        // Result.
+        // Result, with each face's point of gaze.
+        let t = Instant::now();
         self.result.faces.clear();
-        for s in self.slots.iter().filter(|s| s.active) {
+        let still = GazeRay {
+            origin: Vector3::zeros(),
+            direction: Vector3::zeros(),
+        };
+        let mut frame = GazeFrame {
+            timestamp_ns,
+            faces: 0,
+            rays: [[still; 2]; MAX_FACES_LIMIT],
+        };
+        for s in self.slots.iter_mut().filter(|s| s.active) {
             if let Some(fit) = s.fit {
+                let g = &self.gaze;
+                let gaze = point_of_gaze(
+                    &s.landmarks,
+                    &fit,
+                    &g.calibration,
+                    &g.config,
+                    s.gaze_dir.as_ref(),
+                    &g.targets,
+                );
+                s.gaze_dir = Some(gaze.ray.direction);
+                if frame.faces < MAX_FACES_LIMIT {
+                    frame.rays[frame.faces] = raw_eye_rays(&s.landmarks, &fit);
+                    frame.faces += 1;
+                }
                 self.result.faces.push(TrackedFace {
                     id: s.id,
                     rect: s.rect,
@@ -1015,9 +1179,12 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                     fit,
                     shape_held: s.msbp_track.fixed_shape().is_some(),
                     flow_points: s.flow_points,
+                    gaze,
                 });
             }
         }
+        self.gaze.record(frame);
+        timings.gaze_us = us(t);
         if video {
             // Tracks without a template cannot be followed: end them after reporting this frame.
             for s in self

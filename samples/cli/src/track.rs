@@ -758,6 +758,14 @@ mod tests {
                 fit,
                 shape_held: true,
                 flow_points: 60,
+                gaze: monotrack_core::gaze::point_of_gaze(
+                    &lm,
+                    &fit,
+                    &Default::default(),
+                    &Default::default(),
+                    None,
+                    &[],
+                ),
             }],
             detector_ran: false,
             timings: StageTimings {
