@@ -14,6 +14,7 @@ uniffi::setup_scaffolding!();
 
 mod body;
 mod error;
+mod gaze;
 mod live;
 mod tracker;
 mod types;
@@ -21,6 +22,7 @@ mod types;
 pub use body::*;
 pub use error::MonotrackError;
 use error::guard;
+pub use gaze::*;
 pub use live::*;
 pub use tracker::*;
 pub use types::*;

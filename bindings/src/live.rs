@@ -4,8 +4,10 @@
 
 use crate::MonotrackError;
 use crate::error::{guard, guard_infallible};
+use crate::gaze::GazeTarget;
 use crate::tracker::{TrackerConfig, TrackingResult, build_tracker, result};
 use crate::types::FrameDesc;
+use monotrack_core::gaze::Target;
 use monotrack_core::image::{Frame, FrameDesc as CoreFrameDesc};
 use monotrack_core::track::live::{LiveListener, LiveStream, Submitted};
 use monotrack_core::track::{self as core_track};
@@ -45,12 +47,13 @@ impl LiveListener for Forward {
         frames_dropped: u64,
         frame: &CoreFrameDesc,
         r: &core_track::TrackingResult,
+        targets: &[Target],
     ) {
         let (w, h) = frame.upright_size();
         self.0.on_result(LiveStreamResult {
             timestamp_ns,
             frames_dropped,
-            result: result(r, w as u32, h as u32),
+            result: result(r, w as u32, h as u32, targets),
         });
     }
 
@@ -139,6 +142,26 @@ impl LiveFaceTracker {
     /// The settings this tracker was built with.
     pub fn config(&self) -> TrackerConfig {
         self.config
+    }
+
+    /// Sets the gaze targets (as `FaceTracker::set_gaze_targets`), from the next frame the
+    /// worker takes.
+    ///
+    /// # Errors
+    /// `InvalidConfig` for a bad target or a repeated id.
+    pub fn set_gaze_targets(&self, targets: Vec<GazeTarget>) -> Result<(), MonotrackError> {
+        guard(|| {
+            let core = crate::gaze::to_core(&targets)?;
+            if let Some(s) = self
+                .stream
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .as_ref()
+            {
+                s.set_gaze_targets(core);
+            }
+            Ok(())
+        })
     }
 }
 

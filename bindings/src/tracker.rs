@@ -4,9 +4,11 @@
 
 use crate::MonotrackError;
 use crate::error::{guard, guard_infallible};
+use crate::gaze::{GazeTarget, PlanePoint, PointOfGaze};
 use crate::types::{ActionUnits, CameraIntrinsics, FrameDesc, HeadPose, Point2, ShapeUnits, Vec3};
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::detect::DetectorConfig;
+use monotrack_core::gaze::{GazeConfig, GazeFilter, Target};
 use monotrack_core::image::{Frame, Rect as CoreRect};
 use monotrack_core::model::{FaceModel, N_LANDMARKS};
 use monotrack_core::track::{self as core_track, TrackedFace, Tracker};
@@ -54,6 +56,8 @@ pub struct TrackerConfig {
     pub search_margin: f32,
     /// Optical-flow landmark filter on or off.
     pub flow_filter: bool,
+    /// Temporal smoothing of the gaze direction that leaves saccades sharp (default off).
+    pub gaze_filter: bool,
     /// Frames over which a new track's shape units are estimated before being held (1..=1000).
     pub shape_frames: u32,
     /// Landmarks in M3's mirror-average mode: more accurate on still images, slower (the
@@ -78,6 +82,7 @@ pub fn default_tracker_config() -> TrackerConfig {
         min_match_score: c.min_ncc_score,
         search_margin: c.search_margin,
         flow_filter: c.flow_filter,
+        gaze_filter: false,
         shape_frames: c.shape_frames as u32,
         mirror_average: None,
     }
@@ -97,6 +102,10 @@ pub(crate) fn build_tracker(
     if let Some(on) = config.mirror_average {
         t.estimator_mut().set_mirror_average(on);
     }
+    t.set_gaze_config(GazeConfig {
+        filter: config.gaze_filter.then(GazeFilter::default),
+        ..GazeConfig::default()
+    });
     Ok(t)
 }
 
@@ -230,6 +239,9 @@ pub struct Face {
     pub action_units: ActionUnits,
     /// RMS reprojection error of the 3D fit, pixels.
     pub fit_rms_px: f64,
+    /// Where the face looks: the gaze ray from between the eyes, and the target it lands on when
+    /// targets are set (`FaceTracker::set_gaze_targets`).
+    pub point_of_gaze: PointOfGaze,
     /// The fitted face model's 68 vertices (iBUG order, the landmarks' points on the 3D face),
     /// camera frame, millimetres: with `face_mesh_triangles()` and the intrinsics, the mesh an AR
     /// overlay draws over the upright image.
@@ -244,8 +256,9 @@ fn v3(v: &[f32; 3]) -> Vec3 {
     }
 }
 
-impl From<&TrackedFace> for Face {
-    fn from(f: &TrackedFace) -> Self {
+impl Face {
+    /// From the core's face; `targets` name the gaze targets.
+    fn from_tracked(f: &TrackedFace, targets: &[Target]) -> Self {
         let l = &f.landmarks;
         Self {
             id: f.id,
@@ -280,6 +293,7 @@ impl From<&TrackedFace> for Face {
             shape_units: ShapeUnits::from(&f.fit.shape[..]),
             action_units: ActionUnits::from(&f.fit.animation[..]),
             fit_rms_px: f.fit.report.rms_px,
+            point_of_gaze: PointOfGaze::from_core(&f.gaze, targets),
             vertices_mm: {
                 let fit = &f.fit;
                 let mut v = [nalgebra::Vector3::zeros(); N_LANDMARKS];
@@ -329,6 +343,8 @@ pub struct StageTimings {
     pub flow_us: u64,
     /// 3D fit.
     pub fit_us: u64,
+    /// Point of gaze.
+    pub gaze_us: u64,
     /// The whole call.
     pub total_us: u64,
 }
@@ -346,12 +362,21 @@ pub struct TrackingResult {
     pub timings: StageTimings,
 }
 
-pub(crate) fn result(r: &core_track::TrackingResult, w: u32, h: u32) -> TrackingResult {
+pub(crate) fn result(
+    r: &core_track::TrackingResult,
+    w: u32,
+    h: u32,
+    targets: &[Target],
+) -> TrackingResult {
     let t = &r.timings;
     TrackingResult {
         frame_width: w,
         frame_height: h,
-        faces: r.faces.iter().map(Face::from).collect(),
+        faces: r
+            .faces
+            .iter()
+            .map(|f| Face::from_tracked(f, targets))
+            .collect(),
         timings: StageTimings {
             convert_us: t.image_us,
             detect_us: t.detect_us,
@@ -359,6 +384,7 @@ pub(crate) fn result(r: &core_track::TrackingResult, w: u32, h: u32) -> Tracking
             landmarks_us: t.landmarks_us,
             flow_us: t.flow_us,
             fit_us: t.fit_us,
+            gaze_us: t.gaze_us,
             total_us: t.total_us,
         },
     }
@@ -438,8 +464,7 @@ impl FaceTracker {
             let (w, h) = upright_size(&desc);
             let frame = Frame::new(bytes, desc.try_into()?)?;
             let mut g = self.lock();
-            let r = g
-                .video
+            g.video
                 .process_frame(&frame, timestamp_ns)
                 .map_err(|e| match e {
                     monotrack_core::Error::InvalidInput(msg) => {
@@ -447,7 +472,8 @@ impl FaceTracker {
                     }
                     e => e.into(),
                 })?;
-            Ok(result(r, w, h))
+            let v = &g.video;
+            Ok(result(v.result(), w, h, v.gaze_targets()))
         })
     }
 
@@ -465,13 +491,15 @@ impl FaceTracker {
             let frame = Frame::new(bytes, desc.try_into()?)?;
             let mut g = self.lock();
             if g.stills.is_none() {
-                g.stills = Some(build_tracker(&g.config, true)?);
+                let mut t = build_tracker(&g.config, true)?;
+                t.set_gaze_targets(g.video.gaze_targets().to_vec());
+                g.stills = Some(t);
             }
             let stills = g.stills.as_mut().ok_or_else(|| MonotrackError::Internal {
                 msg: "no image tracker".into(),
             })?;
-            let r = stills.process_frame(&frame, 0)?;
-            Ok(result(r, w, h))
+            stills.process_frame(&frame, 0)?;
+            Ok(result(stills.result(), w, h, stills.gaze_targets()))
         })
     }
 
@@ -489,6 +517,71 @@ impl FaceTracker {
     /// The settings this tracker was built with.
     pub fn config(&self) -> TrackerConfig {
         self.lock().config
+    }
+
+    /// Sets the targets each face's point of gaze is located among (screens, mirrors, zones),
+    /// replacing any before; an empty list turns location off. The tap calibration stays.
+    ///
+    /// # Errors
+    /// `InvalidConfig` for a bad target (fewer than 3 corners, not planar, not finite) or a
+    /// repeated id.
+    pub fn set_gaze_targets(&self, targets: Vec<GazeTarget>) -> Result<(), MonotrackError> {
+        guard(|| {
+            let core = crate::gaze::to_core(&targets)?;
+            let mut g = self.lock();
+            if let Some(s) = g.stills.as_mut() {
+                s.set_gaze_targets(core.clone());
+            }
+            g.video.set_gaze_targets(core);
+            Ok(())
+        })
+    }
+
+    /// Tells the tracker the user looked at `point` on the target `target_id` at `timestamp_ns`
+    /// (the time of a tap or button press, in the frames' clock): the gaze of the frame nearest
+    /// that time teaches a per-user correction, applied from the next frame. Returns the taps
+    /// learnt from so far. Video mode (`process_frame`).
+    ///
+    /// # Errors
+    /// `InvalidConfig` for an unknown target or a non-finite point, `InvalidFrame` when no frame
+    /// with a face lies within 250 ms of `timestamp_ns`.
+    pub fn add_calibration_point(
+        &self,
+        target_id: String,
+        point: PlanePoint,
+        timestamp_ns: i64,
+    ) -> Result<u32, MonotrackError> {
+        guard(|| {
+            let mut g = self.lock();
+            let index = g
+                .video
+                .gaze_targets()
+                .iter()
+                .position(|t| t.id == target_id)
+                .ok_or_else(|| MonotrackError::InvalidConfig {
+                    msg: format!("no gaze target {target_id:?}"),
+                })?;
+            if !(point.u_mm.is_finite() && point.v_mm.is_finite()) {
+                return Err(MonotrackError::InvalidConfig {
+                    msg: format!("calibration point {point:?} is not finite"),
+                });
+            }
+            let n = g
+                .video
+                .add_calibration_point(index, [point.u_mm, point.v_mm], timestamp_ns)
+                .map_err(|e| match e {
+                    monotrack_core::Error::InvalidInput(msg) => {
+                        MonotrackError::InvalidFrame { msg }
+                    }
+                    e => e.into(),
+                })?;
+            Ok(n as u32)
+        })
+    }
+
+    /// Forgets the tap calibration (a new user).
+    pub fn reset_gaze_calibration(&self) {
+        guard_infallible(|| self.lock().video.reset_gaze_calibration());
     }
 }
 
@@ -882,5 +975,99 @@ mod tests {
                 });
             }
         });
+    }
+
+    /// Targets set on the tracker: each face carries its point of gaze; a tap teaches the
+    /// correction, after which the same view lands on the tapped point.
+    #[test]
+    fn gaze_lands_on_targets_and_a_tap_calibrates_it() {
+        let (upright, w, h) = upright_face();
+        let tracker = FaceTracker::new(default_tracker_config()).unwrap();
+        let desc = FrameDesc {
+            width: w as u32,
+            height: h as u32,
+            format: PixelFormat::Gray8,
+            row_stride: w as u32,
+            uv_row_stride: 0,
+            uv_pixel_stride: 0,
+            rotation_degrees: 0,
+            mirrored: false,
+        };
+        let screen = crate::gaze::screen_target("phone".into(), 70.0, 150.0, 35.0, -8.0).unwrap();
+        tracker.set_gaze_targets(vec![screen]).unwrap();
+        let ms = 1_000_000;
+        let f = tracker
+            .process_frame(&upright, desc, 10 * ms)
+            .unwrap()
+            .faces[0]
+            .clone();
+        let g = &f.point_of_gaze;
+        assert!((200.0..3000.0).contains(&g.origin_mm.z), "{g:?}");
+        let d = &g.direction;
+        assert!(((d.x * d.x + d.y * d.y + d.z * d.z).sqrt() - 1.0).abs() < 1e-9);
+        let hit = g.target.as_ref().unwrap();
+        assert_eq!(hit.nearest, "phone");
+        // The origin lies between the fitted eyes: on the face, above the nose tip's height.
+        assert!(g.origin_mm.y < f.vertices_mm[30].y, "{g:?}");
+        assert!(matches!(
+            tracker.add_calibration_point(
+                "tv".into(),
+                PlanePoint {
+                    u_mm: 1.0,
+                    v_mm: 1.0
+                },
+                10 * ms
+            ),
+            Err(MonotrackError::InvalidConfig { .. })
+        ));
+        assert!(matches!(
+            tracker.add_calibration_point(
+                "phone".into(),
+                PlanePoint {
+                    u_mm: 1.0,
+                    v_mm: 1.0
+                },
+                900 * ms
+            ),
+            Err(MonotrackError::InvalidFrame { .. })
+        ));
+        let tap = PlanePoint {
+            u_mm: 35.0,
+            v_mm: 50.0,
+        };
+        assert_eq!(
+            tracker
+                .add_calibration_point("phone".into(), tap, 12 * ms)
+                .unwrap(),
+            1
+        );
+        let after = tracker
+            .process_frame(&upright, desc, 43 * ms)
+            .unwrap()
+            .faces[0]
+            .clone();
+        let h = after.point_of_gaze.target.unwrap();
+        let miss = ((h.point.u_mm - tap.u_mm).powi(2) + (h.point.v_mm - tap.v_mm).powi(2)).sqrt();
+        assert!(h.hit && miss < 10.0, "{h:?}: {miss} mm from the tap");
+        tracker.reset_gaze_calibration();
+        // Targets can be cleared; a bad one is refused.
+        tracker.set_gaze_targets(vec![]).unwrap();
+        let r = tracker.process_frame(&upright, desc, 76 * ms).unwrap();
+        assert!(r.faces[0].point_of_gaze.target.is_none());
+        let flat = crate::gaze::GazeTarget {
+            id: "flat".into(),
+            corners_mm: vec![
+                Vec3 {
+                    x: 0.0,
+                    y: 0.0,
+                    z: 0.0
+                };
+                3
+            ],
+        };
+        assert!(matches!(
+            tracker.set_gaze_targets(vec![flat]),
+            Err(MonotrackError::InvalidConfig { .. })
+        ));
     }
 }

@@ -160,6 +160,7 @@ fn frames_and_trackers_never_panic() {
             min_match_score: r.float(3.0) as f32 - 1.0,
             search_margin: r.float(6.0) as f32 - 1.0,
             flow_filter: r.below(2) == 0,
+            gaze_filter: r.below(2) == 1,
             shape_frames: r.small(),
             mirror_average: [None, Some(false), Some(true)][r.below(3) as usize],
         };

@@ -70,7 +70,9 @@ impl Target {
         }
         let n = normal.norm();
         let first = pts[1] - origin;
-        if !(n > 1e-9) || !(first.norm() > 1e-9) {
+        // Also catches NaN (all corners were checked finite, but a huge span can overflow).
+        let spans = n > 1e-9 && first.norm() > 1e-9;
+        if !spans {
             return Err(bad("corners do not span a plane".into()));
         }
         let normal = normal / n;
@@ -116,9 +118,12 @@ impl Target {
         camera_mm: [f64; 2],
     ) -> Result<Self> {
         let id = id.into();
-        if !(width_mm.is_finite() && height_mm.is_finite() && width_mm > 0.0 && height_mm > 0.0)
-            || !camera_mm.iter().all(|c| c.is_finite())
-        {
+        let ok = width_mm.is_finite()
+            && height_mm.is_finite()
+            && width_mm > 0.0
+            && height_mm > 0.0
+            && camera_mm.iter().all(|c| c.is_finite());
+        if !ok {
             return Err(Error::InvalidConfig(format!(
                 "screen {id:?}: size {width_mm}x{height_mm} mm and camera offset must be finite, the size positive"
             )));
@@ -349,7 +354,8 @@ impl GazeCalibration {
         for (slot, eye) in tap.iter_mut().zip(eyes) {
             let to = point - eye.origin;
             let n = to.norm();
-            if !(n > 1e-6) || !eye.direction.iter().all(|v| v.is_finite()) || !n.is_finite() {
+            let usable = n > 1e-6 && n.is_finite() && eye.direction.iter().all(|v| v.is_finite());
+            if !usable {
                 return Err(Error::InvalidInput(
                     "a calibration tap needs finite eye rays and a point away from the eyes".into(),
                 ));

@@ -55,7 +55,11 @@ fn a_miss_names_the_nearest_target_and_its_distance() {
     assert!((h.distance_mm - 30.0).abs() < 1e-9, "{}", h.distance_mm);
     // A corner miss measures to the corner: (290, 70) from (250, 30).
     let h = locate(&t, &ray([0.0, 0.0, 400.0], [290.0, 70.0, -400.0])).unwrap();
-    assert!((h.distance_mm - 40.0 * 2f64.sqrt()).abs() < 1e-9, "{}", h.distance_mm);
+    assert!(
+        (h.distance_mm - 40.0 * 2f64.sqrt()).abs() < 1e-9,
+        "{}",
+        h.distance_mm
+    );
 }
 
 #[test]

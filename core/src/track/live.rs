@@ -10,6 +10,7 @@
 
 use super::{FaceTracker, LandmarkEstimator, RegionDetector, TrackingResult};
 use crate::error::{Error, Result};
+use crate::gaze::Target;
 use crate::image::{Frame, FrameDesc};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
@@ -20,12 +21,14 @@ pub trait LiveListener: Send {
     /// The faces of the frame taken at `timestamp_ns` and described by `frame`; `frames_dropped`
     /// frames submitted since the previous delivery (result or error) were skipped because the
     /// worker was busy.
+    /// `targets` are the gaze targets the result's points of gaze were located among.
     fn on_result(
         &mut self,
         timestamp_ns: i64,
         frames_dropped: u64,
         frame: &FrameDesc,
         result: &TrackingResult,
+        targets: &[Target],
     );
 
     /// Tracking the frame taken at `timestamp_ns` failed (a bug caught as [`Error::Internal`], or
@@ -43,6 +46,15 @@ pub trait FrameProcessor: Send + 'static {
 
     /// Ends every track (after a caught panic, whose state is unknown).
     fn reset(&mut self);
+
+    /// The last result, and the gaze targets it was located among.
+    fn last(&self) -> (&TrackingResult, &[Target]);
+
+    /// Sets the gaze targets ([`FaceTracker::set_gaze_targets`]).
+    fn set_gaze_targets(&mut self, targets: Vec<Target>);
+
+    /// The gaze targets set.
+    fn gaze_targets(&self) -> &[Target];
 }
 
 impl<D, L> FrameProcessor for FaceTracker<D, L>
@@ -56,6 +68,18 @@ where
 
     fn reset(&mut self) {
         FaceTracker::reset(self);
+    }
+
+    fn last(&self) -> (&TrackingResult, &[Target]) {
+        (self.result(), FaceTracker::gaze_targets(self))
+    }
+
+    fn set_gaze_targets(&mut self, targets: Vec<Target>) {
+        FaceTracker::set_gaze_targets(self, targets);
+    }
+
+    fn gaze_targets(&self) -> &[Target] {
+        FaceTracker::gaze_targets(self)
     }
 }
 
@@ -84,6 +108,8 @@ struct Slot {
     dropped: u64,
     /// The last accepted timestamp: submitted frames must come after it.
     last_timestamp_ns: Option<i64>,
+    /// Gaze targets for the worker to take before its next frame.
+    targets: Option<Vec<Target>>,
     shutdown: bool,
 }
 
@@ -167,6 +193,11 @@ impl LiveStream {
         Ok(outcome)
     }
 
+    /// Sets the gaze targets; frames tracked from the next one on use them.
+    pub fn set_gaze_targets(&self, targets: Vec<Target>) {
+        self.shared.lock().targets = Some(targets);
+    }
+
     /// Stops the worker (see the type's docs) and waits for it, unless called from the listener
     /// itself (on the worker thread), where it only asks the worker to stop after this delivery.
     pub fn close(&mut self) {
@@ -195,7 +226,7 @@ fn run_worker(
 ) {
     let mut working = Pending::default();
     loop {
-        let dropped = {
+        let (dropped, targets) = {
             let mut slot = shared.lock();
             while slot.waiting.desc.is_none() && !slot.shutdown {
                 slot = shared.wake.wait(slot).unwrap_or_else(|p| p.into_inner());
@@ -204,15 +235,22 @@ fn run_worker(
                 return;
             }
             std::mem::swap(&mut slot.waiting, &mut working);
-            std::mem::take(&mut slot.dropped)
+            (std::mem::take(&mut slot.dropped), slot.targets.take())
         };
+        if let Some(t) = targets {
+            tracker.set_gaze_targets(t);
+        }
         let Some(desc) = working.desc.take() else {
             continue;
         };
         let ts = working.timestamp_ns;
         let delivered = catch_unwind(AssertUnwindSafe(|| {
-            match Frame::new(&working.bytes, desc).and_then(|f| tracker.process(&f, ts)) {
-                Ok(result) => listener.on_result(ts, dropped, &desc, result),
+            match Frame::new(&working.bytes, desc).and_then(|f| tracker.process(&f, ts).map(|_| ()))
+            {
+                Ok(()) => {
+                    let (result, targets) = tracker.last();
+                    listener.on_result(ts, dropped, &desc, result, targets);
+                }
                 Err(e) => listener.on_error(ts, dropped, e),
             }
         }));
@@ -265,12 +303,26 @@ mod tests {
         fn reset(&mut self) {
             *self.resets.lock().unwrap() += 1;
         }
+        fn last(&self) -> (&TrackingResult, &[Target]) {
+            (&self.result, &[])
+        }
+        fn set_gaze_targets(&mut self, _: Vec<Target>) {}
+        fn gaze_targets(&self) -> &[Target] {
+            &[]
+        }
     }
 
     struct ToChannel(mpsc::Sender<Event>);
 
     impl LiveListener for ToChannel {
-        fn on_result(&mut self, ts: i64, dropped: u64, _: &FrameDesc, _: &TrackingResult) {
+        fn on_result(
+            &mut self,
+            ts: i64,
+            dropped: u64,
+            _: &FrameDesc,
+            _: &TrackingResult,
+            _: &[Target],
+        ) {
             let _ = self.0.send(Event::Result(ts, dropped));
         }
         fn on_error(&mut self, ts: i64, dropped: u64, error: Error) {
