@@ -16,7 +16,8 @@ rustup toolchain list | grep -q '^nightly' || rustup toolchain install nightly -
 command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --locked
 WORK=${FUZZ_WORK:-$(pwd)/../target/fuzz-work}
 mkdir -p "$WORK"
-cargo +nightly fuzz build -O "${TARGETS[@]/#/}" 2>&1 | tail -3 || true
+# Every target at once (cargo-fuzz builds one or all).
+cargo +nightly fuzz build -O
 for t in "${TARGETS[@]}"; do
   scratch="$WORK/$t"; rm -rf "$scratch"; mkdir -p "$scratch"
   [ -d "corpus/$t" ] && cp -r "corpus/$t/." "$scratch/"

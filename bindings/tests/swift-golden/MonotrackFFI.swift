@@ -844,6 +844,18 @@ public func FfiConverterTypeBodyTracker_lower(_ value: BodyTracker) -> UInt64 {
 public protocol FaceTrackerProtocol: AnyObject, Sendable {
     
     /**
+     * Tells the tracker the user looked at `point` on the target `target_id` at `timestamp_ns`
+     * (the time of a tap or button press, in the frames' clock): the gaze of the frame nearest
+     * that time teaches a per-user correction, applied from the next frame. Returns the taps
+     * learnt from so far. Video mode (`process_frame`).
+     *
+     * # Errors
+     * `InvalidConfig` for an unknown target or a non-finite point, `InvalidFrame` when no frame
+     * with a face lies within 250 ms of `timestamp_ns`.
+     */
+    func addCalibrationPoint(targetId: String, point: PlanePoint, timestampNs: Int64) throws  -> UInt32
+    
+    /**
      * The settings this tracker was built with.
      */
     func config()  -> TrackerConfig
@@ -869,6 +881,21 @@ public protocol FaceTrackerProtocol: AnyObject, Sendable {
      * Ends every track and forgets the user's shape and the timestamp history.
      */
     func reset() 
+    
+    /**
+     * Forgets the tap calibration (a new user).
+     */
+    func resetGazeCalibration() 
+    
+    /**
+     * Sets the targets each face's point of gaze is located among (screens, mirrors, zones),
+     * replacing any before; an empty list turns location off. The tap calibration stays.
+     *
+     * # Errors
+     * `InvalidConfig` for a bad target (fewer than 3 corners, not planar, not finite) or a
+     * repeated id.
+     */
+    func setGazeTargets(targets: [GazeTarget]) throws 
     
 }
 /**
@@ -943,6 +970,28 @@ public convenience init(config: TrackerConfig)throws  {
 
     
     /**
+     * Tells the tracker the user looked at `point` on the target `target_id` at `timestamp_ns`
+     * (the time of a tap or button press, in the frames' clock): the gaze of the frame nearest
+     * that time teaches a per-user correction, applied from the next frame. Returns the taps
+     * learnt from so far. Video mode (`process_frame`).
+     *
+     * # Errors
+     * `InvalidConfig` for an unknown target or a non-finite point, `InvalidFrame` when no frame
+     * with a face lies within 250 ms of `timestamp_ns`.
+     */
+open func addCalibrationPoint(targetId: String, point: PlanePoint, timestampNs: Int64)throws  -> UInt32  {
+    return try  FfiConverterUInt32.lift(try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_facetracker_add_calibration_point(
+            self.uniffiCloneHandle(),
+        FfiConverterString.lower(targetId),
+        FfiConverterTypePlanePoint_lower(point),
+        FfiConverterInt64.lower(timestampNs),uniffiCallStatus
+    )
+})
+}
+    
+    /**
      * The settings this tracker was built with.
      */
 open func config() -> TrackerConfig  {
@@ -1001,6 +1050,34 @@ open func reset()  {try! rustCall() {
         uniffiCallStatus in
     uniffi_monotrack_ffi_fn_method_facetracker_reset(
             self.uniffiCloneHandle(),uniffiCallStatus
+    )
+}
+}
+    
+    /**
+     * Forgets the tap calibration (a new user).
+     */
+open func resetGazeCalibration()  {try! rustCall() {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_facetracker_reset_gaze_calibration(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+}
+}
+    
+    /**
+     * Sets the targets each face's point of gaze is located among (screens, mirrors, zones),
+     * replacing any before; an empty list turns location off. The tap calibration stays.
+     *
+     * # Errors
+     * `InvalidConfig` for a bad target (fewer than 3 corners, not planar, not finite) or a
+     * repeated id.
+     */
+open func setGazeTargets(targets: [GazeTarget])throws   {try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_facetracker_set_gaze_targets(
+            self.uniffiCloneHandle(),
+        FfiConverterSequenceTypeGazeTarget.lower(targets),uniffiCallStatus
     )
 }
 }
@@ -1077,6 +1154,15 @@ public protocol LiveFaceTrackerProtocol: AnyObject, Sendable {
      * increase, or the tracker was shut down.
      */
     func processAsync(bytes: Data, desc: FrameDesc, timestampNs: Int64) throws  -> Bool
+    
+    /**
+     * Sets the gaze targets (as `FaceTracker::set_gaze_targets`), from the next frame the
+     * worker takes.
+     *
+     * # Errors
+     * `InvalidConfig` for a bad target or a repeated id.
+     */
+    func setGazeTargets(targets: [GazeTarget]) throws 
     
     /**
      * Stops the worker: a frame being tracked finishes and is delivered, a waiting one is
@@ -1195,6 +1281,22 @@ open func processAsync(bytes: Data, desc: FrameDesc, timestampNs: Int64)throws  
     )
         }
 })
+}
+    
+    /**
+     * Sets the gaze targets (as `FaceTracker::set_gaze_targets`), from the next frame the
+     * worker takes.
+     *
+     * # Errors
+     * `InvalidConfig` for a bad target or a repeated id.
+     */
+open func setGazeTargets(targets: [GazeTarget])throws   {try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_livefacetracker_set_gaze_targets(
+            self.uniffiCloneHandle(),
+        FfiConverterSequenceTypeGazeTarget.lower(targets),uniffiCallStatus
+    )
+}
 }
     
     /**
@@ -2414,6 +2516,11 @@ public struct Face: Equatable, Hashable {
      */
     public var fitRmsPx: Double
     /**
+     * Where the face looks: the gaze ray from between the eyes, and the target it lands on when
+     * targets are set (`FaceTracker::set_gaze_targets`).
+     */
+    public var pointOfGaze: PointOfGaze
+    /**
      * The fitted face model's 68 vertices (iBUG order, the landmarks' points on the 3D face),
      * camera frame, millimetres: with `face_mesh_triangles()` and the intrinsics, the mesh an AR
      * overlay draws over the upright image.
@@ -2463,6 +2570,10 @@ public struct Face: Equatable, Hashable {
          * RMS reprojection error of the 3D fit, pixels.
          */fitRmsPx: Double, 
         /**
+         * Where the face looks: the gaze ray from between the eyes, and the target it lands on when
+         * targets are set (`FaceTracker::set_gaze_targets`).
+         */pointOfGaze: PointOfGaze, 
+        /**
          * The fitted face model's 68 vertices (iBUG order, the landmarks' points on the 3D face),
          * camera frame, millimetres: with `face_mesh_triangles()` and the intrinsics, the mesh an AR
          * overlay draws over the upright image.
@@ -2480,6 +2591,7 @@ public struct Face: Equatable, Hashable {
         self.shapeUnits = shapeUnits
         self.actionUnits = actionUnits
         self.fitRmsPx = fitRmsPx
+        self.pointOfGaze = pointOfGaze
         self.verticesMm = verticesMm
     }
 
@@ -2512,6 +2624,7 @@ public struct FfiConverterTypeFace: FfiConverterRustBuffer {
                 shapeUnits: FfiConverterTypeShapeUnits.read(from: &buf), 
                 actionUnits: FfiConverterTypeActionUnits.read(from: &buf), 
                 fitRmsPx: FfiConverterDouble.read(from: &buf), 
+                pointOfGaze: FfiConverterTypePointOfGaze.read(from: &buf), 
                 verticesMm: FfiConverterSequenceTypeVec3.read(from: &buf)
         )
     }
@@ -2530,6 +2643,7 @@ public struct FfiConverterTypeFace: FfiConverterRustBuffer {
         FfiConverterTypeShapeUnits.write(value.shapeUnits, into: &buf)
         FfiConverterTypeActionUnits.write(value.actionUnits, into: &buf)
         FfiConverterDouble.write(value.fitRmsPx, into: &buf)
+        FfiConverterTypePointOfGaze.write(value.pointOfGaze, into: &buf)
         FfiConverterSequenceTypeVec3.write(value.verticesMm, into: &buf)
     }
 }
@@ -3059,6 +3173,77 @@ public func FfiConverterTypeGaze_lower(_ value: Gaze) -> RustBuffer {
 
 
 /**
+ * A planar target — a screen, mirror or zone — as corners in the camera frame (mm, in order
+ * round the polygon; 3 or more, coplanar). In-plane coordinates on it: `u` from corner 0 towards
+ * corner 1, `v` perpendicular, into the polygon.
+ */
+public struct GazeTarget: Equatable, Hashable {
+    /**
+     * The app's name for it.
+     */
+    public var id: String
+    /**
+     * Corners, camera frame, millimetres.
+     */
+    public var cornersMm: [Vec3]
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The app's name for it.
+         */id: String, 
+        /**
+         * Corners, camera frame, millimetres.
+         */cornersMm: [Vec3]) {
+        self.id = id
+        self.cornersMm = cornersMm
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension GazeTarget: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeGazeTarget: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> GazeTarget {
+        return
+            try GazeTarget(
+                id: FfiConverterString.read(from: &buf), 
+                cornersMm: FfiConverterSequenceTypeVec3.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: GazeTarget, into buf: inout [UInt8]) {
+        FfiConverterString.write(value.id, into: &buf)
+        FfiConverterSequenceTypeVec3.write(value.cornersMm, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGazeTarget_lift(_ buf: RustBuffer) throws -> GazeTarget {
+    return try FfiConverterTypeGazeTarget.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGazeTarget_lower(_ value: GazeTarget) -> RustBuffer {
+    return FfiConverterTypeGazeTarget.lower(value)
+}
+
+
+/**
  * Gesture probabilities (mouth: smile, frown, kiss, neutral; brows: raise, frown, neutral).
  */
 public struct Gestures: Equatable, Hashable {
@@ -3506,6 +3691,75 @@ public func FfiConverterTypeNamedValue_lower(_ value: NamedValue) -> RustBuffer 
 
 
 /**
+ * A point on a target's plane, millimetres (`u` along its first edge, `v` across it).
+ */
+public struct PlanePoint: Equatable, Hashable {
+    /**
+     * Along the first edge, from corner 0.
+     */
+    public var uMm: Double
+    /**
+     * Across it, into the polygon.
+     */
+    public var vMm: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Along the first edge, from corner 0.
+         */uMm: Double, 
+        /**
+         * Across it, into the polygon.
+         */vMm: Double) {
+        self.uMm = uMm
+        self.vMm = vMm
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension PlanePoint: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypePlanePoint: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> PlanePoint {
+        return
+            try PlanePoint(
+                uMm: FfiConverterDouble.read(from: &buf), 
+                vMm: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: PlanePoint, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.uMm, into: &buf)
+        FfiConverterDouble.write(value.vMm, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePlanePoint_lift(_ buf: RustBuffer) throws -> PlanePoint {
+    return try FfiConverterTypePlanePoint.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePlanePoint_lower(_ value: PlanePoint) -> RustBuffer {
+    return FfiConverterTypePlanePoint.lower(value)
+}
+
+
+/**
  * A 2D point, pixels.
  */
 public struct Point2: Equatable, Hashable {
@@ -3571,6 +3825,115 @@ public func FfiConverterTypePoint2_lift(_ buf: RustBuffer) throws -> Point2 {
 #endif
 public func FfiConverterTypePoint2_lower(_ value: Point2) -> RustBuffer {
     return FfiConverterTypePoint2.lower(value)
+}
+
+
+/**
+ * Where one face looks.
+ */
+public struct PointOfGaze: Equatable, Hashable {
+    /**
+     * The gaze ray's start: between the fitted face's eyes, camera frame, mm.
+     */
+    public var originMm: Vec3
+    /**
+     * The gaze direction (unit, camera frame), corrected by the tap calibration.
+     */
+    public var direction: Vec3
+    /**
+     * Eyes or head.
+     */
+    public var source: GazeSource
+    /**
+     * 0..1: how far the eyes are trusted (head yaw, agreement of the two eyes).
+     */
+    public var confidence: Double
+    /**
+     * Angle between the head's facing direction and the gaze, degrees.
+     */
+    public var headToGazeDeg: Double
+    /**
+     * The target looked at or the nearest one; `None` when no targets are set.
+     */
+    public var target: TargetHit?
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The gaze ray's start: between the fitted face's eyes, camera frame, mm.
+         */originMm: Vec3, 
+        /**
+         * The gaze direction (unit, camera frame), corrected by the tap calibration.
+         */direction: Vec3, 
+        /**
+         * Eyes or head.
+         */source: GazeSource, 
+        /**
+         * 0..1: how far the eyes are trusted (head yaw, agreement of the two eyes).
+         */confidence: Double, 
+        /**
+         * Angle between the head's facing direction and the gaze, degrees.
+         */headToGazeDeg: Double, 
+        /**
+         * The target looked at or the nearest one; `None` when no targets are set.
+         */target: TargetHit?) {
+        self.originMm = originMm
+        self.direction = direction
+        self.source = source
+        self.confidence = confidence
+        self.headToGazeDeg = headToGazeDeg
+        self.target = target
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension PointOfGaze: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypePointOfGaze: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> PointOfGaze {
+        return
+            try PointOfGaze(
+                originMm: FfiConverterTypeVec3.read(from: &buf), 
+                direction: FfiConverterTypeVec3.read(from: &buf), 
+                source: FfiConverterTypeGazeSource.read(from: &buf), 
+                confidence: FfiConverterDouble.read(from: &buf), 
+                headToGazeDeg: FfiConverterDouble.read(from: &buf), 
+                target: FfiConverterOptionTypeTargetHit.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: PointOfGaze, into buf: inout [UInt8]) {
+        FfiConverterTypeVec3.write(value.originMm, into: &buf)
+        FfiConverterTypeVec3.write(value.direction, into: &buf)
+        FfiConverterTypeGazeSource.write(value.source, into: &buf)
+        FfiConverterDouble.write(value.confidence, into: &buf)
+        FfiConverterDouble.write(value.headToGazeDeg, into: &buf)
+        FfiConverterOptionTypeTargetHit.write(value.target, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePointOfGaze_lift(_ buf: RustBuffer) throws -> PointOfGaze {
+    return try FfiConverterTypePointOfGaze.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePointOfGaze_lower(_ value: PointOfGaze) -> RustBuffer {
+    return FfiConverterTypePointOfGaze.lower(value)
 }
 
 
@@ -4009,6 +4372,10 @@ public struct StageTimings: Equatable, Hashable {
      */
     public var fitUs: UInt64
     /**
+     * Point of gaze.
+     */
+    public var gazeUs: UInt64
+    /**
      * The whole call.
      */
     public var totalUs: UInt64
@@ -4035,6 +4402,9 @@ public struct StageTimings: Equatable, Hashable {
          * 3D fit.
          */fitUs: UInt64, 
         /**
+         * Point of gaze.
+         */gazeUs: UInt64, 
+        /**
          * The whole call.
          */totalUs: UInt64) {
         self.convertUs = convertUs
@@ -4043,6 +4413,7 @@ public struct StageTimings: Equatable, Hashable {
         self.landmarksUs = landmarksUs
         self.flowUs = flowUs
         self.fitUs = fitUs
+        self.gazeUs = gazeUs
         self.totalUs = totalUs
     }
 
@@ -4068,6 +4439,7 @@ public struct FfiConverterTypeStageTimings: FfiConverterRustBuffer {
                 landmarksUs: FfiConverterUInt64.read(from: &buf), 
                 flowUs: FfiConverterUInt64.read(from: &buf), 
                 fitUs: FfiConverterUInt64.read(from: &buf), 
+                gazeUs: FfiConverterUInt64.read(from: &buf), 
                 totalUs: FfiConverterUInt64.read(from: &buf)
         )
     }
@@ -4079,6 +4451,7 @@ public struct FfiConverterTypeStageTimings: FfiConverterRustBuffer {
         FfiConverterUInt64.write(value.landmarksUs, into: &buf)
         FfiConverterUInt64.write(value.flowUs, into: &buf)
         FfiConverterUInt64.write(value.fitUs, into: &buf)
+        FfiConverterUInt64.write(value.gazeUs, into: &buf)
         FfiConverterUInt64.write(value.totalUs, into: &buf)
     }
 }
@@ -4096,6 +4469,107 @@ public func FfiConverterTypeStageTimings_lift(_ buf: RustBuffer) throws -> Stage
 #endif
 public func FfiConverterTypeStageTimings_lower(_ value: StageTimings) -> RustBuffer {
     return FfiConverterTypeStageTimings.lower(value)
+}
+
+
+/**
+ * Where the gaze lands among the targets.
+ */
+public struct TargetHit: Equatable, Hashable {
+    /**
+     * The target looked at; `None` when the gaze misses every target.
+     */
+    public var id: String?
+    /**
+     * Whether a target is hit.
+     */
+    public var hit: Bool
+    /**
+     * On the hit target; on a miss, where the gaze meets the nearest target's plane (its
+     * centroid when it never meets it in front of the eyes).
+     */
+    public var point: PlanePoint
+    /**
+     * The target hit, or the nearest one.
+     */
+    public var nearest: String
+    /**
+     * 0 on a hit, else how far the gaze passes from the nearest target, mm.
+     */
+    public var distanceMm: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The target looked at; `None` when the gaze misses every target.
+         */id: String?, 
+        /**
+         * Whether a target is hit.
+         */hit: Bool, 
+        /**
+         * On the hit target; on a miss, where the gaze meets the nearest target's plane (its
+         * centroid when it never meets it in front of the eyes).
+         */point: PlanePoint, 
+        /**
+         * The target hit, or the nearest one.
+         */nearest: String, 
+        /**
+         * 0 on a hit, else how far the gaze passes from the nearest target, mm.
+         */distanceMm: Double) {
+        self.id = id
+        self.hit = hit
+        self.point = point
+        self.nearest = nearest
+        self.distanceMm = distanceMm
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension TargetHit: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeTargetHit: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> TargetHit {
+        return
+            try TargetHit(
+                id: FfiConverterOptionString.read(from: &buf), 
+                hit: FfiConverterBool.read(from: &buf), 
+                point: FfiConverterTypePlanePoint.read(from: &buf), 
+                nearest: FfiConverterString.read(from: &buf), 
+                distanceMm: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: TargetHit, into buf: inout [UInt8]) {
+        FfiConverterOptionString.write(value.id, into: &buf)
+        FfiConverterBool.write(value.hit, into: &buf)
+        FfiConverterTypePlanePoint.write(value.point, into: &buf)
+        FfiConverterString.write(value.nearest, into: &buf)
+        FfiConverterDouble.write(value.distanceMm, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeTargetHit_lift(_ buf: RustBuffer) throws -> TargetHit {
+    return try FfiConverterTypeTargetHit.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeTargetHit_lower(_ value: TargetHit) -> RustBuffer {
+    return FfiConverterTypeTargetHit.lower(value)
 }
 
 
@@ -4154,6 +4628,10 @@ public struct TrackerConfig: Equatable, Hashable {
      */
     public var flowFilter: Bool
     /**
+     * Temporal smoothing of the gaze direction that leaves saccades sharp (default off).
+     */
+    public var gazeFilter: Bool
+    /**
      * Frames over which a new track's shape units are estimated before being held (1..=1000).
      */
     public var shapeFrames: UInt32
@@ -4209,6 +4687,9 @@ public struct TrackerConfig: Equatable, Hashable {
          * Optical-flow landmark filter on or off.
          */flowFilter: Bool, 
         /**
+         * Temporal smoothing of the gaze direction that leaves saccades sharp (default off).
+         */gazeFilter: Bool, 
+        /**
          * Frames over which a new track's shape units are estimated before being held (1..=1000).
          */shapeFrames: UInt32, 
         /**
@@ -4227,6 +4708,7 @@ public struct TrackerConfig: Equatable, Hashable {
         self.minMatchScore = minMatchScore
         self.searchMargin = searchMargin
         self.flowFilter = flowFilter
+        self.gazeFilter = gazeFilter
         self.shapeFrames = shapeFrames
         self.mirrorAverage = mirrorAverage
     }
@@ -4257,6 +4739,7 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
                 minMatchScore: FfiConverterFloat.read(from: &buf), 
                 searchMargin: FfiConverterFloat.read(from: &buf), 
                 flowFilter: FfiConverterBool.read(from: &buf), 
+                gazeFilter: FfiConverterBool.read(from: &buf), 
                 shapeFrames: FfiConverterUInt32.read(from: &buf), 
                 mirrorAverage: FfiConverterOptionBool.read(from: &buf)
         )
@@ -4273,6 +4756,7 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
         FfiConverterFloat.write(value.minMatchScore, into: &buf)
         FfiConverterFloat.write(value.searchMargin, into: &buf)
         FfiConverterBool.write(value.flowFilter, into: &buf)
+        FfiConverterBool.write(value.gazeFilter, into: &buf)
         FfiConverterUInt32.write(value.shapeFrames, into: &buf)
         FfiConverterOptionBool.write(value.mirrorAverage, into: &buf)
     }
@@ -4893,6 +5377,82 @@ public func FfiConverterTypeFitMethod_lower(_ value: FitMethod) -> RustBuffer {
 
 
 /**
+ * Where a point of gaze came from.
+ */
+
+public enum GazeSource: Equatable, Hashable {
+    
+    /**
+     * The eyes.
+     */
+    case eyes
+    /**
+     * The head's facing direction (the eyes' estimates were not trusted: large head rotation or
+     * eyes that disagree).
+     */
+    case head
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension GazeSource: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeGazeSource: FfiConverterRustBuffer {
+    typealias SwiftType = GazeSource
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> GazeSource {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .eyes
+        
+        case 2: return .head
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: GazeSource, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .eyes:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .head:
+            writeInt(&buf, Int32(2))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGazeSource_lift(_ buf: RustBuffer) throws -> GazeSource {
+    return try FfiConverterTypeGazeSource.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGazeSource_lower(_ value: GazeSource) -> RustBuffer {
+    return FfiConverterTypeGazeSource.lower(value)
+}
+
+
+
+/**
  * Errors surfaced to Kotlin (`MonotrackException`) and Swift (`MonotrackError`). Few variants on
  * purpose: apps branch on the kind, the message says what exactly was wrong.
  */
@@ -5252,6 +5812,30 @@ fileprivate struct FfiConverterOptionBool: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionString: FfiConverterRustBuffer {
+    typealias SwiftType = String?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterString.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterString.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterOptionTypeCameraIntrinsics: FfiConverterRustBuffer {
     typealias SwiftType = CameraIntrinsics?
 
@@ -5268,6 +5852,30 @@ fileprivate struct FfiConverterOptionTypeCameraIntrinsics: FfiConverterRustBuffe
         switch try readInt(&buf) as Int8 {
         case 0: return nil
         case 1: return try FfiConverterTypeCameraIntrinsics.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypeTargetHit: FfiConverterRustBuffer {
+    typealias SwiftType = TargetHit?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeTargetHit.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeTargetHit.read(from: &buf)
         default: throw UniffiInternalError.unexpectedOptionalTag
         }
     }
@@ -5442,6 +6050,31 @@ fileprivate struct FfiConverterSequenceTypeFace: FfiConverterRustBuffer {
         seq.reserveCapacity(Int(len))
         for _ in 0 ..< len {
             seq.append(try FfiConverterTypeFace.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeGazeTarget: FfiConverterRustBuffer {
+    typealias SwiftType = [GazeTarget]
+
+    public static func write(_ value: [GazeTarget], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeGazeTarget.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [GazeTarget] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [GazeTarget]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeGazeTarget.read(from: &buf))
         }
         return seq
     }
@@ -5643,6 +6276,43 @@ public func defaultBodyTrackerConfig() -> BodyTrackerConfig  {
 })
 }
 /**
+ * Targets from the CLI's `T.json` (`{"targets": [{"id", "corners_mm": [[x, y, z], ...]}]}`,
+ * `CONTRACT.md`).
+ *
+ * # Errors
+ * `InvalidConfig` for malformed JSON, no targets, a repeated id or a bad target.
+ */
+public func gazeTargetsFromJson(json: String)throws  -> [GazeTarget]  {
+    return try  FfiConverterSequenceTypeGazeTarget.lift(try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_func_gaze_targets_from_json(
+        FfiConverterString.lower(json),uniffiCallStatus
+    )
+})
+}
+/**
+ * A device's own screen as a target: `width_mm` × `height_mm` as the user sees it, the camera in
+ * its plane `camera_right_mm` right of and `camera_down_mm` below its top-left corner as the user
+ * sees it (negative `camera_down_mm` for a camera above the screen), for a front camera whose
+ * frames are mirrored (the selfie view). Points on it are the user's screen coordinates in mm
+ * from the top-left.
+ *
+ * # Errors
+ * `InvalidConfig` for a size that is not finite and positive or a non-finite offset.
+ */
+public func screenTarget(id: String, widthMm: Double, heightMm: Double, cameraRightMm: Double, cameraDownMm: Double)throws  -> GazeTarget  {
+    return try  FfiConverterTypeGazeTarget_lift(try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_func_screen_target(
+        FfiConverterString.lower(id),
+        FfiConverterDouble.lower(widthMm),
+        FfiConverterDouble.lower(heightMm),
+        FfiConverterDouble.lower(cameraRightMm),
+        FfiConverterDouble.lower(cameraDownMm),uniffiCallStatus
+    )
+})
+}
+/**
  * The default settings: video mode, one face, default intrinsics, filter on.
  */
 public func defaultTrackerConfig() -> TrackerConfig  {
@@ -5740,6 +6410,12 @@ private let initializationResult: InitializationResult = {
     if (uniffi_monotrack_ffi_checksum_func_default_body_tracker_config() != 21044) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_monotrack_ffi_checksum_func_gaze_targets_from_json() != 3781) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_func_screen_target() != 65533) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_monotrack_ffi_checksum_func_default_tracker_config() != 13976) {
         return InitializationResult.apiChecksumMismatch
     }
@@ -5764,6 +6440,9 @@ private let initializationResult: InitializationResult = {
     if (uniffi_monotrack_ffi_checksum_method_livefacetracker_process_async() != 1800) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_monotrack_ffi_checksum_method_livefacetracker_set_gaze_targets() != 36233) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_monotrack_ffi_checksum_method_livefacetracker_shutdown() != 15644) {
         return InitializationResult.apiChecksumMismatch
     }
@@ -5771,6 +6450,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_error() != 22839) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_facetracker_add_calibration_point() != 22823) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_method_facetracker_config() != 53659) {
@@ -5783,6 +6465,12 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_method_facetracker_reset() != 56240) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_facetracker_reset_gaze_calibration() != 58850) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_facetracker_set_gaze_targets() != 33230) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_constructor_bodytracker_new() != 21048) {

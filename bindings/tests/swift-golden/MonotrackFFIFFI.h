@@ -317,6 +317,11 @@ RustBuffer uniffi_monotrack_ffi_fn_method_livefacetracker_config(uint64_t ptr, R
 int8_t uniffi_monotrack_ffi_fn_method_livefacetracker_process_async(uint64_t ptr, ForeignBytes bytes, RustBuffer desc, int64_t timestamp_ns, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVEFACETRACKER_SET_GAZE_TARGETS
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVEFACETRACKER_SET_GAZE_TARGETS
+void uniffi_monotrack_ffi_fn_method_livefacetracker_set_gaze_targets(uint64_t ptr, RustBuffer targets, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVEFACETRACKER_SHUTDOWN
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_LIVEFACETRACKER_SHUTDOWN
 void uniffi_monotrack_ffi_fn_method_livefacetracker_shutdown(uint64_t ptr, RustCallStatus *_Nonnull out_status
@@ -362,6 +367,11 @@ void uniffi_monotrack_ffi_fn_free_facetracker(uint64_t handle, RustCallStatus *_
 uint64_t uniffi_monotrack_ffi_fn_constructor_facetracker_new(RustBuffer config, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_FACETRACKER_ADD_CALIBRATION_POINT
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_FACETRACKER_ADD_CALIBRATION_POINT
+uint32_t uniffi_monotrack_ffi_fn_method_facetracker_add_calibration_point(uint64_t ptr, RustBuffer target_id, RustBuffer point, int64_t timestamp_ns, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_FACETRACKER_CONFIG
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_FACETRACKER_CONFIG
 RustBuffer uniffi_monotrack_ffi_fn_method_facetracker_config(uint64_t ptr, RustCallStatus *_Nonnull out_status
@@ -380,6 +390,16 @@ RustBuffer uniffi_monotrack_ffi_fn_method_facetracker_process_image(uint64_t ptr
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_FACETRACKER_RESET
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_FACETRACKER_RESET
 void uniffi_monotrack_ffi_fn_method_facetracker_reset(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_FACETRACKER_RESET_GAZE_CALIBRATION
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_FACETRACKER_RESET_GAZE_CALIBRATION
+void uniffi_monotrack_ffi_fn_method_facetracker_reset_gaze_calibration(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_FACETRACKER_SET_GAZE_TARGETS
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_FACETRACKER_SET_GAZE_TARGETS
+void uniffi_monotrack_ffi_fn_method_facetracker_set_gaze_targets(uint64_t ptr, RustBuffer targets, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_DEFAULT_CAMERA
@@ -412,6 +432,16 @@ RustBuffer uniffi_monotrack_ffi_fn_func_calibrate_floor_camera(RustBuffer corner
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_DEFAULT_BODY_TRACKER_CONFIG
 RustBuffer uniffi_monotrack_ffi_fn_func_default_body_tracker_config(RustCallStatus *_Nonnull out_status
     
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_GAZE_TARGETS_FROM_JSON
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_GAZE_TARGETS_FROM_JSON
+RustBuffer uniffi_monotrack_ffi_fn_func_gaze_targets_from_json(RustBuffer json, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_SCREEN_TARGET
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_SCREEN_TARGET
+RustBuffer uniffi_monotrack_ffi_fn_func_screen_target(RustBuffer id, double width_mm, double height_mm, double camera_right_mm, double camera_down_mm, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_DEFAULT_TRACKER_CONFIG
@@ -732,6 +762,18 @@ uint16_t uniffi_monotrack_ffi_checksum_func_default_body_tracker_config(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_GAZE_TARGETS_FROM_JSON
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_GAZE_TARGETS_FROM_JSON
+uint16_t uniffi_monotrack_ffi_checksum_func_gaze_targets_from_json(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_SCREEN_TARGET
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_SCREEN_TARGET
+uint16_t uniffi_monotrack_ffi_checksum_func_screen_target(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_DEFAULT_TRACKER_CONFIG
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_DEFAULT_TRACKER_CONFIG
 uint16_t uniffi_monotrack_ffi_checksum_func_default_tracker_config(void
@@ -780,6 +822,12 @@ uint16_t uniffi_monotrack_ffi_checksum_method_livefacetracker_process_async(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVEFACETRACKER_SET_GAZE_TARGETS
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVEFACETRACKER_SET_GAZE_TARGETS
+uint16_t uniffi_monotrack_ffi_checksum_method_livefacetracker_set_gaze_targets(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVEFACETRACKER_SHUTDOWN
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVEFACETRACKER_SHUTDOWN
 uint16_t uniffi_monotrack_ffi_checksum_method_livefacetracker_shutdown(void
@@ -795,6 +843,12 @@ uint16_t uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_result(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVESTREAMLISTENER_ON_ERROR
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_LIVESTREAMLISTENER_ON_ERROR
 uint16_t uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_error(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_ADD_CALIBRATION_POINT
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_ADD_CALIBRATION_POINT
+uint16_t uniffi_monotrack_ffi_checksum_method_facetracker_add_calibration_point(void
     
 );
 #endif
@@ -819,6 +873,18 @@ uint16_t uniffi_monotrack_ffi_checksum_method_facetracker_process_image(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_RESET
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_RESET
 uint16_t uniffi_monotrack_ffi_checksum_method_facetracker_reset(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_RESET_GAZE_CALIBRATION
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_RESET_GAZE_CALIBRATION
+uint16_t uniffi_monotrack_ffi_checksum_method_facetracker_reset_gaze_calibration(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_SET_GAZE_TARGETS
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_SET_GAZE_TARGETS
+uint16_t uniffi_monotrack_ffi_checksum_method_facetracker_set_gaze_targets(void
     
 );
 #endif

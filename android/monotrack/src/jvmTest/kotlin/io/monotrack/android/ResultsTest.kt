@@ -12,6 +12,8 @@ import io.monotrack.Point2
 import io.monotrack.Rect
 import io.monotrack.StageStat
 import io.monotrack.Vec3
+import io.monotrack.PointOfGaze
+import io.monotrack.GazeSource
 import io.monotrack.ShapeUnits
 import io.monotrack.ActionUnits
 import org.junit.jupiter.api.Assertions.assertEquals
@@ -41,6 +43,7 @@ private fun face(landmarks: List<Point2>, gaze: Gaze) = Face(
     shapeUnits = ShapeUnits(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
     actionUnits = ActionUnits(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
     fitRmsPx = 0.5,
+    pointOfGaze = PointOfGaze(Vec3(0.0, 0.0, 500.0), Vec3(0.0, 0.0, -1.0), GazeSource.EYES, 1.0, 0.0, null),
     verticesMm = emptyList(),
 )
 
