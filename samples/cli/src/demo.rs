@@ -76,7 +76,7 @@ pub fn run(frames: usize, overlay: Option<&Path>, out: Option<&Path>) -> Result<
             detected.push(r.timings);
         }
         if let Some(s) = sink.as_mut() {
-            let mut line = frame_json(r);
+            let mut line = frame_json(r, None);
             line["frame"] = serde_json::json!(t);
             s.write(&line)?;
         }

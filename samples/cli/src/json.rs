@@ -2,6 +2,7 @@
 
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::fit::FaceFit;
+use monotrack_core::gaze::{PointOfGaze, Target, targets_from_json};
 use monotrack_core::model::{ANIM_UNIT_NAMES, SHAPE_UNIT_NAMES};
 use serde::Deserialize;
 use serde_json::{Map, Value, json};
@@ -30,6 +31,41 @@ pub fn intrinsics(
 fn round(v: f64, digits: i32) -> f64 {
     let p = 10f64.powi(digits);
     (v * p).round() / p
+}
+
+/// Reads the targets file of `--targets` (`T.json`, CONTRACT.md).
+///
+/// # Errors
+/// A message naming the file when it cannot be read or is not a valid targets file.
+pub fn load_targets(path: &std::path::Path) -> Result<Vec<Target>, String> {
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    targets_from_json(&bytes).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// With `--targets`: adds `origin_mm` to the FACE's `gaze` object and its `target` object
+/// (CONTRACT.md, "Options shared by face commands").
+pub fn put_point_of_gaze(face: &mut Map<String, Value>, g: &PointOfGaze, targets: &[Target]) {
+    let o = &g.ray.origin;
+    if let Some(Value::Object(gaze)) = face.get_mut("gaze") {
+        gaze.insert(
+            "origin_mm".into(),
+            json!([round(o.x, 2), round(o.y, 2), round(o.z, 2)]),
+        );
+    }
+    let Some(h) = g.hit else {
+        return;
+    };
+    let name = |i: usize| targets.get(i).map(|t| t.id.clone()).unwrap_or_default();
+    face.insert(
+        "target".into(),
+        json!({
+            "id": h.target.map(name),
+            "hit": h.target.is_some(),
+            "point_mm": [round(h.point_mm[0], 2), round(h.point_mm[1], 2)],
+            "nearest": name(h.nearest),
+            "distance_mm": round(h.distance_mm, 2),
+        }),
+    );
 }
 
 /// Adds `pose`, `shape_units`, `action_units`, `fit_rms_px` (and `fit_report`) to a FACE object.

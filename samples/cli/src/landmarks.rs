@@ -7,10 +7,11 @@
 //! point, `track::SMALL_FACES_MIN_FACE_PX`). One output line per input line; a bad line yields
 //! `{"line": N, "error": "..."}` in its place, a message on stderr, and exit status 1 at the end.
 
-use crate::json::{CameraJson, intrinsics, put_fit};
+use crate::json::{CameraJson, intrinsics, put_fit, put_point_of_gaze};
 use crate::{LineSink, read_lines};
 use monotrack_core::detect::DetectorConfig;
 use monotrack_core::fit::{Msbp, MsbpConfig};
+use monotrack_core::gaze::{Target, point_of_gaze};
 use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::{BROW_GESTURES, FaceLandmarks, M3, MOUTH_GESTURES, N_POINTS};
 use monotrack_core::track::{
@@ -167,7 +168,12 @@ fn face_json(rect: &Rect, score: f32, lm: &FaceLandmarks) -> Map<String, Value> 
     face
 }
 
-fn landmarks_line(text: &str, base: &Path, p: &mut Pipeline) -> Result<Value, String> {
+fn landmarks_line(
+    text: &str,
+    base: &Path,
+    p: &mut Pipeline,
+    targets: Option<&[Target]>,
+) -> Result<Value, String> {
     let t_start = Instant::now();
     let line: LineIn = serde_json::from_str(text).map_err(|e| format!("malformed JSON: {e}"))?;
     let path = {
@@ -220,6 +226,18 @@ fn landmarks_line(text: &str, base: &Path, p: &mut Pipeline) -> Result<Value, St
         // Given boxes have no detection score: the level-1 face confidence stands in for it.
         let mut face = face_json(rect, det_score.unwrap_or(p.lm.face_prob), &p.lm);
         put_fit(&mut face, &fit);
+        if let Some(t) = targets {
+            // A still: no calibration, no filter.
+            let g = point_of_gaze(
+                &p.lm,
+                &fit,
+                &Default::default(),
+                &Default::default(),
+                None,
+                t,
+            );
+            put_point_of_gaze(&mut face, &g, t);
+        }
         faces.push(Value::Object(face));
     }
     Ok(json!({
@@ -237,7 +255,9 @@ pub fn run(
     out: Option<&Path>,
     mirror_average: bool,
     small_faces: bool,
+    targets: Option<&Path>,
 ) -> Result<bool, String> {
+    let targets = targets.map(crate::json::load_targets).transpose()?;
     let lines = read_lines(input)?;
     let base = input
         .parent()
@@ -257,7 +277,7 @@ pub fn run(
     p.m3.set_mirror_average(mirror_average);
     let mut ok = true;
     for (n, text) in lines {
-        let v = landmarks_line(&text, &base, &mut p).unwrap_or_else(|e| {
+        let v = landmarks_line(&text, &base, &mut p, targets.as_deref()).unwrap_or_else(|e| {
             eprintln!("{}:{n}: {e}", input.display());
             ok = false;
             json!({"line": n, "error": e})

@@ -61,6 +61,9 @@ enum Command {
         /// core/models/MODEL_CARD.md) instead of the SDK's default (min face 24 px, score 0.4).
         #[arg(long)]
         small_faces: bool,
+        /// Gaze targets (CONTRACT.md `T.json`): each face gets its point of gaze.
+        #[arg(long)]
+        targets: Option<PathBuf>,
     },
     /// Detect faces in images with the SDK's detector: {"image": path} lines in, boxes + scores out.
     Detect {
@@ -97,6 +100,9 @@ enum Command {
         /// Tracker settings as a JSON file (the core's `TrackerConfig`; missing fields keep defaults).
         #[arg(long)]
         config: Option<PathBuf>,
+        /// Gaze targets (CONTRACT.md `T.json`): each face gets its point of gaze.
+        #[arg(long)]
+        targets: Option<PathBuf>,
     },
     /// The whole pipeline on a clip made from the committed sample image: overlays + timing table.
     Demo {
@@ -200,6 +206,7 @@ fn run_track(
     out: Option<&Path>,
     overlay: Option<&Path>,
     config: Option<&Path>,
+    targets: Option<&Path>,
 ) -> Result<bool, String> {
     let cfg: monotrack_core::TrackerConfig = match config {
         Some(p) => {
@@ -211,6 +218,9 @@ fn run_track(
     };
     let mut tracker =
         monotrack_core::track::Tracker::with_default_models(cfg).map_err(|e| e.to_string())?;
+    if let Some(p) = targets {
+        tracker.set_gaze_targets(json::load_targets(p)?);
+    }
     track::run(&mut tracker, input, out, overlay)
 }
 
@@ -224,7 +234,14 @@ fn main() -> ExitCode {
             single_pass,
             mirror_average: _,
             small_faces,
-        } => landmarks::run(&input, out.as_deref(), !single_pass, small_faces),
+            targets,
+        } => landmarks::run(
+            &input,
+            out.as_deref(),
+            !single_pass,
+            small_faces,
+            targets.as_deref(),
+        ),
         Command::Detect {
             input,
             out,
@@ -253,11 +270,13 @@ fn main() -> ExitCode {
             out,
             overlay,
             config,
+            targets,
         } => run_track(
             &input,
             out.as_deref(),
             overlay.as_deref(),
             config.as_deref(),
+            targets.as_deref(),
         ),
         Command::Demo {
             overlay,

@@ -6,8 +6,9 @@
 //! estimator.
 
 use crate::LineSink;
-use crate::json::put_fit;
+use crate::json::{put_fit, put_point_of_gaze};
 use monotrack_core::camera::Intrinsics;
+use monotrack_core::gaze::Target;
 use monotrack_core::image::GrayImage;
 use monotrack_core::landmarks::{BROW_GESTURES, MOUTH_GESTURES};
 use monotrack_core::model::{FaceModel, N_LANDMARKS};
@@ -411,7 +412,7 @@ fn round(v: f64, digits: i32) -> f64 {
 }
 
 /// One CONTRACT FACE object (plus `id` and `state`) for a tracked face.
-pub fn face_json(face: &TrackedFace) -> Value {
+pub fn face_json(face: &TrackedFace, targets: Option<&[Target]>) -> Value {
     let lm = &face.landmarks;
     let r = face.rect;
     let mut m = Map::new();
@@ -467,13 +468,17 @@ pub fn face_json(face: &TrackedFace) -> Value {
         }),
     );
     put_fit(&mut m, &face.fit);
+    if let Some(t) = targets {
+        put_point_of_gaze(&mut m, &face.gaze, t);
+    }
     m.insert("shape_held".into(), json!(face.shape_held));
     m.insert("flow_points".into(), json!(face.flow_points));
     Value::Object(m)
 }
 
 /// The CONTRACT `track` output line of one frame.
-pub fn frame_json(result: &TrackingResult) -> Value {
+/// `targets`: those of `--targets`, whose point of gaze each face then carries.
+pub fn frame_json(result: &TrackingResult, targets: Option<&[Target]>) -> Value {
     let t = &result.timings;
     json!({
         "frame": result.frame_index,
@@ -483,7 +488,7 @@ pub fn frame_json(result: &TrackingResult) -> Value {
             FrameState::Tracked => "tracked",
             FrameState::Lost => "lost",
         },
-        "faces": result.faces.iter().map(face_json).collect::<Vec<_>>(),
+        "faces": result.faces.iter().map(|f| face_json(f, targets)).collect::<Vec<_>>(),
         "timings_us": {
             "image": t.image_us, "region": t.region_us, "detect": t.detect_us,
             "landmarks": t.landmarks_us, "flow": t.flow_us, "fit": t.fit_us, "total": t.total_us,
@@ -687,9 +692,11 @@ pub fn run<D: RegionDetector, L: LandmarkEstimator>(
     let mut all_ok = true;
     let mut done = 0;
     while let Some((i, ts)) = source.next_frame_with(&mut frame, overlay.map(|_| &mut rgb))? {
-        match tracker.process(&frame, ts) {
-            Ok(result) => {
-                let mut line = frame_json(result);
+        match tracker.process(&frame, ts).map(|_| ()) {
+            Ok(()) => {
+                // Point of gaze only with --targets (CONTRACT.md).
+                let targets = Some(tracker.gaze_targets()).filter(|t| !t.is_empty());
+                let mut line = frame_json(tracker.result(), targets);
                 // The tracker counts calls; the CLI's frame number is the input's.
                 line["frame"] = json!(i);
                 sink.write(&line)?;
@@ -780,7 +787,7 @@ mod tests {
     fn frame_json_follows_the_contract() {
         let cam = Intrinsics::default_for(640, 480).unwrap();
         let r = result(&cam);
-        let v = frame_json(&r);
+        let v = frame_json(&r, None);
         assert_eq!(v["frame"], 2);
         assert_eq!(v["timestamp_ms"], 66.667);
         assert_eq!(v["state"], "tracked");
@@ -807,10 +814,10 @@ mod tests {
         assert!(f["fit_rms_px"].as_f64().unwrap() < 0.5);
         let mut lost = r.clone();
         lost.faces.clear();
-        assert_eq!(frame_json(&lost)["state"], "lost");
+        assert_eq!(frame_json(&lost, None)["state"], "lost");
         lost.faces = r.faces.clone();
         lost.faces[0].state = FaceState::Detected;
-        assert_eq!(frame_json(&lost)["state"], "detected");
+        assert_eq!(frame_json(&lost, None)["state"], "detected");
     }
 
     #[test]

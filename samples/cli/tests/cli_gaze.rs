@@ -1,0 +1,100 @@
+//! `--targets T.json` on `landmarks` and `track`: each face's point of gaze (CONTRACT.md, "Options
+//! shared by face commands"), on the committed sample face.
+
+use serde_json::Value;
+use std::path::PathBuf;
+use std::process::Command;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("monotrack-gaze-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A phone screen below the camera (as `screen_target` makes it) and a far wall behind the
+/// subject: the wall can never be hit.
+const TARGETS: &str = r#"{"targets": [
+  {"id": "phone", "corners_mm": [[-35, 8, 0], [35, 8, 0], [35, 158, 0], [-35, 158, 0]]},
+  {"id": "wall", "corners_mm": [[-500, -500, 3000], [500, -500, 3000], [500, 500, 3000]]}
+]}"#;
+
+fn check_face(f: &Value) {
+    let origin = f["gaze"]["origin_mm"].as_array().unwrap();
+    assert_eq!(origin.len(), 3);
+    assert!((200.0..3000.0).contains(&origin[2].as_f64().unwrap()), "{origin:?}");
+    let t = &f["target"];
+    let keys: Vec<&str> = t.as_object().unwrap().keys().map(|k| k.as_str()).collect();
+    assert_eq!(keys, ["distance_mm", "hit", "id", "nearest", "point_mm"]);
+    assert_eq!(t["point_mm"].as_array().unwrap().len(), 2);
+    // The sample face looks at about the camera: the phone below it is nearest, never the wall.
+    assert_eq!(t["nearest"], "phone");
+    assert_eq!(t["hit"].as_bool().unwrap(), t["id"] == "phone");
+    assert!(t["distance_mm"].as_f64().unwrap() >= 0.0);
+}
+
+#[test]
+fn landmarks_and_track_add_the_point_of_gaze() {
+    let dir = scratch("cli");
+    let targets = dir.join("targets.json");
+    std::fs::write(&targets, TARGETS).unwrap();
+    let image = repo().join("samples/data/astronaut.jpg");
+    let input = dir.join("in.jsonl");
+    std::fs::write(&input, format!("{{\"image\": {:?}}}\n", image.display().to_string())).unwrap();
+    let exe = env!("CARGO_BIN_EXE_monotrack");
+    let out = Command::new(exe)
+        .arg("landmarks")
+        .arg(&input)
+        .arg("--targets")
+        .arg(&targets)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    check_face(&v["faces"][0]);
+
+    // Without --targets nothing is added.
+    let plain = Command::new(exe).arg("landmarks").arg(&input).output().unwrap();
+    let v: Value = serde_json::from_slice(&plain.stdout).unwrap();
+    assert!(v["faces"][0].get("target").is_none());
+    assert!(v["faces"][0]["gaze"].get("origin_mm").is_none());
+
+    // Track over a two-frame directory.
+    let frames = dir.join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    for i in 0..2 {
+        std::fs::copy(&image, frames.join(format!("f{i}.jpg"))).unwrap();
+    }
+    let out = Command::new(exe)
+        .arg("track")
+        .arg(&frames)
+        .arg("--targets")
+        .arg(&targets)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let lines: Vec<Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 2);
+    for l in &lines {
+        check_face(&l["faces"][0]);
+    }
+
+    // A bad targets file is a clear error, not a crash.
+    std::fs::write(&targets, r#"{"targets": [{"id": "x", "corners_mm": [[0,0,0],[1,0,0]]}]}"#).unwrap();
+    let out = Command::new(exe)
+        .arg("landmarks")
+        .arg(&input)
+        .arg("--targets")
+        .arg(&targets)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("3 or more corners"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
