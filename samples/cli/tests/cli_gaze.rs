@@ -25,7 +25,10 @@ const TARGETS: &str = r#"{"targets": [
 fn check_face(f: &Value) {
     let origin = f["gaze"]["origin_mm"].as_array().unwrap();
     assert_eq!(origin.len(), 3);
-    assert!((200.0..3000.0).contains(&origin[2].as_f64().unwrap()), "{origin:?}");
+    assert!(
+        (200.0..3000.0).contains(&origin[2].as_f64().unwrap()),
+        "{origin:?}"
+    );
     let t = &f["target"];
     let keys: Vec<&str> = t.as_object().unwrap().keys().map(|k| k.as_str()).collect();
     assert_eq!(keys, ["distance_mm", "hit", "id", "nearest", "point_mm"]);
@@ -43,7 +46,11 @@ fn landmarks_and_track_add_the_point_of_gaze() {
     std::fs::write(&targets, TARGETS).unwrap();
     let image = repo().join("samples/data/astronaut.jpg");
     let input = dir.join("in.jsonl");
-    std::fs::write(&input, format!("{{\"image\": {:?}}}\n", image.display().to_string())).unwrap();
+    std::fs::write(
+        &input,
+        format!("{{\"image\": {:?}}}\n", image.display().to_string()),
+    )
+    .unwrap();
     let exe = env!("CARGO_BIN_EXE_monotrack");
     let out = Command::new(exe)
         .arg("landmarks")
@@ -52,12 +59,20 @@ fn landmarks_and_track_add_the_point_of_gaze() {
         .arg(&targets)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: Value = serde_json::from_slice(&out.stdout).unwrap();
     check_face(&v["faces"][0]);
 
     // Without --targets nothing is added.
-    let plain = Command::new(exe).arg("landmarks").arg(&input).output().unwrap();
+    let plain = Command::new(exe)
+        .arg("landmarks")
+        .arg(&input)
+        .output()
+        .unwrap();
     let v: Value = serde_json::from_slice(&plain.stdout).unwrap();
     assert!(v["faces"][0].get("target").is_none());
     assert!(v["faces"][0]["gaze"].get("origin_mm").is_none());
@@ -75,7 +90,11 @@ fn landmarks_and_track_add_the_point_of_gaze() {
         .arg(&targets)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let lines: Vec<Value> = String::from_utf8_lossy(&out.stdout)
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
@@ -86,7 +105,11 @@ fn landmarks_and_track_add_the_point_of_gaze() {
     }
 
     // A bad targets file is a clear error, not a crash.
-    std::fs::write(&targets, r#"{"targets": [{"id": "x", "corners_mm": [[0,0,0],[1,0,0]]}]}"#).unwrap();
+    std::fs::write(
+        &targets,
+        r#"{"targets": [{"id": "x", "corners_mm": [[0,0,0],[1,0,0]]}]}"#,
+    )
+    .unwrap();
     let out = Command::new(exe)
         .arg("landmarks")
         .arg(&input)
