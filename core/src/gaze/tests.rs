@@ -185,33 +185,36 @@ fn tap_curve(counts: &[usize], noise_deg: f64, seed: u64) -> Vec<f64> {
         })
     };
     let mut out = Vec::new();
+    // Each count: 10 users' calibrations (different taps), 100 test looks each.
+    let (users, trials) = (10, 100);
     for &n in counts {
-        let mut cal = GazeCalibration::default();
-        for _ in 0..n {
-            let uv = [70.0 * rng.uniform(), 150.0 * rng.uniform()];
-            let rays = look(&mut rng, uv);
-            cal.add_tap(&rays, &screen.point_at(uv)).unwrap();
-        }
         let mut err = 0.0;
-        let trials = 400;
-        for _ in 0..trials {
-            let uv = [70.0 * rng.uniform(), 150.0 * rng.uniform()];
-            let raw = look(&mut rng, uv);
-            let d =
-                (cal.correct(0, &raw[0].direction) + cal.correct(1, &raw[1].direction)).normalize();
-            let r = GazeRay {
-                origin: (eyes[0] + eyes[1]) / 2.0,
-                direction: d,
-            };
-            let h = locate(std::slice::from_ref(&screen), &r).unwrap();
-            let q = if h.range_mm.is_finite() {
-                h.point_mm
-            } else {
-                [f64::INFINITY; 2]
-            };
-            err += ((q[0] - uv[0]).powi(2) + (q[1] - uv[1]).powi(2)).sqrt();
+        for _ in 0..users {
+            let mut cal = GazeCalibration::default();
+            for _ in 0..n {
+                let uv = [70.0 * rng.uniform(), 150.0 * rng.uniform()];
+                let rays = look(&mut rng, uv);
+                cal.add_tap(&rays, &screen.point_at(uv)).unwrap();
+            }
+            for _ in 0..trials {
+                let uv = [70.0 * rng.uniform(), 150.0 * rng.uniform()];
+                let raw = look(&mut rng, uv);
+                let d = (cal.correct(0, &raw[0].direction) + cal.correct(1, &raw[1].direction))
+                    .normalize();
+                let r = GazeRay {
+                    origin: (eyes[0] + eyes[1]) / 2.0,
+                    direction: d,
+                };
+                let h = locate(std::slice::from_ref(&screen), &r).unwrap();
+                let q = if h.range_mm.is_finite() {
+                    h.point_mm
+                } else {
+                    [f64::INFINITY; 2]
+                };
+                err += ((q[0] - uv[0]).powi(2) + (q[1] - uv[1]).powi(2)).sqrt();
+            }
         }
-        out.push(err / f64::from(trials));
+        out.push(err / f64::from(users * trials));
     }
     out
 }
