@@ -19,6 +19,11 @@
   ahead), and the blendshape teacher M3 learnt from (how far the two teachers disagree).
 - Per |yaw| bin, and split by the SDK's gaze confidence (core::gaze: eye agreement x head yaw).
 Writes core/models/m3/gaze_metrics.json and prints a table.
+
+With --fit-correction it also fits the thesis' head-proportional correction (eq. 6.4: each eye's
+eye-in-head yaw / pitch plus a gain times the head's yaw / pitch, minus a reference) and the
+dominant-eye weight on the training split against the same teacher, and reports the validation
+error with them: the evidence for core::gaze's defaults (no correction, equal weights).
 """
 import argparse
 import json
@@ -108,9 +113,79 @@ def summary(errs):
             "median_deg": round(float(np.median(e)), 2), "p90_deg": round(float(np.percentile(e, 90)), 2)}
 
 
+def run_split(monotrack, teacher, split, tmp):
+    """(fitted rotation, yaw, pitch, right gaze, left gaze, teacher row) per face of `split`."""
+    paths, faces = D.load_faces68(split)
+    boxes = jittered_boxes(faces)
+    rows, seen = [], {}
+    for f, b in zip(faces, boxes):
+        fi = seen.get(f["line"], 0)
+        seen[f["line"]] = fi + 1
+        t = teacher.get((f["path"], fi))
+        if t is not None:
+            rows.append((paths[f["image"]], b, t))
+    man = os.path.join(tmp, f"fit_{split}.jsonl")
+    with open(man, "w") as fh:
+        for p, b, _ in rows:
+            fh.write(json.dumps({"image": p, "faces": [{"box": [float(v) for v in b]}]}) + "\n")
+    subprocess.run([monotrack, "landmarks", man, "--out", man + ".out", "--single-pass"], check=True)
+    out = []
+    for (_, _, t), line in zip(rows, open(man + ".out")):
+        faces_out = json.loads(line).get("faces")
+        if faces_out:
+            o = faces_out[0]
+            R = np.array(o["pose"]["rotation"], np.float64).reshape(3, 3)
+            out.append((R, o["pose"]["yaw_deg"], o["pose"]["pitch_deg"], np.array(o["gaze"]["right"]),
+                        np.array(o["gaze"]["left"]), t))
+    return out
+
+
+def corrected_error(data, offset, gain, icpt, wmax):
+    """Mean / median combined error with the correction and dominant-eye weight applied."""
+    errs = []
+    for R, yaw, pitch, gr, gl, t in data:
+        want = iris_teacher(t, offset)["combined"]
+        eyes = []
+        for g in (gr, gl):
+            m = np.degrees(eye_in_head(R.T @ unit(g)))
+            c = m + np.array([gain[0] * yaw + icpt[0], gain[1] * pitch + icpt[1]])
+            eyes.append(R @ from_eye_in_head(np.radians(c)))
+        left_near = (R @ np.array([1.0, 0.0, 0.0]))[2] < 0
+        w = 0.5 + min(abs(yaw) / MAX_YAW_DEG, 1.0) * (wmax - 0.5)
+        wr, wl = (1 - w, w) if left_near else (w, 1 - w)
+        errs.append(angle_deg(wr * eyes[0] + wl * eyes[1], want))
+    e = np.asarray(errs)
+    return [round(float(e.mean()), 2), round(float(np.median(e)), 2)]
+
+
+def fit_correction(monotrack, teacher, offset):
+    tmp = tempfile.mkdtemp()
+    train, val = run_split(monotrack, teacher, "train", tmp), run_split(monotrack, teacher, "val", tmp)
+    X, Y = [], []
+    for R, yaw, pitch, gr, gl, t in train:
+        want = iris_teacher(t, offset)
+        for g, w in ((gr, want["right"]), (gl, want["left"])):
+            X.append([yaw, pitch])
+            Y.append(np.degrees(eye_in_head(R.T @ w)) - np.degrees(eye_in_head(R.T @ unit(g))))
+    X, Y = np.asarray(X), np.asarray(Y)
+    gain, icpt = [], []
+    for k in range(2):
+        sol, *_ = np.linalg.lstsq(np.c_[X[:, k], np.ones(len(X))], Y[:, k], rcond=None)
+        gain.append(float(sol[0]))
+        icpt.append(float(sol[1]))
+    res = {"train_faces": len(train), "gain_yaw_pitch": [round(v, 3) for v in gain],
+           "intercept_deg": [round(v, 2) for v in icpt],
+           "val_none": corrected_error(val, offset, [0, 0], [0, 0], 0.5)}
+    for wmax in (0.5, 0.7, 0.9, 1.0):
+        res[f"val_fitted_dominant_{wmax}"] = corrected_error(val, offset, gain, icpt, wmax)
+    print("head correction (eq. 6.4) fitted on the training split:", json.dumps(res))
+    return res
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--monotrack", required=True, help="the built `monotrack` CLI")
+    ap.add_argument("--fit-correction", action="store_true")
     ap.add_argument("--out", default=os.path.join(D.REPO, "core", "models", "m3", "gaze_metrics.json"))
     a = ap.parse_args()
     teacher = {}
@@ -165,6 +240,8 @@ def main():
             "combined_by_abs_yaw_deg": {k: summary(v) for k, v in bins.items()},
             "combined_by_confidence": {k: summary(v) for k, v in by_conf.items()},
         }
+    if a.fit_correction:
+        metrics["head_correction_fit"] = fit_correction(a.monotrack, teacher, offset)
     with open(a.out, "w") as fh:
         json.dump(metrics, fh, indent=1)
     print(f"{len(rows)} validation faces with the teacher; angles to the iris teacher, degrees "
