@@ -25,6 +25,7 @@ mod kernels;
 pub mod landmarks;
 pub mod metrics;
 pub mod model;
+pub mod motion;
 mod stem;
 pub mod track;
 
