@@ -24,9 +24,11 @@ fn bench(c: &mut Criterion) {
             converged: true,
         },
     };
-    let mut lm = FaceLandmarks::default();
-    lm.gaze_right = [0.05, 0.1, -0.99];
-    lm.gaze_left = [0.02, 0.12, -0.99];
+    let lm = FaceLandmarks {
+        gaze_right: [0.05, 0.1, -0.99],
+        gaze_left: [0.02, 0.12, -0.99],
+        ..Default::default()
+    };
     let zones = targets_from_json(include_bytes!("../../examples/driver_zones.json")).unwrap();
     let phone = [Target::screen("phone", 70.0, 150.0, [35.0, -8.0]).unwrap()];
     // A calibrated user: the correction is applied too.
