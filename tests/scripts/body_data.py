@@ -105,11 +105,31 @@ def h36m(shared, out):
     os.replace(path + ".tmp", path)
 
 
+# Whole sequences (10 fps, not subsampled) for the motion comparison tests: the first 12 s.
+MOTION_KEYS = ["S1/Walking", "S5/Walking", "S1/Eating", "S1/Greeting"]
+MOTION_FRAMES = 120
+
+
+def motion(shared, out):
+    path = os.path.join(out, "motion.json")
+    if fresh(path):
+        return
+    poses = np.load(os.path.join(shared, "body", "h36m", "poses3d_mm_10fps.npz"))
+    seqs = []
+    for key in MOTION_KEYS:
+        subject, action = key.split("/", 1)
+        x = poses[key][:MOTION_FRAMES][:, H36M_TO_HE15, :]
+        seqs.append({"subject": subject, "action": action, "joints3d_mm": rnd(x)})
+    json.dump({"fps": 10, "sequences": seqs}, open(path + ".tmp", "w"))
+    os.replace(path + ".tmp", path)
+
+
 def main():
     shared, out = sys.argv[1], sys.argv[2]
     os.makedirs(out, exist_ok=True)
     humaneva(shared, out)
     h36m(shared, out)
+    motion(shared, out)
 
 
 if __name__ == "__main__":

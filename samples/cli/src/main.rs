@@ -9,6 +9,7 @@ mod fit;
 mod json;
 mod landmarks;
 mod luma;
+mod motion;
 // Some frame-source helpers are used by tests only.
 #[allow(dead_code)]
 mod track;
@@ -135,6 +136,25 @@ enum Command {
         /// Print the report as one JSON object.
         #[arg(long)]
         json: bool,
+    },
+    /// Score a trial motion against a reference (3D joints from body-fit) and say what to fix.
+    CompareMotion {
+        /// The reference: body-fit output lines (`joints3d_mm`, the 15 joints).
+        #[arg(long)]
+        reference: PathBuf,
+        /// The trial, in the same form.
+        #[arg(long)]
+        trial: PathBuf,
+        /// Phases of the reference and weighted features (CONTRACT.md).
+        #[arg(long)]
+        weights: PathBuf,
+        /// Print the CONTRACT.md JSON instead of the readable report.
+        #[arg(long)]
+        json: bool,
+        /// Write one PNG per weighted feature here (reference blue, trial orange, phase shaded,
+        /// similarity as the green bar; the file name says phase, joint, feature and score).
+        #[arg(long)]
+        plot: Option<PathBuf>,
     },
     /// 3D body pose and dimensions from 2D joints with a known or floor-calibrated camera.
     BodyFit {
@@ -290,6 +310,13 @@ fn main() -> ExitCode {
             frames,
             json,
         } => bench::run(format, rotation, mirrored, frames, json),
+        Command::CompareMotion {
+            reference,
+            trial,
+            weights,
+            json,
+            plot,
+        } => motion::run(&reference, &trial, &weights, json, plot.as_deref()).map(|()| true),
         Command::BodyFit {
             input,
             out,
