@@ -534,13 +534,22 @@ pub fn compare(
     let (tp, tv) = prepare(trial);
     let shift = global_shift(&rp, &tp);
     let limb = most_energetic(&rv);
-    let a: Vec<[f64; 3]> = rp.iter().map(|p| p[limb]).collect();
+    // Each trajectory about its own mean: a limb held differently (a bent elbow moves the wrist)
+    // still times the same, and timing is what the path is for.
+    let about_mean = |v: Vec<[f64; 3]>| -> Vec<[f64; 3]> {
+        let k = 1.0 / v.len().max(1) as f64;
+        let m = v.iter().fold([0.0; 3], |acc, p| add(&acc, p));
+        v.iter().map(|p| sub(p, &scale(&m, k))).collect()
+    };
+    let a = about_mean(rp.iter().map(|p| p[limb]).collect());
     // The trial from the shift on, so frames before the reference's start are not matched.
     let start = shift.max(0) as usize;
-    let b: Vec<[f64; 3]> = tp[start.min(tp.len() - 1)..]
-        .iter()
-        .map(|p| p[limb])
-        .collect();
+    let b = about_mean(
+        tp[start.min(tp.len() - 1)..]
+            .iter()
+            .map(|p| p[limb])
+            .collect(),
+    );
     let path: Vec<(usize, usize)> = dtw(&a, &b)
         .into_iter()
         .map(|(i, j)| (i, j + start))
