@@ -6,7 +6,7 @@
 mod body_common;
 
 use body_common::*;
-use monotrack_core::body::{Joint, N_JOINTS};
+use monotrack_core::body::Joint;
 use monotrack_core::motion::{MotionConfig, Pose3, Weights, compare};
 use serde::Deserialize;
 
@@ -124,11 +124,9 @@ fn human36m_warps_faults_and_people() {
         let (a, f) = (t.floor() as usize, t.fract());
         trial.push(lerp(&reference[a], &reference[(a + 1).min(n - 1)], f));
     }
-    for p in &mut trial {
-        for j in 0..N_JOINTS {
-            p[j][0] += 400.0;
-            p[j][1] -= 200.0;
-        }
+    for joint in trial.iter_mut().flatten() {
+        joint[0] += 400.0;
+        joint[1] -= 200.0;
     }
     let rep = compare(reference, &trial, &w, &cfg).unwrap();
     // Truth: reference frame r sits at trial frame 10 + tau⁻¹(r).
