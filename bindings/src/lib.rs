@@ -16,6 +16,7 @@ mod body;
 mod error;
 mod gaze;
 mod live;
+mod motion;
 mod tracker;
 mod types;
 
@@ -24,6 +25,7 @@ pub use error::MonotrackError;
 use error::guard;
 pub use gaze::*;
 pub use live::*;
+pub use motion::*;
 pub use tracker::*;
 pub use types::*;
 

@@ -1623,6 +1623,201 @@ public func FfiConverterTypeLiveStreamListener_lower(_ value: LiveStreamListener
 
 
 
+
+
+/**
+ * A live sequence scored against a reference when it ends: add each frame's joints as the
+ * `BodyTracker` gives them, then `finish`.
+ */
+public protocol MotionSessionProtocol: AnyObject, Sendable {
+    
+    /**
+     * Appends one live frame; returns the frames so far.
+     *
+     * # Errors
+     * `InvalidConfig` for a frame without all 15 joints (or one twice).
+     */
+    func addFrame(frame: MotionFrame) throws  -> UInt32
+    
+    /**
+     * Scores the frames added so far against the reference and starts a new sequence.
+     *
+     * # Errors
+     * `InvalidFrame` when too few frames were added (under 9) or some are not finite.
+     */
+    func finish() throws  -> MotionReport
+    
+    /**
+     * Drops the frames added so far.
+     */
+    func reset() 
+    
+}
+/**
+ * A live sequence scored against a reference when it ends: add each frame's joints as the
+ * `BodyTracker` gives them, then `finish`.
+ */
+open class MotionSession: MotionSessionProtocol, @unchecked Sendable {
+    fileprivate let handle: UInt64
+
+    /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public struct NoHandle {
+        public init() {}
+    }
+
+    // TODO: We'd like this to be `private` but for Swifty reasons,
+    // we can't implement `FfiConverter` without making this `required` and we can't
+    // make it `required` without making it `public`.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    required public init(unsafeFromHandle handle: UInt64) {
+        self.handle = handle
+    }
+
+    // This constructor can be used to instantiate a fake object.
+    // - Parameter noHandle: Placeholder value so we can have a constructor separate from the default empty one that may be implemented for classes extending [FFIObject].
+    //
+    // - Warning:
+    //     Any object instantiated with this constructor cannot be passed to an actual Rust-backed object. Since there isn't a backing handle the FFI lower functions will crash.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public init(noHandle: NoHandle) {
+        self.handle = 0
+    }
+
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public func uniffiCloneHandle() -> UInt64 {
+        return try! rustCall { uniffi_monotrack_ffi_fn_clone_motionsession(self.handle, $0) }
+    }
+    /**
+     * A session against `reference` (at `fps`, as the live frames will be) with `weights_json`.
+     *
+     * # Errors
+     * As `compare_motion` for the reference and the weights (phases are checked against the
+     * reference here).
+     */
+public convenience init(reference: [MotionFrame], weightsJson: String, fps: Double)throws  {
+    let handle =
+        try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_constructor_motionsession_new(
+        FfiConverterSequenceTypeMotionFrame.lower(reference),
+        FfiConverterString.lower(weightsJson),
+        FfiConverterDouble.lower(fps),uniffiCallStatus
+    )
+}
+    self.init(unsafeFromHandle: handle)
+}
+
+    deinit {
+        if handle == 0 {
+            // Mock objects have handle=0 don't try to free them
+            return
+        }
+
+        try! rustCall { uniffi_monotrack_ffi_fn_free_motionsession(handle, $0) }
+    }
+
+    
+
+    
+    /**
+     * Appends one live frame; returns the frames so far.
+     *
+     * # Errors
+     * `InvalidConfig` for a frame without all 15 joints (or one twice).
+     */
+open func addFrame(frame: MotionFrame)throws  -> UInt32  {
+    return try  FfiConverterUInt32.lift(try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_motionsession_add_frame(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeMotionFrame_lower(frame),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Scores the frames added so far against the reference and starts a new sequence.
+     *
+     * # Errors
+     * `InvalidFrame` when too few frames were added (under 9) or some are not finite.
+     */
+open func finish()throws  -> MotionReport  {
+    return try  FfiConverterTypeMotionReport_lift(try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_motionsession_finish(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Drops the frames added so far.
+     */
+open func reset()  {try! rustCall() {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_motionsession_reset(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+}
+}
+    
+
+    
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeMotionSession: FfiConverter {
+    typealias FfiType = UInt64
+    typealias SwiftType = MotionSession
+
+    public static func lift(_ handle: UInt64) throws -> MotionSession {
+        return MotionSession(unsafeFromHandle: handle)
+    }
+
+    public static func lower(_ value: MotionSession) -> UInt64 {
+        return value.uniffiCloneHandle()
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> MotionSession {
+        let handle: UInt64 = try readInt(&buf)
+        return try lift(handle)
+    }
+
+    public static func write(_ value: MotionSession, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionSession_lift(_ handle: UInt64) throws -> MotionSession {
+    return try FfiConverterTypeMotionSession.lift(handle)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionSession_lower(_ value: MotionSession) -> UInt64 {
+    return FfiConverterTypeMotionSession.lower(value)
+}
+
+
+
+
 /**
  * The expression: the 6 animation units (0 neutral, 1 the unit's full extent).
  */
@@ -2985,6 +3180,75 @@ public func FfiConverterTypeFrameDesc_lower(_ value: FrameDesc) -> RustBuffer {
 
 
 /**
+ * A reference frame and the trial frame it corresponds to.
+ */
+public struct FramePair: Equatable, Hashable {
+    /**
+     * Frame of the reference.
+     */
+    public var referenceFrame: UInt32
+    /**
+     * Frame of the trial.
+     */
+    public var trialFrame: UInt32
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Frame of the reference.
+         */referenceFrame: UInt32, 
+        /**
+         * Frame of the trial.
+         */trialFrame: UInt32) {
+        self.referenceFrame = referenceFrame
+        self.trialFrame = trialFrame
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension FramePair: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeFramePair: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> FramePair {
+        return
+            try FramePair(
+                referenceFrame: FfiConverterUInt32.read(from: &buf), 
+                trialFrame: FfiConverterUInt32.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: FramePair, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.referenceFrame, into: &buf)
+        FfiConverterUInt32.write(value.trialFrame, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFramePair_lift(_ buf: RustBuffer) throws -> FramePair {
+    return try FfiConverterTypeFramePair.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFramePair_lower(_ value: FramePair) -> RustBuffer {
+    return FfiConverterTypeFramePair.lower(value)
+}
+
+
+/**
  * Per-stage times of one kind of frame, camera bytes to result (see `run_camera_benchmark`).
  */
 public struct FrameStageTimes: Equatable, Hashable {
@@ -3618,6 +3882,363 @@ public func FfiConverterTypeLumaImage_lift(_ buf: RustBuffer) throws -> LumaImag
 #endif
 public func FfiConverterTypeLumaImage_lower(_ value: LumaImage) -> RustBuffer {
     return FfiConverterTypeLumaImage.lower(value)
+}
+
+
+/**
+ * One weighted feature's result.
+ */
+public struct MotionFeatureScore: Equatable, Hashable {
+    /**
+     * The phase.
+     */
+    public var phase: String
+    /**
+     * The joint.
+     */
+    public var joint: BodyJoint
+    /**
+     * The feature.
+     */
+    public var feature: MotionFeature
+    /**
+     * Similarity 0..1.
+     */
+    public var score: Double
+    /**
+     * Its weight.
+     */
+    public var weight: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The phase.
+         */phase: String, 
+        /**
+         * The joint.
+         */joint: BodyJoint, 
+        /**
+         * The feature.
+         */feature: MotionFeature, 
+        /**
+         * Similarity 0..1.
+         */score: Double, 
+        /**
+         * Its weight.
+         */weight: Double) {
+        self.phase = phase
+        self.joint = joint
+        self.feature = feature
+        self.score = score
+        self.weight = weight
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension MotionFeatureScore: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeMotionFeatureScore: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> MotionFeatureScore {
+        return
+            try MotionFeatureScore(
+                phase: FfiConverterString.read(from: &buf), 
+                joint: FfiConverterTypeBodyJoint.read(from: &buf), 
+                feature: FfiConverterTypeMotionFeature.read(from: &buf), 
+                score: FfiConverterDouble.read(from: &buf), 
+                weight: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: MotionFeatureScore, into buf: inout [UInt8]) {
+        FfiConverterString.write(value.phase, into: &buf)
+        FfiConverterTypeBodyJoint.write(value.joint, into: &buf)
+        FfiConverterTypeMotionFeature.write(value.feature, into: &buf)
+        FfiConverterDouble.write(value.score, into: &buf)
+        FfiConverterDouble.write(value.weight, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionFeatureScore_lift(_ buf: RustBuffer) throws -> MotionFeatureScore {
+    return try FfiConverterTypeMotionFeatureScore.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionFeatureScore_lower(_ value: MotionFeatureScore) -> RustBuffer {
+    return FfiConverterTypeMotionFeatureScore.lower(value)
+}
+
+
+/**
+ * One pose of a motion: the 15 joints' 3D positions (mm), each once, any order — what
+ * `BodyFitResult.joints` holds.
+ */
+public struct MotionFrame: Equatable, Hashable {
+    /**
+     * The joints.
+     */
+    public var joints: [BodyJoint3d]
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The joints.
+         */joints: [BodyJoint3d]) {
+        self.joints = joints
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension MotionFrame: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeMotionFrame: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> MotionFrame {
+        return
+            try MotionFrame(
+                joints: FfiConverterSequenceTypeBodyJoint3d.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: MotionFrame, into buf: inout [UInt8]) {
+        FfiConverterSequenceTypeBodyJoint3d.write(value.joints, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionFrame_lift(_ buf: RustBuffer) throws -> MotionFrame {
+    return try FfiConverterTypeMotionFrame.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionFrame_lower(_ value: MotionFrame) -> RustBuffer {
+    return FfiConverterTypeMotionFrame.lower(value)
+}
+
+
+/**
+ * A phase's result.
+ */
+public struct MotionPhaseScore: Equatable, Hashable {
+    /**
+     * The phase.
+     */
+    public var name: String
+    /**
+     * Weighted sum of its features' similarities.
+     */
+    public var score: Double
+    /**
+     * The sum of its features' weights (the best possible score).
+     */
+    public var nominal: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The phase.
+         */name: String, 
+        /**
+         * Weighted sum of its features' similarities.
+         */score: Double, 
+        /**
+         * The sum of its features' weights (the best possible score).
+         */nominal: Double) {
+        self.name = name
+        self.score = score
+        self.nominal = nominal
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension MotionPhaseScore: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeMotionPhaseScore: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> MotionPhaseScore {
+        return
+            try MotionPhaseScore(
+                name: FfiConverterString.read(from: &buf), 
+                score: FfiConverterDouble.read(from: &buf), 
+                nominal: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: MotionPhaseScore, into buf: inout [UInt8]) {
+        FfiConverterString.write(value.name, into: &buf)
+        FfiConverterDouble.write(value.score, into: &buf)
+        FfiConverterDouble.write(value.nominal, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionPhaseScore_lift(_ buf: RustBuffer) throws -> MotionPhaseScore {
+    return try FfiConverterTypeMotionPhaseScore.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionPhaseScore_lower(_ value: MotionPhaseScore) -> RustBuffer {
+    return FfiConverterTypeMotionPhaseScore.lower(value)
+}
+
+
+/**
+ * A trial scored against a reference.
+ */
+public struct MotionReport: Equatable, Hashable {
+    /**
+     * All phases' scores over their nominal scores, 0..1.
+     */
+    public var overall: Double
+    /**
+     * Per phase.
+     */
+    public var phases: [MotionPhaseScore]
+    /**
+     * Per weighted feature.
+     */
+    public var features: [MotionFeatureScore]
+    /**
+     * What to fix: the lowest-scoring feature of the lowest-scoring phase.
+     */
+    public var worst: MotionFeatureScore
+    /**
+     * Global alignment: trial frame = reference frame + shift.
+     */
+    public var shift: Int64
+    /**
+     * Dense frame correspondences.
+     */
+    public var path: [FramePair]
+    /**
+     * The coach's summary in words ("To fix: right elbow flexion in back-swing").
+     */
+    public var summary: String
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * All phases' scores over their nominal scores, 0..1.
+         */overall: Double, 
+        /**
+         * Per phase.
+         */phases: [MotionPhaseScore], 
+        /**
+         * Per weighted feature.
+         */features: [MotionFeatureScore], 
+        /**
+         * What to fix: the lowest-scoring feature of the lowest-scoring phase.
+         */worst: MotionFeatureScore, 
+        /**
+         * Global alignment: trial frame = reference frame + shift.
+         */shift: Int64, 
+        /**
+         * Dense frame correspondences.
+         */path: [FramePair], 
+        /**
+         * The coach's summary in words ("To fix: right elbow flexion in back-swing").
+         */summary: String) {
+        self.overall = overall
+        self.phases = phases
+        self.features = features
+        self.worst = worst
+        self.shift = shift
+        self.path = path
+        self.summary = summary
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension MotionReport: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeMotionReport: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> MotionReport {
+        return
+            try MotionReport(
+                overall: FfiConverterDouble.read(from: &buf), 
+                phases: FfiConverterSequenceTypeMotionPhaseScore.read(from: &buf), 
+                features: FfiConverterSequenceTypeMotionFeatureScore.read(from: &buf), 
+                worst: FfiConverterTypeMotionFeatureScore.read(from: &buf), 
+                shift: FfiConverterInt64.read(from: &buf), 
+                path: FfiConverterSequenceTypeFramePair.read(from: &buf), 
+                summary: FfiConverterString.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: MotionReport, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.overall, into: &buf)
+        FfiConverterSequenceTypeMotionPhaseScore.write(value.phases, into: &buf)
+        FfiConverterSequenceTypeMotionFeatureScore.write(value.features, into: &buf)
+        FfiConverterTypeMotionFeatureScore.write(value.worst, into: &buf)
+        FfiConverterInt64.write(value.shift, into: &buf)
+        FfiConverterSequenceTypeFramePair.write(value.path, into: &buf)
+        FfiConverterString.write(value.summary, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionReport_lift(_ buf: RustBuffer) throws -> MotionReport {
+    return try FfiConverterTypeMotionReport.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionReport_lower(_ value: MotionReport) -> RustBuffer {
+    return FfiConverterTypeMotionReport.lower(value)
 }
 
 
@@ -5587,6 +6208,101 @@ public func FfiConverterTypeMonotrackError_lower(_ value: MonotrackError) -> Rus
 
 
 /**
+ * A feature a motion is scored on.
+ */
+
+public enum MotionFeature: Equatable, Hashable {
+    
+    /**
+     * Flexion / extension angle, degrees.
+     */
+    case flexion
+    /**
+     * Abduction / adduction angle, degrees.
+     */
+    case abduction
+    /**
+     * Speed relative to the pelvis, mm/s.
+     */
+    case linearVelocity
+    /**
+     * Rate of change of the flexion angle, degrees/s.
+     */
+    case angularVelocity
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension MotionFeature: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeMotionFeature: FfiConverterRustBuffer {
+    typealias SwiftType = MotionFeature
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> MotionFeature {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .flexion
+        
+        case 2: return .abduction
+        
+        case 3: return .linearVelocity
+        
+        case 4: return .angularVelocity
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: MotionFeature, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .flexion:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .abduction:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .linearVelocity:
+            writeInt(&buf, Int32(3))
+        
+        
+        case .angularVelocity:
+            writeInt(&buf, Int32(4))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionFeature_lift(_ buf: RustBuffer) throws -> MotionFeature {
+    return try FfiConverterTypeMotionFeature.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeMotionFeature_lower(_ value: MotionFeature) -> RustBuffer {
+    return FfiConverterTypeMotionFeature.lower(value)
+}
+
+
+
+/**
  * Pixel formats a frame may arrive in (see `FrameDesc`).
  */
 
@@ -6058,6 +6774,31 @@ fileprivate struct FfiConverterSequenceTypeFace: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterSequenceTypeFramePair: FfiConverterRustBuffer {
+    typealias SwiftType = [FramePair]
+
+    public static func write(_ value: [FramePair], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeFramePair.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [FramePair] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [FramePair]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeFramePair.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceTypeGazeTarget: FfiConverterRustBuffer {
     typealias SwiftType = [GazeTarget]
 
@@ -6075,6 +6816,81 @@ fileprivate struct FfiConverterSequenceTypeGazeTarget: FfiConverterRustBuffer {
         seq.reserveCapacity(Int(len))
         for _ in 0 ..< len {
             seq.append(try FfiConverterTypeGazeTarget.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeMotionFeatureScore: FfiConverterRustBuffer {
+    typealias SwiftType = [MotionFeatureScore]
+
+    public static func write(_ value: [MotionFeatureScore], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeMotionFeatureScore.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [MotionFeatureScore] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [MotionFeatureScore]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeMotionFeatureScore.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeMotionFrame: FfiConverterRustBuffer {
+    typealias SwiftType = [MotionFrame]
+
+    public static func write(_ value: [MotionFrame], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeMotionFrame.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [MotionFrame] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [MotionFrame]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeMotionFrame.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeMotionPhaseScore: FfiConverterRustBuffer {
+    typealias SwiftType = [MotionPhaseScore]
+
+    public static func write(_ value: [MotionPhaseScore], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeMotionPhaseScore.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [MotionPhaseScore] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [MotionPhaseScore]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeMotionPhaseScore.read(from: &buf))
         }
         return seq
     }
@@ -6313,6 +7129,25 @@ public func screenTarget(id: String, widthMm: Double, heightMm: Double, cameraRi
 })
 }
 /**
+ * Scores `trial` against `reference` (both at `fps`) with the phases and weighted features of
+ * `weights_json` (the CLI's `W.json`, CONTRACT.md).
+ *
+ * # Errors
+ * `InvalidConfig` for bad weights (named field), a frame without all 15 joints, or a bad `fps`;
+ * `InvalidFrame` for a sequence too short (under 9 frames) or with non-finite joints.
+ */
+public func compareMotion(reference: [MotionFrame], trial: [MotionFrame], weightsJson: String, fps: Double)throws  -> MotionReport  {
+    return try  FfiConverterTypeMotionReport_lift(try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_func_compare_motion(
+        FfiConverterSequenceTypeMotionFrame.lower(reference),
+        FfiConverterSequenceTypeMotionFrame.lower(trial),
+        FfiConverterString.lower(weightsJson),
+        FfiConverterDouble.lower(fps),uniffiCallStatus
+    )
+})
+}
+/**
  * The default settings: video mode, one face, default intrinsics, filter on.
  */
 public func defaultTrackerConfig() -> TrackerConfig  {
@@ -6416,6 +7251,9 @@ private let initializationResult: InitializationResult = {
     if (uniffi_monotrack_ffi_checksum_func_screen_target() != 65533) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_monotrack_ffi_checksum_func_compare_motion() != 48643) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_monotrack_ffi_checksum_func_default_tracker_config() != 13976) {
         return InitializationResult.apiChecksumMismatch
     }
@@ -6452,6 +7290,15 @@ private let initializationResult: InitializationResult = {
     if (uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_error() != 22839) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_monotrack_ffi_checksum_method_motionsession_add_frame() != 11400) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_motionsession_finish() != 32983) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_motionsession_reset() != 34190) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_monotrack_ffi_checksum_method_facetracker_add_calibration_point() != 22823) {
         return InitializationResult.apiChecksumMismatch
     }
@@ -6477,6 +7324,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_constructor_livefacetracker_new() != 12329) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_constructor_motionsession_new() != 60954) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_constructor_facetracker_new() != 34358) {

@@ -352,6 +352,36 @@ void uniffi_monotrack_ffi_fn_method_livestreamlistener_on_result(uint64_t ptr, R
 void uniffi_monotrack_ffi_fn_method_livestreamlistener_on_error(uint64_t ptr, int64_t timestamp_ns, uint64_t frames_dropped, RustBuffer error, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_MOTIONSESSION
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_MOTIONSESSION
+uint64_t uniffi_monotrack_ffi_fn_clone_motionsession(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FREE_MOTIONSESSION
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FREE_MOTIONSESSION
+void uniffi_monotrack_ffi_fn_free_motionsession(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CONSTRUCTOR_MOTIONSESSION_NEW
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CONSTRUCTOR_MOTIONSESSION_NEW
+uint64_t uniffi_monotrack_ffi_fn_constructor_motionsession_new(RustBuffer reference, RustBuffer weights_json, double fps, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_MOTIONSESSION_ADD_FRAME
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_MOTIONSESSION_ADD_FRAME
+uint32_t uniffi_monotrack_ffi_fn_method_motionsession_add_frame(uint64_t ptr, RustBuffer frame, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_MOTIONSESSION_FINISH
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_MOTIONSESSION_FINISH
+RustBuffer uniffi_monotrack_ffi_fn_method_motionsession_finish(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_MOTIONSESSION_RESET
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_METHOD_MOTIONSESSION_RESET
+void uniffi_monotrack_ffi_fn_method_motionsession_reset(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_FACETRACKER
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_CLONE_FACETRACKER
 uint64_t uniffi_monotrack_ffi_fn_clone_facetracker(uint64_t handle, RustCallStatus *_Nonnull out_status
@@ -442,6 +472,11 @@ RustBuffer uniffi_monotrack_ffi_fn_func_gaze_targets_from_json(RustBuffer json, 
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_SCREEN_TARGET
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_SCREEN_TARGET
 RustBuffer uniffi_monotrack_ffi_fn_func_screen_target(RustBuffer id, double width_mm, double height_mm, double camera_right_mm, double camera_down_mm, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_COMPARE_MOTION
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_COMPARE_MOTION
+RustBuffer uniffi_monotrack_ffi_fn_func_compare_motion(RustBuffer reference, RustBuffer trial, RustBuffer weights_json, double fps, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_DEFAULT_TRACKER_CONFIG
@@ -774,6 +809,12 @@ uint16_t uniffi_monotrack_ffi_checksum_func_screen_target(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_COMPARE_MOTION
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_COMPARE_MOTION
+uint16_t uniffi_monotrack_ffi_checksum_func_compare_motion(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_DEFAULT_TRACKER_CONFIG
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_DEFAULT_TRACKER_CONFIG
 uint16_t uniffi_monotrack_ffi_checksum_func_default_tracker_config(void
@@ -846,6 +887,24 @@ uint16_t uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_error(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_MOTIONSESSION_ADD_FRAME
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_MOTIONSESSION_ADD_FRAME
+uint16_t uniffi_monotrack_ffi_checksum_method_motionsession_add_frame(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_MOTIONSESSION_FINISH
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_MOTIONSESSION_FINISH
+uint16_t uniffi_monotrack_ffi_checksum_method_motionsession_finish(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_MOTIONSESSION_RESET
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_MOTIONSESSION_RESET
+uint16_t uniffi_monotrack_ffi_checksum_method_motionsession_reset(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_ADD_CALIBRATION_POINT
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_METHOD_FACETRACKER_ADD_CALIBRATION_POINT
 uint16_t uniffi_monotrack_ffi_checksum_method_facetracker_add_calibration_point(void
@@ -897,6 +956,12 @@ uint16_t uniffi_monotrack_ffi_checksum_constructor_bodytracker_new(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_CONSTRUCTOR_LIVEFACETRACKER_NEW
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_CONSTRUCTOR_LIVEFACETRACKER_NEW
 uint16_t uniffi_monotrack_ffi_checksum_constructor_livefacetracker_new(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_CONSTRUCTOR_MOTIONSESSION_NEW
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_CONSTRUCTOR_MOTIONSESSION_NEW
+uint16_t uniffi_monotrack_ffi_checksum_constructor_motionsession_new(void
     
 );
 #endif
