@@ -758,6 +758,20 @@ mod tests {
     use crate::types::PixelFormat;
     use monotrack_core::camera::Rotation;
 
+    /// A packed 8-bit frame of `w`×`h` turned by `rotation` (then mirrored).
+    fn gray_desc(w: usize, h: usize, rotation: u32, mirrored: bool) -> FrameDesc {
+        FrameDesc {
+            width: w as u32,
+            height: h as u32,
+            format: PixelFormat::Gray8,
+            row_stride: w as u32,
+            uv_row_stride: 0,
+            uv_pixel_stride: 0,
+            rotation_degrees: rotation,
+            mirrored,
+        }
+    }
+
     /// The upright test picture: the sample face cropped to a landscape 512×400 (so quarter turns
     /// swap the axes).
     fn upright_face() -> (Vec<u8>, usize, usize) {
@@ -821,16 +835,7 @@ mod tests {
             ..default_tracker_config()
         };
         let tracker = FaceTracker::new(config).unwrap();
-        let desc = FrameDesc {
-            width: w as u32,
-            height: h as u32,
-            format: PixelFormat::Gray8,
-            row_stride: w as u32,
-            uv_row_stride: 0,
-            uv_pixel_stride: 0,
-            rotation_degrees: rotation,
-            mirrored,
-        };
+        let desc = gray_desc(w, h, rotation, mirrored);
         let r = tracker.process_frame(buf, desc, 1).unwrap();
         assert_eq!(r.faces.len(), 1, "rotation {rotation} mirrored {mirrored}");
         r.faces[0].pose.clone()
@@ -902,16 +907,7 @@ mod tests {
         let k = Intrinsics::default_for(w as u32, h as u32).unwrap();
         let face = {
             let tracker = FaceTracker::new(default_tracker_config()).unwrap();
-            let desc = FrameDesc {
-                width: w as u32,
-                height: h as u32,
-                format: PixelFormat::Gray8,
-                row_stride: w as u32,
-                uv_row_stride: 0,
-                uv_pixel_stride: 0,
-                rotation_degrees: 0,
-                mirrored: false,
-            };
+            let desc = gray_desc(w, h, 0, false);
             tracker.process_frame(&upright, desc, 1).unwrap().faces[0].clone()
         };
         assert_eq!(face.vertices_mm.len(), 68);
@@ -941,16 +937,7 @@ mod tests {
     fn one_tracker_serves_several_threads() {
         let (upright, w, h) = upright_face();
         let tracker = FaceTracker::new(default_tracker_config()).unwrap();
-        let desc = FrameDesc {
-            width: w as u32,
-            height: h as u32,
-            format: PixelFormat::Gray8,
-            row_stride: w as u32,
-            uv_row_stride: 0,
-            uv_pixel_stride: 0,
-            rotation_degrees: 0,
-            mirrored: false,
-        };
+        let desc = gray_desc(w, h, 0, false);
         let clock = std::sync::atomic::AtomicI64::new(0);
         std::thread::scope(|scope| {
             for t in 0..4u32 {
@@ -983,16 +970,7 @@ mod tests {
     fn gaze_lands_on_targets_and_a_tap_calibrates_it() {
         let (upright, w, h) = upright_face();
         let tracker = FaceTracker::new(default_tracker_config()).unwrap();
-        let desc = FrameDesc {
-            width: w as u32,
-            height: h as u32,
-            format: PixelFormat::Gray8,
-            row_stride: w as u32,
-            uv_row_stride: 0,
-            uv_pixel_stride: 0,
-            rotation_degrees: 0,
-            mirrored: false,
-        };
+        let desc = gray_desc(w, h, 0, false);
         let screen = crate::gaze::screen_target("phone".into(), 70.0, 150.0, 35.0, -8.0).unwrap();
         tracker.set_gaze_targets(vec![screen]).unwrap();
         let ms = 1_000_000;

@@ -1,27 +1,10 @@
 //! `monotrack compare-motion`: CONTRACT.md's JSON, the readable report, the plots, and clear errors
 //! for bad input, on a synthetic arm swing written as body-fit output lines.
 
+use monotrack_core::body::JOINT_NAMES;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-const NAMES: [&str; 15] = [
-    "pelvis",
-    "thorax",
-    "lshoulder",
-    "lelbow",
-    "lwrist",
-    "rshoulder",
-    "relbow",
-    "rwrist",
-    "lhip",
-    "lknee",
-    "lankle",
-    "rhip",
-    "rknee",
-    "rankle",
-    "head",
-];
 
 /// One frame of a right-arm swing (`phase` 0..1), the elbow bent `bend` degrees more.
 fn frame(phase: f64, bend: f64) -> Value {
