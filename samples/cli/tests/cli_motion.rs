@@ -34,7 +34,7 @@ fn frame(phase: f64, bend: f64) -> Value {
         [-100.0, 0.0, 80.0],
         [0.0, 20.0, 1620.0],
     ];
-    let joints: serde_json::Map<String, Value> = NAMES
+    let joints: serde_json::Map<String, Value> = JOINT_NAMES
         .iter()
         .zip(pos)
         .map(|(n, p)| (n.to_string(), json!(p)))
