@@ -91,6 +91,29 @@ public final class FaceTracker: @unchecked Sendable {
         lock.unlock()
     }
 
+    /// Sets the targets each face's point of gaze is located among (e.g. `screenTarget(...)`
+    /// for the device's own screen); an empty list turns location off.
+    ///
+    /// - Throws: `MonotrackError.InvalidConfig` for a bad target or a repeated id.
+    public func setGazeTargets(_ targets: [GazeTarget]) throws {
+        try native.setGazeTargets(targets: targets)
+    }
+
+    /// The user looked at `point` on target `targetId` at `timestampNs` (a tap; the frames'
+    /// clock): refines the user's own gaze offset from the next frame. Returns the taps so far.
+    ///
+    /// - Throws: `MonotrackError.InvalidConfig` (unknown target), `.InvalidFrame` (no frame with a
+    ///   face within 250 ms).
+    @discardableResult
+    public func addCalibrationPoint(targetId: String, point: PlanePoint, timestampNs: Int64) throws -> UInt32 {
+        try native.addCalibrationPoint(targetId: targetId, point: point, timestampNs: timestampNs)
+    }
+
+    /// Forgets the gaze calibration (a new user).
+    public func resetGazeCalibration() {
+        native.resetGazeCalibration()
+    }
+
     private func nextTimestamp(_ t: Int64) -> Int64 {
         lock.lock()
         defer { lock.unlock() }

@@ -105,6 +105,27 @@ public class FaceTracker(config: TrackerConfig = defaultTrackerConfig()) : Close
         timestamps.reset()
     }
 
+    /**
+     * Sets the targets each face's point of gaze is located among (e.g. [io.monotrack.screenTarget]
+     * for the phone's own screen); an empty list turns location off.
+     *
+     * @throws MonotrackException.InvalidConfig for a bad target or a repeated id.
+     */
+    public fun setGazeTargets(targets: List<io.monotrack.GazeTarget>): Unit = checkOpen().setGazeTargets(targets)
+
+    /**
+     * The user looked at [point] on target [targetId] at [timestampNs] (a tap; the frames' clock):
+     * refines the user's own gaze offset from the next frame. Returns the taps so far.
+     *
+     * @throws MonotrackException.InvalidConfig for an unknown target.
+     * @throws MonotrackException.InvalidFrame when no frame with a face lies within 250 ms.
+     */
+    public fun addCalibrationPoint(targetId: String, point: io.monotrack.PlanePoint, timestampNs: Long): UInt =
+        checkOpen().addCalibrationPoint(targetId, point, timestampNs)
+
+    /** Forgets the gaze calibration (a new user). */
+    public fun resetGazeCalibration(): Unit = checkOpen().resetGazeCalibration()
+
     /** Frees the native tracker. Idempotent; the tracker is unusable afterwards. */
     override fun close() {
         if (!closed) {
