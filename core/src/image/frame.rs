@@ -81,10 +81,12 @@ pub struct FrameDesc {
 
 impl FrameDesc {
     /// A tightly packed frame of `format` (strides from the width), upright, not mirrored.
+    /// Strides saturate rather than wrap where a 32-bit `usize` cannot hold them (a width near
+    /// `u32::MAX`): [`Self::required_len`] then refuses the frame as it does on 64-bit targets.
     pub fn packed(width: u32, height: u32, format: PixelFormat) -> Self {
         let w = width as usize;
         let (crs, cps) = match format {
-            PixelFormat::Nv21 | PixelFormat::Nv12 => (w.div_ceil(2) * 2, 2),
+            PixelFormat::Nv21 | PixelFormat::Nv12 => (w.div_ceil(2).saturating_mul(2), 2),
             PixelFormat::I420 => (w.div_ceil(2), 1),
             _ => (0, 0),
         };
@@ -92,7 +94,7 @@ impl FrameDesc {
             width,
             height,
             format,
-            row_stride: w * format.luma_bytes_per_pixel(),
+            row_stride: w.saturating_mul(format.luma_bytes_per_pixel()),
             chroma_row_stride: crs,
             chroma_pixel_stride: cps,
             rotation: Rotation::R0,

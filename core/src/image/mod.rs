@@ -49,7 +49,8 @@ impl GrayImage {
 
     /// Wraps packed row-major bytes; `None` when `data.len() != width * height`.
     pub fn from_vec(width: usize, height: usize, data: Vec<u8>) -> Option<Self> {
-        (data.len() == width * height).then_some(Self {
+        // Checked: a caller's sizes can overflow a 32-bit usize.
+        (width.checked_mul(height) == Some(data.len())).then_some(Self {
             width,
             height,
             data,
@@ -156,6 +157,14 @@ impl Rect {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Sizes whose product overflows `usize` (any target) are a mismatch, not a panic.
+    #[test]
+    fn from_vec_refuses_overflowing_sizes() {
+        assert!(GrayImage::from_vec(usize::MAX, 2, vec![0; 4]).is_none());
+        assert!(GrayImage::from_vec(2, 2, vec![0; 4]).is_some());
+        assert!(GrayImage::from_vec(2, 3, vec![0; 4]).is_none());
+    }
 
     #[test]
     fn contract_luma_is_the_rounded_f32_sum_on_every_input() {
