@@ -1,5 +1,8 @@
 //! Reads fuzzer bytes as values, so that each target sees structured input without a derive.
 
+// Each target uses a subset of these helpers.
+#![allow(dead_code)]
+
 /// Takes values off the front of the fuzzer's bytes; zeros once they run out.
 pub struct Bytes<'a>(pub &'a [u8]);
 
