@@ -69,18 +69,21 @@ pub fn report_json(r: &MotionReport) -> Value {
 }
 
 const W: usize = 640;
-const H: usize = 320;
+const H: usize = 360;
 const MARGIN: f64 = 24.0;
+/// The title's and legend's height, pixels (a 3×5 font at scale 2, with a gap).
+const TEXT_ROW: f64 = 16.0;
+const TEXT_RGB: [u8; 3] = [20, 20, 20];
 const REFERENCE_RGB: [u8; 3] = [30, 90, 200];
 const TRIAL_RGB: [u8; 3] = [230, 120, 20];
 const PHASE_RGB: [u8; 3] = [225, 225, 225];
 const AXIS_RGB: [u8; 3] = [90, 90, 90];
 const SCORE_RGB: [u8; 3] = [40, 160, 60];
 
-/// One PNG per weighted feature: the reference (blue) and the trial carried onto the reference's
-/// frames (orange) over the whole reference, the feature's phase shaded, and a bar along the top
-/// whose green length is the similarity. The file name says what it shows:
-/// `NN_phase_joint_feature_score.png`.
+/// One PNG per weighted feature: a title (phase, joint, feature, similarity), the reference (blue)
+/// and the trial carried onto the reference's frames (orange) over the whole reference, the
+/// feature's phase shaded, a bar whose green length is the similarity, a legend with the plotted
+/// range and the frames. The file name says the same: `NN_phase_joint_feature_score.png`.
 fn plot(r: &MotionReport, weights: &Weights, dir: &Path) -> Result<(), String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let white = GrayImage::from_vec(W, H, vec![255; W * H]).ok_or("plot canvas")?;
@@ -95,42 +98,51 @@ fn plot(r: &MotionReport, weights: &Weights, dir: &Path) -> Result<(), String> {
                 (a.min(v), b.max(v))
             });
         let span = (hi - lo).max(1e-6);
+        // Rows from the top: title, similarity bar, plot, legend.
+        let (top, bottom) = (MARGIN + TEXT_ROW + 12.0, H as f64 - MARGIN - TEXT_ROW);
         let x = |i: usize| MARGIN + (W as f64 - 2.0 * MARGIN) * i as f64 / (n - 1) as f64;
-        let y = |v: f64| H as f64 - MARGIN - (H as f64 - 3.0 * MARGIN) * (v - lo) / span;
+        let y = |v: f64| bottom - (bottom - top) * (v - lo) / span;
+        let unit = match f.feature {
+            monotrack_core::motion::Feature::LinearVelocity => "MM/S",
+            monotrack_core::motion::Feature::AngularVelocity => "DEG/S",
+            _ => "DEG",
+        };
+        let title = format!(
+            "{}: {} {}  SIMILARITY {:.2}",
+            f.phase,
+            joint_words(f.joint),
+            f.feature.words(),
+            f.score
+        );
+        c.text(MARGIN as i64, (MARGIN * 0.25) as i64, &title, 2, TEXT_RGB);
         if let Some(p) = weights.phases.iter().find(|p| p.name == f.phase) {
             let (x0, x1) = (x(p.start_frame), x(p.end_frame));
             let mut xx = x0;
             while xx <= x1 {
-                c.line([xx, 2.0 * MARGIN], [xx, H as f64 - MARGIN], PHASE_RGB);
+                c.line([xx, top], [xx, bottom], PHASE_RGB);
                 xx += 1.0;
             }
         }
-        c.line(
-            [MARGIN, H as f64 - MARGIN],
-            [W as f64 - MARGIN, H as f64 - MARGIN],
-            AXIS_RGB,
-        );
-        c.line(
-            [MARGIN, 2.0 * MARGIN],
-            [MARGIN, H as f64 - MARGIN],
-            AXIS_RGB,
-        );
+        c.line([MARGIN, bottom], [W as f64 - MARGIN, bottom], AXIS_RGB);
+        c.line([MARGIN, top], [MARGIN, bottom], AXIS_RGB);
         for (series, rgb) in [(&f.reference, REFERENCE_RGB), (&f.trial, TRIAL_RGB)] {
             for i in 1..series.len() {
-                c.line([x(i - 1), y(series[i - 1])], [x(i), y(series[i])], rgb);
-                c.line(
-                    [x(i - 1), y(series[i - 1]) + 1.0],
-                    [x(i), y(series[i]) + 1.0],
-                    rgb,
-                );
+                let (a, b) = ([x(i - 1), y(series[i - 1])], [x(i), y(series[i])]);
+                c.line(a, b, rgb);
+                c.line([a[0], a[1] + 1.0], [b[0], b[1] + 1.0], rgb);
             }
         }
         let bar = MARGIN + (W as f64 - 2.0 * MARGIN) * f.score.clamp(0.0, 1.0);
         for dy in 0..6 {
-            let yy = MARGIN * 0.5 + f64::from(dy);
+            let yy = MARGIN + TEXT_ROW - 8.0 + f64::from(dy);
             c.line([MARGIN, yy], [W as f64 - MARGIN, yy], PHASE_RGB);
             c.line([MARGIN, yy], [bar, yy], SCORE_RGB);
         }
+        let legend_y = (H as f64 - MARGIN - TEXT_ROW + 8.0) as i64;
+        c.text(MARGIN as i64, legend_y, "REFERENCE", 2, REFERENCE_RGB);
+        c.text(MARGIN as i64 + 88, legend_y, "TRIAL", 2, TRIAL_RGB);
+        let range = format!("{lo:.1} TO {hi:.1} {unit}, FRAMES 0-{}", n - 1);
+        c.text(MARGIN as i64 + 144, legend_y, &range, 2, TEXT_RGB);
         let safe = |s: &str| {
             s.chars()
                 .map(|ch| {

@@ -496,6 +496,59 @@ pub fn frame_json(result: &TrackingResult, targets: Option<&[Target]>) -> Value 
     })
 }
 
+/// A 3×5 pixel glyph of `c` (letters upper-cased), rows top to bottom, 3 bits each with the left
+/// pixel highest; blank for characters it does not have. Enough for plot titles and legends.
+fn glyph(c: char) -> u16 {
+    match c.to_ascii_uppercase() {
+        'A' => 0b010101111101101,
+        'B' => 0b110101110101110,
+        'C' => 0b011100100100011,
+        'D' => 0b110101101101110,
+        'E' => 0b111100110100111,
+        'F' => 0b111100110100100,
+        'G' => 0b011100101101011,
+        'H' => 0b101101111101101,
+        'I' => 0b111010010010111,
+        'J' => 0b001001001101010,
+        'K' => 0b101101110101101,
+        'L' => 0b100100100100111,
+        'M' => 0b101111111101101,
+        'N' => 0b110101101101101,
+        'O' => 0b010101101101010,
+        'P' => 0b110101110100100,
+        'Q' => 0b010101101110011,
+        'R' => 0b110101110101101,
+        'S' => 0b011100010001110,
+        'T' => 0b111010010010010,
+        'U' => 0b101101101101111,
+        'V' => 0b101101101101010,
+        'W' => 0b101101111111101,
+        'X' => 0b101101010101101,
+        'Y' => 0b101101010010010,
+        'Z' => 0b111001010100111,
+        '0' => 0b111101101101111,
+        '1' => 0b010110010010111,
+        '2' => 0b110001010100111,
+        '3' => 0b110001010001110,
+        '4' => 0b101101111001001,
+        '5' => 0b111100110001110,
+        '6' => 0b011100111101111,
+        '7' => 0b111001010010010,
+        '8' => 0b111101111101111,
+        '9' => 0b111101111001110,
+        '.' => 0b000000000000010,
+        '-' => 0b000000111000000,
+        ':' => 0b000010000010000,
+        '%' => 0b101001010100101,
+        '(' => 0b001010010010001,
+        ')' => 0b100010010010100,
+        '/' => 0b001001010100100,
+        '_' => 0b000000000000111,
+        ',' => 0b000000000010100,
+        _ => 0,
+    }
+}
+
 /// An RGB drawing surface for overlays.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Canvas {
@@ -553,6 +606,26 @@ impl Canvas {
         if x >= 0 && y >= 0 && (x as usize) < self.width && (y as usize) < self.height {
             let k = 3 * (y as usize * self.width + x as usize);
             self.rgb[k..k + 3].copy_from_slice(&c);
+        }
+    }
+
+    /// Writes `text` with its top-left corner at (x, y), each glyph pixel a `scale`×`scale`
+    /// block (a 3×5 font: letters, digits, `.-:%()/_,`).
+    pub fn text(&mut self, x: i64, y: i64, text: &str, scale: i64, c: [u8; 3]) {
+        for (k, ch) in text.chars().enumerate() {
+            let g = glyph(ch);
+            let x0 = x + k as i64 * 4 * scale;
+            for row in 0..5 {
+                for col in 0..3 {
+                    if g >> (14 - (row * 3 + col)) & 1 == 1 {
+                        for dy in 0..scale {
+                            for dx in 0..scale {
+                                self.put(x0 + col * scale + dx, y + row * scale + dy, c);
+                            }
+                        }
+                    }
+                }
+            }
         }
     }
 
@@ -818,6 +891,22 @@ mod tests {
         lost.faces = r.faces.clone();
         lost.faces[0].state = FaceState::Detected;
         assert_eq!(frame_json(&lost, None)["state"], "detected");
+    }
+
+    #[test]
+    fn text_draws_the_glyph_pixels() {
+        let mut c = Canvas::from_gray(&GrayImage::new(12, 6));
+        let ink = [9, 9, 9];
+        // 'L': the left column, then the bottom row; 'l' is the same glyph; '~' draws nothing.
+        c.text(0, 0, "l~", 1, ink);
+        for row in 0..5 {
+            assert_eq!(c.get(0, row), Some(ink), "row {row}");
+            assert_eq!(
+                c.get(1, row),
+                if row == 4 { Some(ink) } else { Some([0, 0, 0]) }
+            );
+        }
+        assert!((4..8).all(|x| (0..5).all(|y| c.get(x, y) == Some([0, 0, 0]))));
     }
 
     #[test]
