@@ -549,6 +549,19 @@ pub fn point_of_gaze(
     targets: &[Target],
 ) -> PointOfGaze {
     let raw = raw_eye_rays(landmarks, fit);
+    point_of_gaze_from_rays(&raw, fit, calibration, config, previous, targets)
+}
+
+/// [`point_of_gaze`] from the face's uncorrected eye rays ([`raw_eye_rays`]), for a caller that
+/// keeps them too (the tracker records them for taps).
+pub fn point_of_gaze_from_rays(
+    raw: &[GazeRay; 2],
+    fit: &FaceFit,
+    calibration: &GazeCalibration,
+    config: &GazeConfig,
+    previous: Option<&Vector3<f64>>,
+    targets: &[Target],
+) -> PointOfGaze {
     let eyes = [0, 1].map(|e| GazeRay {
         origin: raw[e].origin,
         direction: calibration.correct(e, &raw[e].direction),

@@ -33,7 +33,8 @@ use crate::camera::Intrinsics;
 use crate::error::{Error, Result};
 use crate::fit::{FaceFit, Msbp, MsbpConfig, ShapeAccumulator};
 use crate::gaze::{
-    GazeCalibration, GazeConfig, GazeRay, PointOfGaze, Target, point_of_gaze, raw_eye_rays,
+    GazeCalibration, GazeConfig, GazeRay, PointOfGaze, Target, point_of_gaze_from_rays,
+    raw_eye_rays,
 };
 use crate::image::{Frame, GrayImage, Rect};
 use crate::landmarks::{FaceLandmarks, N_POINTS};
@@ -1157,8 +1158,9 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         for s in self.slots.iter_mut().filter(|s| s.active) {
             if let Some(fit) = s.fit {
                 let g = &self.gaze;
-                let gaze = point_of_gaze(
-                    &s.landmarks,
+                let raw = raw_eye_rays(&s.landmarks, &fit);
+                let gaze = point_of_gaze_from_rays(
+                    &raw,
                     &fit,
                     &g.calibration,
                     &g.config,
@@ -1167,7 +1169,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 );
                 s.gaze_dir = Some(gaze.ray.direction);
                 if frame.faces < MAX_FACES_LIMIT {
-                    frame.rays[frame.faces] = raw_eye_rays(&s.landmarks, &fit);
+                    frame.rays[frame.faces] = raw;
                     frame.faces += 1;
                 }
                 self.result.faces.push(TrackedFace {
