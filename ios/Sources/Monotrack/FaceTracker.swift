@@ -21,8 +21,7 @@ import Foundation
 public final class FaceTracker: @unchecked Sendable {
     private let native: MonotrackFFI.FaceTracker
     private let videoMode: Bool
-    private let lock = NSLock()
-    private var lastTimestampNs: Int64?
+    private let timestamps = MonotonicTimestamps()
 
     /// The configuration the tracker runs with.
     public let config: TrackerConfig
@@ -80,15 +79,13 @@ public final class FaceTracker: @unchecked Sendable {
     ///   `MonotrackError`s from the SDK.
     public func processFrame(bytes: Data, desc: FrameDesc, timestampNs: Int64) throws -> TrackingResult {
         guard videoMode else { return try native.processImage(bytes: bytes, desc: desc) }
-        return try native.processFrame(bytes: bytes, desc: desc, timestampNs: nextTimestamp(timestampNs))
+        return try native.processFrame(bytes: bytes, desc: desc, timestampNs: timestamps.next(timestampNs))
     }
 
     /// Forgets all tracks and the user's estimated face shape (camera switch, new person).
     public func reset() {
         native.reset()
-        lock.lock()
-        lastTimestampNs = nil
-        lock.unlock()
+        timestamps.reset()
     }
 
     /// Sets the targets each face's point of gaze is located among (e.g. `screenTarget(...)`
@@ -112,14 +109,6 @@ public final class FaceTracker: @unchecked Sendable {
     /// Forgets the gaze calibration (a new user).
     public func resetGazeCalibration() {
         native.resetGazeCalibration()
-    }
-
-    private func nextTimestamp(_ t: Int64) -> Int64 {
-        lock.lock()
-        defer { lock.unlock() }
-        let next = lastTimestampNs.map { t <= $0 ? $0 + 1 : t } ?? t
-        lastTimestampNs = next
-        return next
     }
 
     /// `time` in nanoseconds (0 for an invalid time, which the timestamp guard then moves forward).

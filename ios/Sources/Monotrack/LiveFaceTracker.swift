@@ -25,8 +25,7 @@ public enum LiveEvent: Sendable {
 public final class LiveTracker: @unchecked Sendable {
     private let native: MonotrackFFI.LiveFaceTracker
     private let continuation: AsyncStream<LiveEvent>.Continuation
-    private let lock = NSLock()
-    private var lastTimestampNs: Int64?
+    private let timestamps = MonotonicTimestamps()
 
     /// Every event, in timestamp order. Buffers the newest 8 for a slow consumer; the stream
     /// finishes when the tracker is shut down.
@@ -59,7 +58,7 @@ public final class LiveTracker: @unchecked Sendable {
         }
         let t = FaceTracker.nanoseconds(CMSampleBufferGetPresentationTimeStamp(sampleBuffer))
         return try pixelBuffer.withMonotrackFrame(orientation: orientation) { data, desc in
-            try native.processAsync(bytes: data, desc: desc, timestampNs: nextTimestamp(t))
+            try native.processAsync(bytes: data, desc: desc, timestampNs: timestamps.next(t))
         }
     }
 
@@ -68,14 +67,6 @@ public final class LiveTracker: @unchecked Sendable {
     public func shutdown() {
         native.shutdown()
         continuation.finish()
-    }
-
-    private func nextTimestamp(_ t: Int64) -> Int64 {
-        lock.lock()
-        defer { lock.unlock() }
-        let next = lastTimestampNs.map { t <= $0 ? $0 + 1 : t } ?? t
-        lastTimestampNs = next
-        return next
     }
 }
 
