@@ -10,7 +10,7 @@ use monotrack_core::camera::Intrinsics;
 use monotrack_core::detect::DetectorConfig;
 use monotrack_core::gaze::{GazeConfig, GazeFilter, Target};
 use monotrack_core::image::{Frame, Rect as CoreRect};
-use monotrack_core::model::{FaceModel, N_LANDMARKS};
+use monotrack_core::model::FaceModel;
 use monotrack_core::track::{self as core_track, TrackedFace, Tracker};
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -295,16 +295,9 @@ impl Face {
             fit_rms_px: f.fit.report.rms_px,
             point_of_gaze: PointOfGaze::from_core(&f.gaze, targets),
             vertices_mm: {
-                let fit = &f.fit;
-                let mut v = [nalgebra::Vector3::zeros(); N_LANDMARKS];
-                FaceModel::builtin().posed_into(
-                    &fit.shape,
-                    &fit.animation,
-                    &fit.pose.rotation,
-                    &fit.pose.translation,
-                    &mut v,
-                );
-                v.iter()
+                f.fit
+                    .posed_vertices()
+                    .iter()
                     .map(|p| Vec3 {
                         x: p.x,
                         y: p.y,

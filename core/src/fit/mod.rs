@@ -54,6 +54,22 @@ pub struct FaceFit {
     pub report: FitReport,
 }
 
+impl FaceFit {
+    /// The shipped face model deformed by this fit's units and placed by its pose: the 68 vertices
+    /// in camera coordinates, mm ([`FaceModel::posed_into`]).
+    pub fn posed_vertices(&self) -> [nalgebra::Vector3<f64>; N_LANDMARKS] {
+        let mut v = [nalgebra::Vector3::zeros(); N_LANDMARKS];
+        FaceModel::builtin().posed_into(
+            &self.shape,
+            &self.animation,
+            &self.pose.rotation,
+            &self.pose.translation,
+            &mut v,
+        );
+        v
+    }
+}
+
 /// FFBP's default confidence weights (thesis): 1.0 eyes, mouth, nose top and base; 0.8 brows and
 /// contour; 0.2 nostrils.
 pub fn ffbp_default_weights() -> LandmarkWeights {

@@ -17,7 +17,6 @@
 use crate::error::{Error, Result};
 use crate::fit::FaceFit;
 use crate::landmarks::FaceLandmarks;
-use crate::model::{FaceModel, N_LANDMARKS};
 use nalgebra::Vector3;
 
 /// Corners further than this from their best-fit plane make a target non-planar, mm.
@@ -500,14 +499,7 @@ pub struct PointOfGaze {
 /// The fitted face's eye centres (right, left): centroids of the posed eye-contour vertices,
 /// camera frame, mm.
 pub fn eye_centres(fit: &FaceFit) -> [Vector3<f64>; 2] {
-    let mut v = [Vector3::zeros(); N_LANDMARKS];
-    FaceModel::builtin().posed_into(
-        &fit.shape,
-        &fit.animation,
-        &fit.pose.rotation,
-        &fit.pose.translation,
-        &mut v,
-    );
+    let v = fit.posed_vertices();
     let mean = |r: std::ops::Range<usize>| v[r].iter().sum::<Vector3<f64>>() / 6.0;
     // iBUG 36–41: the subject's right eye; 42–47: the left.
     [mean(36..42), mean(42..48)]
