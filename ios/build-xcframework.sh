@@ -32,8 +32,8 @@ done
 
 dir=$PROFILE; [ "$PROFILE" = dev ] && dir=debug
 for t in "${TARGETS[@]}"; do
-  echo "== cargo build $t ($PROFILE)"
-  cargo build -p monotrack-ffi --lib --profile "$PROFILE" --target "$t"
+  echo "== cargo rustc --crate-type staticlib $t ($PROFILE)"
+  cargo rustc -p monotrack-ffi --lib --profile "$PROFILE" --target "$t" --crate-type staticlib
 done
 DEVICE_LIB="target/aarch64-apple-ios/$dir/libmonotrack_ffi.a"
 SIM_LIB="target/aarch64-apple-ios-sim/$dir/libmonotrack_ffi.a"

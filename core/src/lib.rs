@@ -26,6 +26,7 @@ pub mod landmarks;
 pub mod metrics;
 pub mod model;
 pub mod motion;
+mod onnx;
 mod stem;
 pub mod track;
 

@@ -347,14 +347,13 @@ impl StemWeights {
     /// [`crate::conv::available`], the 3×3 layers after it — takes their weights and cuts them
     /// from the graph; `None` (and `proto` untouched) when the first layer has another form.
     pub(crate) fn split_from(
-        onnx: &tract_onnx::Onnx,
         proto: &mut ModelProto,
         shapes: &[Vec<usize>],
     ) -> TractResult<Option<Self>> {
         let Some(layer) = StemLayer::find(proto, shapes, crate::conv::available()) else {
             return Ok(None);
         };
-        let weights = layer.weights(onnx, proto, shapes)?;
+        let weights = layer.weights(proto)?;
         layer.cut(proto);
         Ok(Some(weights))
     }
@@ -408,34 +407,22 @@ pub(crate) fn is_relu(node: &NodeProto) -> bool {
         || (node.op_type == "LeakyRelu" && attr(node, "alpha").is_some_and(|a| a.f == 0.0))
 }
 
-/// The values `names` of `proto` (for inputs of `shapes`) as tract computes them from zero
-/// inputs: the weights of layers run outside tract, whatever storage tract reads them from (int8
-/// with `DequantizeLinear`, float16 with `Cast`).
-pub(crate) fn values_by_name(
-    onnx: &tract_onnx::Onnx,
-    proto: &ModelProto,
-    shapes: &[Vec<usize>],
-    names: &[&str],
-) -> TractResult<TVec<TValue>> {
-    let mut model = onnx.model_for_proto_model(proto)?;
-    // tract's inputs leave out graph inputs that are initializers: check before indexing.
-    if model.input_outlets()?.len() != shapes.len() {
-        tract_onnx::tract_core::internal::bail!(
-            "{} inputs, expected {}",
-            model.input_outlets()?.len(),
-            shapes.len()
-        );
-    }
-    for (i, shape) in shapes.iter().enumerate() {
-        model.set_input_fact(i, f32::fact(shape).into())?;
-    }
-    model.select_outputs_by_name(names.iter())?;
-    let plan = model.into_optimized()?.into_runnable()?;
-    let zeros = shapes
+/// The weights `names` of `proto` as float32 tensors: the layers run outside tract read them
+/// whatever storage the graph gives them (int8 with `DequantizeLinear`, float16 with `Cast`).
+pub(crate) fn values_by_name(proto: &ModelProto, names: &[&str]) -> TractResult<TVec<TValue>> {
+    let Some(graph) = proto.graph.as_ref() else {
+        tract_onnx::tract_core::internal::bail!("no graph");
+    };
+    let constants = crate::onnx::constants(graph)?;
+    names
         .iter()
-        .map(|s| Tensor::zero::<f32>(s).map(TValue::from))
-        .collect::<TractResult<TVec<_>>>()?;
-    plan.run(zeros)
+        .map(|n| {
+            let t = constants.get(*n).ok_or_else(|| {
+                tract_onnx::tract_core::internal::format_err!("{n} is not a weight")
+            })?;
+            Ok(t.cast_to::<f32>()?.into_owned().into_tvalue())
+        })
+        .collect()
 }
 
 /// Whether `node` is a `Conv` with explicit (not automatic) padding, group 1 and dilation 1.
@@ -597,12 +584,7 @@ impl StemLayer {
 
     /// The layer's weights, the kernel and bias as tract computes them from the graph (so any
     /// storage of them tract reads — int8 with `DequantizeLinear`, float16 with `Cast` — works).
-    fn weights(
-        &self,
-        onnx: &tract_onnx::Onnx,
-        proto: &ModelProto,
-        shapes: &[Vec<usize>],
-    ) -> TractResult<StemWeights> {
+    fn weights(&self, proto: &ModelProto) -> TractResult<StemWeights> {
         let Some(graph) = proto.graph.as_ref() else {
             tract_onnx::tract_core::internal::bail!("no graph");
         };
@@ -614,7 +596,7 @@ impl StemLayer {
             .iter()
             .flat_map(|c| [c.input[1].as_str(), c.input[2].as_str()])
             .collect();
-        let out = values_by_name(onnx, proto, shapes, &names)?;
+        let out = values_by_name(proto, &names)?;
         let values = |t: &TValue| -> TractResult<Vec<f32>> {
             Ok(t.try_as_plain_ram()?.as_slice::<f32>()?.to_vec())
         };

@@ -27,7 +27,7 @@ use std::sync::Arc;
 use tract_onnx::prelude::*;
 
 /// The network, embedded (≈ 216 KB: float16 weight storage, float32 compute).
-static MODEL_ONNX: &[u8] = include_bytes!("../../models/detector/detector.onnx");
+pub(crate) static MODEL_ONNX: &[u8] = include_bytes!("../../models/detector/detector.onnx");
 /// The network's description written by the training script (strides, minimum face size).
 static MODEL_JSON: &str = include_str!("../../models/detector/detector.json");
 
@@ -183,7 +183,7 @@ impl ShapePlan {
 pub struct FaceDetector {
     config: DetectorConfig,
     /// The network without its first layer when that runs as a [`Stem`].
-    model: InferenceModel,
+    model: tract_onnx::pb::ModelProto,
     stem: Option<StemWeights>,
     /// Strides of the network's heads, in network pixels, in the order of its outputs.
     strides: Vec<usize>,
@@ -229,14 +229,18 @@ impl FaceDetector {
         let window_head = check_desc(&desc)?;
         crate::cpu::select_tract_kernels();
         let load = |e: TractError| Error::ModelLoad(format!("detector.onnx: {e:#}"));
-        let onnx = tract_onnx::onnx();
-        let mut proto = onnx
-            .proto_model_for_read(&mut std::io::Cursor::new(MODEL_ONNX))
-            .map_err(load)?;
+        let mut proto = crate::onnx::parse(MODEL_ONNX).map_err(load)?;
         // The first layer does not depend on the frame size: any shape finds and computes it.
         let nominal = [vec![1, 1, WINDOW_INPUT, WINDOW_INPUT]];
-        let stem = StemWeights::split_from(&onnx, &mut proto, &nominal).map_err(load)?;
-        let model = onnx.model_for_proto_model(&proto).map_err(load)?;
+        let stem = StemWeights::split_from(&mut proto, &nominal).map_err(load)?;
+        // Wired once now, so a network that does not load fails here rather than on a frame.
+        let shape = stem.as_ref().map_or(nominal[0].clone(), |w| {
+            Stem::new(1, WINDOW_INPUT, WINDOW_INPUT, w)
+                .output_shape()
+                .to_vec()
+        });
+        crate::onnx::typed_model(&proto, &[shape]).map_err(load)?;
+        let model = proto;
         Ok(Self {
             config,
             model,
@@ -277,10 +281,7 @@ impl FaceDetector {
             .as_ref()
             .map(|weights| Stem::new(1, h, w, weights));
         let shape = stem.as_ref().map_or([1, 1, h, w], Stem::output_shape);
-        let typed = self
-            .model
-            .clone()
-            .with_input_fact(0, f32::fact(shape).into())
+        let typed = crate::onnx::typed_model(&self.model, &[shape.to_vec()])
             .and_then(|m| m.into_optimized())
             .map_err(|e| Error::ModelLoad(format!("detector plan {w}x{h}: {e}")))?;
         let plan: Plan = typed

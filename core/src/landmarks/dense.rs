@@ -135,7 +135,6 @@ impl Dense {
     /// notes; `Ok(None)` otherwise (tract then runs the graph). Weights are read through tract
     /// (`onnx`), so any weight storage it reads works.
     pub(crate) fn from_proto(
-        onnx: &tract_onnx::Onnx,
         proto: &ModelProto,
         shapes: &[Vec<usize>],
     ) -> TractResult<Option<Self>> {
@@ -272,7 +271,7 @@ impl Dense {
             })
             .collect();
         // (The graph's inputs are `shapes`' alone, checked above, as `values_by_name` needs.)
-        let tensors = values_by_name(onnx, proto, shapes, &wanted)?;
+        let tensors = values_by_name(proto, &wanted)?;
         let mut tensors = tensors.iter();
         let mut ops = Vec::with_capacity(pending.len());
         for p in pending {

@@ -67,13 +67,10 @@ impl Net {
         use_dense: bool,
     ) -> Result<Self> {
         crate::cpu::select_tract_kernels();
-        let onnx = tract_onnx::onnx();
-        let mut proto = onnx
-            .proto_model_for_read(&mut &*bytes)
-            .map_err(load_err(what))?;
+        let mut proto = crate::onnx::parse(bytes).map_err(load_err(what))?;
         let mut shapes: Vec<Vec<usize>> = inputs.iter().map(|(_, s)| s.to_vec()).collect();
         let weights = if use_stem {
-            StemWeights::split_from(&onnx, &mut proto, &shapes).map_err(load_err(what))?
+            StemWeights::split_from(&mut proto, &shapes).map_err(load_err(what))?
         } else {
             None
         };
@@ -90,7 +87,7 @@ impl Net {
             .unwrap_or_default();
         // Only after a stem took the trunk is what is left the heads alone.
         let dense = if stem.is_some() && use_dense && input_names == want {
-            Dense::from_proto(&onnx, &proto, &shapes).map_err(load_err(what))?
+            Dense::from_proto(&proto, &shapes).map_err(load_err(what))?
         } else {
             None
         };
@@ -111,7 +108,7 @@ impl Net {
                 output_slots,
             });
         }
-        let mut model = onnx.model_for_proto_model(&proto).map_err(load_err(what))?;
+        let model = crate::onnx::typed_model(&proto, &shapes).map_err(load_err(what))?;
         let names: Vec<String> = model
             .input_outlets()
             .map_err(load_err(what))?
@@ -122,11 +119,6 @@ impl Net {
             return Err(Error::ModelLoad(format!(
                 "{what}: inputs {names:?}, expected {want:?} (models/M3_IO.md)"
             )));
-        }
-        for (i, shape) in shapes.iter().enumerate() {
-            model
-                .set_input_fact(i, f32::fact(shape).into())
-                .map_err(load_err(what))?;
         }
         let model = model.into_optimized().map_err(load_err(what))?;
         let mut output_slots = Vec::with_capacity(outputs.len());
@@ -241,10 +233,7 @@ fn with_input_slice(t: &mut Arc<Tensor>, f: impl FnOnce(&mut [f32])) -> Result<(
 /// The graph of an ONNX file (for the tests that check how the shipped networks are written).
 #[cfg(test)]
 fn onnx_graph(bytes: &[u8]) -> tract_onnx::pb::GraphProto {
-    let proto = tract_onnx::onnx()
-        .proto_model_for_read(&mut &*bytes)
-        .unwrap();
-    proto.graph.unwrap()
+    crate::onnx::parse(bytes).unwrap().graph.unwrap()
 }
 
 /// The graph output names of an ONNX file, in order.
@@ -383,9 +372,8 @@ mod tests {
     /// fail with a typed error) without panicking.
     #[test]
     fn a_first_layer_of_another_form_is_left_to_tract() {
-        let mut proto = tract_onnx::onnx()
-            .proto_model_for_read(&mut crate::landmarks::embedded_file("nose.onnx").unwrap())
-            .unwrap();
+        let mut proto =
+            crate::onnx::parse(crate::landmarks::embedded_file("nose.onnx").unwrap()).unwrap();
         let shapes = vec![vec![1, 1, 32, 32], vec![1, 5]];
         assert!(StemLayer::find(&proto, &shapes, false).is_some());
         assert!(StemLayer::find(&proto, &shapes, true).is_some());
