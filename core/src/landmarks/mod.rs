@@ -20,6 +20,7 @@
 
 mod dense;
 pub mod filter;
+pub mod gradient;
 mod m3;
 mod net;
 mod prior;
@@ -27,6 +28,9 @@ mod prior;
 pub(crate) use net::onnx_op_types;
 pub mod warp;
 
+pub use gradient::{
+    GRADIENT_NAMES, GRADIENT_TO_68, GradientConfig, GradientDetector, GradientPoints, N_GRADIENT,
+};
 pub use m3::{
     BilateralConfig, EMBEDDED_FILES, LEVEL1_BOX_TOP, Level1Config, M3, M3Config, RefSource,
     ZoneConfig, embedded_file,
@@ -77,6 +81,10 @@ pub struct FaceLandmarks {
     pub gaze_right: [f32; 3],
     /// Normalised sum of both eyes' gaze vectors, camera frame.
     pub gaze_combined: [f32; 3],
+    /// Per point, the estimator's confidence in 0..1, which the 3D fit uses as its weight: 1 for
+    /// every M3 point; for the gradient detector its points' confidences, and 0 for the points it
+    /// has no counterpart of (those hold the mean face placed on the found points).
+    pub weights: [f32; N_POINTS],
 }
 
 impl Default for FaceLandmarks {
@@ -90,6 +98,7 @@ impl Default for FaceLandmarks {
             gaze_left: [0.0, 0.0, 1.0],
             gaze_right: [0.0, 0.0, 1.0],
             gaze_combined: [0.0, 0.0, 1.0],
+            weights: [1.0; N_POINTS],
         }
     }
 }
