@@ -570,7 +570,10 @@ impl GradientDetector {
                 &mut pts,
                 &mut conf,
             )?;
-            if best.is_none_or(|(b, _)| score > b) {
+            // Another turn replaces the hint's only when its eyes are clearly better: on real
+            // faces a brow or a shadow can pair up with an eye in a turned patch.
+            let margin = if turn == 0.0 { 0.0 } else { 0.25 };
+            if best.is_none_or(|(b, _)| score > b + margin) {
                 best = Some((score, frame));
             }
             // A clear, level pair of eyes at the hint needs no other turn.
@@ -615,8 +618,17 @@ impl GradientDetector {
             self.eyes(pts, conf);
             let (r, l) = (eye_centre(pts, 0), eye_centre(pts, 1));
             let delta = (l[1] - r[1]).atan2(l[0] - r[0]);
-            score = conf[14].min(conf[20]) - delta.abs() / 45f32.to_radians();
-            if conf[14].min(conf[20]) <= PRIOR_CONFIDENCE || delta.abs() > 45f32.to_radians() {
+            // Eyes much nearer or further apart than the frame's scale expects are not a pair.
+            let expected = (mean_eye(1)[0] - mean_eye(0)[0]) * SCALE as f32;
+            let ratio = (l[0] - r[0]).hypot(l[1] - r[1]) / expected;
+            let paired = (0.8..1.25).contains(&ratio);
+            score = conf[14].min(conf[20])
+                - delta.abs() / 45f32.to_radians()
+                - if paired { 0.0 } else { 1.0 };
+            if conf[14].min(conf[20]) <= PRIOR_CONFIDENCE
+                || delta.abs() > 45f32.to_radians()
+                || !paired
+            {
                 break;
             }
             let to_image = |p: [f32; 2]| {

@@ -6,14 +6,23 @@
 //! detection finds them (the tracker's defaults, or with `--small-faces` its small-faces operating
 //! point, `track::SMALL_FACES_MIN_FACE_PX`). One output line per input line; a bad line yields
 //! `{"line": N, "error": "..."}` in its place, a message on stderr, and exit status 1 at the end.
+//!
+//! `--landmarks gradient` is the ultra-light mode: no landmark network is loaded; the learning-free
+//! gradient detector gives 32 points (`landmarks32`, `confidence32`), `landmarks68` holds those
+//! with a 68-point counterpart at their index and `null` elsewhere, the fit is FFBP weighted by
+//! the points' confidences, and the fields only M3 gives (yaw, gestures, gaze) are `null`.
+//! Detected faces are those the detector scores at or above the tracker's detection score (no
+//! face classifier runs).
 
 use crate::json::{CameraJson, intrinsics, put_fit, put_point_of_gaze};
 use crate::{LineSink, read_lines};
 use monotrack_core::detect::DetectorConfig;
-use monotrack_core::fit::{Msbp, MsbpConfig};
+use monotrack_core::fit::{Ffbp, FfbpConfig, Msbp, MsbpConfig};
 use monotrack_core::gaze::{Target, point_of_gaze};
 use monotrack_core::image::{GrayImage, Rect};
-use monotrack_core::landmarks::{BROW_GESTURES, FaceLandmarks, M3, MOUTH_GESTURES, N_POINTS};
+use monotrack_core::landmarks::{
+    BROW_GESTURES, FaceLandmarks, GradientDetector, GradientPoints, M3, MOUTH_GESTURES, N_POINTS,
+};
 use monotrack_core::track::{
     DEFAULT_MIN_DETECTION_CONFIDENCE, ModelDetector, RegionDetector,
     SMALL_FACES_MIN_DETECTION_SCORE, SMALL_FACES_MIN_FACE_PX, TrackerConfig, check_detections,
@@ -41,10 +50,23 @@ struct LineIn {
 /// face, level 1's output from the face check.
 type FaceToDo = (Rect, Option<f32>, Option<FaceLandmarks>);
 
+/// Which landmark detector a face command runs (CONTRACT.md `--landmarks`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Landmarker {
+    /// The M3 networks (default).
+    M3,
+    /// The learning-free 32-point gradient detector with the FFBP fit (ultra-light mode).
+    Gradient,
+}
+
 /// Everything reused from line to line.
 struct Pipeline {
-    m3: M3,
+    /// M3, loaded in M3 mode only.
+    m3: Option<M3>,
+    gradient: GradientDetector,
+    points32: GradientPoints,
     msbp: Msbp,
+    ffbp: Ffbp,
     gray: GrayImage,
     lm: FaceLandmarks,
     /// Created on the first line without boxes (lines with boxes never pay for it).
@@ -83,12 +105,27 @@ impl Pipeline {
         let det = self.detector.as_mut().ok_or("detector unavailable")?;
         det.detect(&self.gray, &mut self.candidates)
             .map_err(|e| e.to_string())?;
+        let Some(m3) = self.m3.as_mut() else {
+            // Ultra-light: no face classifier; the detector's score decides, as the tracker's
+            // cascade's first gate does.
+            let min = if self.small_faces {
+                SMALL_FACES_MIN_DETECTION_SCORE
+            } else {
+                TrackerConfig::default().min_detection_score
+            };
+            return Ok(self
+                .candidates
+                .iter()
+                .filter(|c| c.1 >= min)
+                .map(|&(rect, score)| (rect, Some(score), None))
+                .collect());
+        };
         // As in the tracker: a detection must also pass M3's face classifier, which rejects the
         // face-like clutter the compact detector scores high (core/models/MODEL_CARD.md), on the
         // box of level 1's points. The check's level-1 output is kept, so an accepted face only
         // needs level 2 (`M3::refine`), as in the tracker.
         check_detections(
-            &mut self.m3,
+            m3,
             &self.gray,
             &mut self.candidates,
             DEFAULT_MIN_DETECTION_CONFIDENCE,
@@ -168,6 +205,58 @@ fn face_json(rect: &Rect, score: f32, lm: &FaceLandmarks) -> Map<String, Value> 
     face
 }
 
+/// The CONTRACT's FACE object of the gradient detector, without the fit fields.
+fn gradient_face_json(
+    rect: &Rect,
+    score: f32,
+    lm: &FaceLandmarks,
+    g: &GradientPoints,
+) -> Map<String, Value> {
+    let pt = |p: &[f32; 2]| json!([round(f64::from(p[0]), 3), round(f64::from(p[1]), 3)]);
+    let mut face = Map::new();
+    face.insert(
+        "box".into(),
+        json!([rect.x, rect.y, rect.w, rect.h].map(|v| round(f64::from(v), 2))),
+    );
+    face.insert("score".into(), json!(round(f64::from(score), 4)));
+    face.insert(
+        "landmarks68".into(),
+        json!(
+            lm.points
+                .iter()
+                .zip(&lm.weights)
+                .enumerate()
+                .map(
+                    |(k, (p, _))| if monotrack_core::landmarks::GRADIENT_TO_68.contains(&Some(k)) {
+                        pt(p)
+                    } else {
+                        Value::Null
+                    }
+                )
+                .collect::<Vec<_>>()
+        ),
+    );
+    face.insert(
+        "landmarks32".into(),
+        json!(g.points.iter().map(pt).collect::<Vec<_>>()),
+    );
+    face.insert(
+        "confidence32".into(),
+        json!(
+            g.confidence
+                .iter()
+                .map(|c| round(f64::from(*c), 3))
+                .collect::<Vec<_>>()
+        ),
+    );
+    face.insert("roll_deg".into(), json!(round(f64::from(g.roll_deg), 2)));
+    face.insert("face_prob".into(), json!(round(f64::from(lm.face_prob), 4)));
+    for k in ["yaw_class_deg", "yaw_probs", "gestures", "gaze"] {
+        face.insert(k.into(), Value::Null);
+    }
+    face
+}
+
 fn landmarks_line(
     text: &str,
     base: &Path,
@@ -203,13 +292,44 @@ fn landmarks_line(
     let mut faces = Vec::with_capacity(boxes.len());
     for (k, (rect, det_score, checked)) in boxes.iter().enumerate() {
         let t0 = Instant::now();
+        let Some(m3) = p.m3.as_mut() else {
+            p.gradient
+                .detect(&p.gray, rect, 0.0, &mut p.points32)
+                .map_err(|e| format!("face {k}: {e}"))?;
+            p.points32.to_landmarks(&mut p.lm);
+            landmarks_us += t0.elapsed().as_micros() as u64;
+            let (mut pts, mut w) = ([[0.0f64; 2]; N_POINTS], [0.0f64; N_POINTS]);
+            for ((d, wd), (s, ws)) in pts
+                .iter_mut()
+                .zip(&mut w)
+                .zip(p.lm.points.iter().zip(&p.lm.weights))
+            {
+                *d = [f64::from(s[0]), f64::from(s[1])];
+                *wd = f64::from(*ws);
+            }
+            let t1 = Instant::now();
+            let fit = p
+                .ffbp
+                .fit(&pts, Some(&w), &cam)
+                .map_err(|e| format!("face {k}: fit: {e}"))?;
+            fit_us += t1.elapsed().as_micros() as u64;
+            let mut face = gradient_face_json(
+                rect,
+                det_score.unwrap_or(p.lm.face_prob),
+                &p.lm,
+                &p.points32,
+            );
+            put_fit(&mut face, &fit);
+            faces.push(Value::Object(face));
+            continue;
+        };
         // A detected face's level 1 ran in the face check (timed under `detect`).
         match checked {
             Some(level1) => {
                 p.lm = *level1;
-                p.m3.refine(&p.gray, &mut p.lm)
+                m3.refine(&p.gray, &mut p.lm)
             }
-            None => p.m3.estimate(&p.gray, rect, &mut p.lm),
+            None => m3.estimate(&p.gray, rect, &mut p.lm),
         }
         .map_err(|e| format!("face {k}: {e}"))?;
         landmarks_us += t0.elapsed().as_micros() as u64;
@@ -256,8 +376,12 @@ pub fn run(
     mirror_average: bool,
     small_faces: bool,
     targets: Option<&Path>,
+    landmarker: Landmarker,
 ) -> Result<bool, String> {
     let targets = targets.map(crate::json::load_targets).transpose()?;
+    if targets.is_some() && landmarker == Landmarker::Gradient {
+        return Err("--targets needs the eyes' gaze, which only --landmarks m3 gives".into());
+    }
     let lines = read_lines(input)?;
     let base = input
         .parent()
@@ -265,8 +389,14 @@ pub fn run(
         .unwrap_or_else(|| PathBuf::from("."));
     let mut sink = LineSink::new(out)?;
     let mut p = Pipeline {
-        m3: M3::new().map_err(|e| e.to_string())?,
+        m3: match landmarker {
+            Landmarker::M3 => Some(M3::new().map_err(|e| e.to_string())?),
+            Landmarker::Gradient => None,
+        },
+        gradient: GradientDetector::new(),
+        points32: GradientPoints::default(),
         msbp: Msbp::new(MsbpConfig::default()),
+        ffbp: Ffbp::new(FfbpConfig::default()),
         gray: GrayImage::default(),
         lm: FaceLandmarks::default(),
         detector: None,
@@ -274,7 +404,9 @@ pub fn run(
         accepted: Vec::new(),
         small_faces,
     };
-    p.m3.set_mirror_average(mirror_average);
+    if let Some(m3) = p.m3.as_mut() {
+        m3.set_mirror_average(mirror_average);
+    }
     let mut ok = true;
     for (n, text) in lines {
         let v = landmarks_line(&text, &base, &mut p, targets.as_deref()).unwrap_or_else(|e| {

@@ -65,6 +65,10 @@ enum Command {
         /// Gaze targets (CONTRACT.md `T.json`): each face gets its point of gaze.
         #[arg(long)]
         targets: Option<PathBuf>,
+        /// The landmark detector: the M3 networks, or the learning-free 32-point gradient
+        /// detector with the FFBP fit (ultra-light mode, no landmark network loaded).
+        #[arg(long, value_enum, default_value = "m3")]
+        landmarks: landmarks::Landmarker,
     },
     /// Detect faces in images with the SDK's detector: {"image": path} lines in, boxes + scores out.
     Detect {
@@ -255,12 +259,14 @@ fn main() -> ExitCode {
             mirror_average: _,
             small_faces,
             targets,
+            landmarks: landmarker,
         } => landmarks::run(
             &input,
             out.as_deref(),
             !single_pass,
             small_faces,
             targets.as_deref(),
+            landmarker,
         ),
         Command::Detect {
             input,

@@ -299,3 +299,98 @@ fn small_faces_detects_the_face_first_and_keeps_the_contract() {
     assert_eq!(faces[0]["landmarks68"].as_array().unwrap().len(), 68);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--landmarks gradient`: the CONTRACT's gradient-mode FACE (32 points with confidences, 68 with
+/// `null` where there is no counterpart, a fit, no M3 fields), its points around the face M3
+/// finds on the same box, and the detector's faces without a box.
+#[test]
+fn gradient_mode_follows_the_contract_on_the_face() {
+    let dir = dir_with_astronaut("grad");
+    let input = dir.join("in.jsonl");
+    let b = ASTRONAUT_BOX;
+    std::fs::write(
+        &input,
+        format!(
+            "{{\"image\": \"astronaut.jpg\", \"faces\": [{{\"box\": [{}, {}, {}, {}]}}]}}\n{{\"image\": \"astronaut.jpg\"}}\n",
+            b[0], b[1], b[2], b[3]
+        ),
+    )
+    .unwrap();
+    let run = |mode: &str| {
+        let out = monotrack(&["landmarks", input.to_str().unwrap(), "--landmarks", mode]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+            .collect::<Vec<_>>()
+    };
+    let (grad, m3) = (run("gradient"), run("m3"));
+    let g = &grad[0]["faces"][0];
+    let m = &m3[0]["faces"][0];
+    let l32 = g["landmarks32"].as_array().unwrap();
+    let c32 = g["confidence32"].as_array().unwrap();
+    assert_eq!((l32.len(), c32.len()), (32, 32));
+    assert!(
+        c32.iter()
+            .all(|c| (0.0..=1.0).contains(&c.as_f64().unwrap()))
+    );
+    let l68 = g["landmarks68"].as_array().unwrap();
+    assert_eq!(l68.len(), 68);
+    let present: Vec<usize> = (0..68).filter(|&k| !l68[k].is_null()).collect();
+    assert_eq!(present.len(), 27, "{present:?}");
+    for k in ["yaw_class_deg", "yaw_probs", "gestures", "gaze"] {
+        assert!(g[k].is_null(), "{k}");
+    }
+    assert!(g["pose"].is_object() && g["fit_rms_px"].as_f64().unwrap().is_finite());
+    // On the face M3 finds on the same box: the points' mean within three quarters of the eye
+    // distance of M3's, each point within two eye distances. (A bound on gross failure only: on
+    // real faces the detector is far less accurate than M3, core/models/gradient_metrics.json.)
+    let pt = |v: &serde_json::Value| [v[0].as_f64().unwrap(), v[1].as_f64().unwrap()];
+    let m68 = m["landmarks68"].as_array().unwrap();
+    let iod = {
+        let (a, b) = (pt(&m68[36]), pt(&m68[45]));
+        (a[0] - b[0]).hypot(a[1] - b[1])
+    };
+    let centre = |pts: &mut dyn Iterator<Item = [f64; 2]>| {
+        let v: Vec<[f64; 2]> = pts.collect();
+        let n = v.len() as f64;
+        [
+            v.iter().map(|p| p[0]).sum::<f64>() / n,
+            v.iter().map(|p| p[1]).sum::<f64>() / n,
+        ]
+    };
+    let cg = centre(&mut present.iter().map(|&k| pt(&l68[k])));
+    let cm = centre(&mut present.iter().map(|&k| pt(&m68[k])));
+    assert!(
+        (cg[0] - cm[0]).hypot(cg[1] - cm[1]) < 0.75 * iod,
+        "{cg:?} vs {cm:?}"
+    );
+    for &k in &present {
+        let (a, b) = (pt(&l68[k]), pt(&m68[k]));
+        assert!((a[0] - b[0]).hypot(a[1] - b[1]) < 2.0 * iod, "point {k}");
+    }
+    // Without a box the detector finds the face (no face classifier in this mode).
+    let faces = grad[1]["faces"].as_array().unwrap();
+    assert!(faces.iter().any(centred_on_the_face), "{faces:?}");
+    // No gaze without M3.
+    let targets = dir.join("t.json");
+    std::fs::write(
+        &targets,
+        r#"{"targets": [{"id": "s", "corners_mm": [[0,0,0],[1,0,0],[0,1,0]]}]}"#,
+    )
+    .unwrap();
+    let out = monotrack(&[
+        "landmarks",
+        input.to_str().unwrap(),
+        "--landmarks",
+        "gradient",
+        "--targets",
+        targets.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+}
