@@ -42,7 +42,7 @@ pub fn select_tract_kernels() {
         if let Some(edit) = x86::cpu_id().and_then(|(v, f, avx512)| isa_edit(&v, f, avx512)) {
             // A refusal (another component of the process set the knob differently) leaves that
             // setting: the kernels differ in speed and in float rounding only.
-            let _ = tract_onnx::tract_core::knobs::set_config_global("TRACT_CPU_ISA", edit);
+            let _ = tract_core::knobs::set_config_global("TRACT_CPU_ISA", edit);
         }
     });
 }
@@ -344,7 +344,7 @@ mod tests {
         assert!(vendor.iter().all(|b| b.is_ascii_graphic()), "{vendor:?}");
         assert!(family >= 6, "family {family:#x}");
         select_tract_kernels();
-        use tract_onnx::tract_core::tract_linalg::isa::{Isa, native};
+        use tract_core::tract_linalg::isa::{Isa, native};
         if std::env::var_os("TRACT_CPU_ISA").is_some() {
             return; // the environment overrides the library's choice
         }

@@ -2,26 +2,117 @@
 //! operators the networks use, without tract-onnx's operator registry.
 //!
 //! tract-onnx's front end registers every ONNX operator it knows (and, through them, tract's
-//! inference layer and most of tract-core's operators); linked into the phone library that was
-//! over half of its size. Here only the protobuf types of tract-onnx are used, and the graph is
-//! wired with tract-core operators directly, the way tract-onnx's own expansions wire them
+//! inference layer, its NNEF layer and most of tract-core's operators); linked into the phone
+//! library that was over half of its size. Here the protobuf messages the networks need are
+//! declared in [`pb`] (prost skips every other field), and the graph is wired with tract-core
+//! operators directly, the way tract-onnx's own expansions wire them
 //! (`Conv`, `LeakyRelu`, `Gemm` as an `EinSum` plus a bias, `Flatten` as a reshape, `Concat`,
 //! and `Add`/`Sub`/`Mul`/`Div` with rank broadcasting). Weights stored as `DequantizeLinear` of
 //! int8, `Cast` of float16 or `Constant` nodes are evaluated here, once, at load. Anything else
 //! is a typed error naming the operator. The tests hold every shipped network's outputs to what
 //! tract-onnx computes for the same bytes.
 
+use pb::{AttributeProto, GraphProto, ModelProto, NodeProto, TensorProto};
 use std::collections::HashMap;
-use tract_onnx::pb::{AttributeProto, GraphProto, ModelProto, NodeProto, TensorProto};
-use tract_onnx::prelude::*;
-use tract_onnx::tract_core::axes::AxesMapping;
-use tract_onnx::tract_core::internal::{bail, ensure, format_err};
-use tract_onnx::tract_core::ops::array::TypedConcat;
-use tract_onnx::tract_core::ops::change_axes::{AxisOp, wire_with_rank_broadcast};
-use tract_onnx::tract_core::ops::cnn::{Conv, KernelFormat, PaddingSpec, PoolSpec};
-use tract_onnx::tract_core::ops::einsum::EinSum;
-use tract_onnx::tract_core::ops::math;
-use tract_onnx::tract_core::ops::nn::{DataFormat, leaky_relu};
+use tract_core::axes::AxesMapping;
+use tract_core::internal::*;
+use tract_core::internal::{bail, ensure, format_err};
+use tract_core::ops::array::TypedConcat;
+use tract_core::ops::change_axes::{AxisOp, wire_with_rank_broadcast};
+use tract_core::ops::cnn::{Conv, KernelFormat, PaddingSpec, PoolSpec};
+use tract_core::ops::einsum::EinSum;
+use tract_core::ops::math;
+use tract_core::ops::nn::{DataFormat, leaky_relu};
+
+/// The ONNX protobuf messages (`onnx.proto`), with the fields the networks use; prost skips the
+/// others when decoding.
+pub(crate) mod pb {
+    /// A whole model file.
+    #[derive(Clone, PartialEq, prost::Message)]
+    pub struct ModelProto {
+        #[prost(message, optional, tag = "7")]
+        pub graph: Option<GraphProto>,
+    }
+
+    /// The network.
+    #[derive(Clone, PartialEq, prost::Message)]
+    pub struct GraphProto {
+        #[prost(message, repeated, tag = "1")]
+        pub node: Vec<NodeProto>,
+        #[prost(string, tag = "2")]
+        pub name: String,
+        #[prost(message, repeated, tag = "5")]
+        pub initializer: Vec<TensorProto>,
+        #[prost(message, repeated, tag = "11")]
+        pub input: Vec<ValueInfoProto>,
+        #[prost(message, repeated, tag = "12")]
+        pub output: Vec<ValueInfoProto>,
+    }
+
+    /// A graph input or output (its name; the type is not read).
+    #[derive(Clone, PartialEq, prost::Message)]
+    pub struct ValueInfoProto {
+        #[prost(string, tag = "1")]
+        pub name: String,
+    }
+
+    /// One operator.
+    #[derive(Clone, PartialEq, prost::Message)]
+    pub struct NodeProto {
+        #[prost(string, repeated, tag = "1")]
+        pub input: Vec<String>,
+        #[prost(string, repeated, tag = "2")]
+        pub output: Vec<String>,
+        #[prost(string, tag = "3")]
+        pub name: String,
+        #[prost(string, tag = "4")]
+        pub op_type: String,
+        #[prost(message, repeated, tag = "5")]
+        pub attribute: Vec<AttributeProto>,
+        #[prost(string, tag = "7")]
+        pub domain: String,
+    }
+
+    /// An operator's attribute.
+    #[derive(Clone, PartialEq, prost::Message)]
+    pub struct AttributeProto {
+        #[prost(string, tag = "1")]
+        pub name: String,
+        #[prost(float, tag = "2")]
+        pub f: f32,
+        #[prost(int64, tag = "3")]
+        pub i: i64,
+        #[prost(bytes = "vec", tag = "4")]
+        pub s: Vec<u8>,
+        #[prost(message, optional, tag = "5")]
+        pub t: Option<TensorProto>,
+        #[prost(float, repeated, tag = "7")]
+        pub floats: Vec<f32>,
+        #[prost(int64, repeated, tag = "8")]
+        pub ints: Vec<i64>,
+        #[prost(int32, tag = "20")]
+        pub r#type: i32,
+    }
+
+    /// A constant tensor.
+    #[derive(Clone, PartialEq, prost::Message)]
+    pub struct TensorProto {
+        #[prost(int64, repeated, tag = "1")]
+        pub dims: Vec<i64>,
+        #[prost(int32, tag = "2")]
+        pub data_type: i32,
+        #[prost(float, repeated, tag = "4")]
+        pub float_data: Vec<f32>,
+        #[prost(int32, repeated, tag = "5")]
+        pub int32_data: Vec<i32>,
+        #[prost(int64, repeated, tag = "7")]
+        pub int64_data: Vec<i64>,
+        #[prost(string, tag = "8")]
+        pub name: String,
+        #[prost(bytes = "vec", tag = "9")]
+        pub raw_data: Vec<u8>,
+    }
+}
 
 /// ONNX `TensorProto.DataType` codes read here.
 const FLOAT: i32 = 1;
@@ -451,6 +542,7 @@ pub(crate) fn typed_model(proto: &ModelProto, shapes: &[Vec<usize>]) -> TractRes
 #[cfg(test)]
 mod tests {
     use super::*;
+    use tract_onnx::prelude::InferenceModelExt;
 
     /// tract-onnx's whole front end on `bytes` with inputs of `shapes`, then our model, on the
     /// same deterministic inputs: outputs equal to float rounding.

@@ -18,8 +18,8 @@
 //! input (its border stays zero), so tract's second convolution pads nothing.
 
 use crate::conv::{Conv3x3, ConvWeights};
-use tract_onnx::pb::{AttributeProto, ModelProto, NodeProto, TensorProto};
-use tract_onnx::prelude::*;
+use crate::onnx::pb::{AttributeProto, ModelProto, NodeProto, TensorProto};
+use tract_core::internal::*;
 
 /// The first layer of one network and its buffers. Shapes: input `batch × in_h × in_w` (what the
 /// network's image input held), output `batch × channels × (out_h + 2·pad) × (out_w + 2·pad)`.
@@ -411,15 +411,15 @@ pub(crate) fn is_relu(node: &NodeProto) -> bool {
 /// whatever storage the graph gives them (int8 with `DequantizeLinear`, float16 with `Cast`).
 pub(crate) fn values_by_name(proto: &ModelProto, names: &[&str]) -> TractResult<TVec<TValue>> {
     let Some(graph) = proto.graph.as_ref() else {
-        tract_onnx::tract_core::internal::bail!("no graph");
+        tract_core::internal::bail!("no graph");
     };
     let constants = crate::onnx::constants(graph)?;
     names
         .iter()
         .map(|n| {
-            let t = constants.get(*n).ok_or_else(|| {
-                tract_onnx::tract_core::internal::format_err!("{n} is not a weight")
-            })?;
+            let t = constants
+                .get(*n)
+                .ok_or_else(|| tract_core::internal::format_err!("{n} is not a weight"))?;
             Ok(t.cast_to::<f32>()?.into_owned().into_tvalue())
         })
         .collect()
@@ -586,7 +586,7 @@ impl StemLayer {
     /// storage of them tract reads — int8 with `DequantizeLinear`, float16 with `Cast` — works).
     fn weights(&self, proto: &ModelProto) -> TractResult<StemWeights> {
         let Some(graph) = proto.graph.as_ref() else {
-            tract_onnx::tract_core::internal::bail!("no graph");
+            tract_core::internal::bail!("no graph");
         };
         let convs: Vec<&NodeProto> = std::iter::once(self.conv)
             .chain(self.chain.iter().map(|&(i, _)| i))
@@ -606,7 +606,7 @@ impl StemLayer {
         for (kernel, bias) in out.chunks_exact(2).map(|kb| (&kb[0], &kb[1])) {
             let cout = bias.len();
             if kernel.shape() != [cout, cin, 3, 3] || bias.rank() != 1 {
-                tract_onnx::tract_core::internal::bail!(
+                tract_core::internal::bail!(
                     "layer {}: kernel {:?} and bias {:?}",
                     layers.len() + 1,
                     kernel.shape(),
@@ -618,7 +618,7 @@ impl StemLayer {
         }
         let mut layers = layers.into_iter();
         let Some((kernel, bias)) = layers.next() else {
-            tract_onnx::tract_core::internal::bail!("no first layer");
+            tract_core::internal::bail!("no first layer");
         };
         Ok(StemWeights {
             kernel,

@@ -24,7 +24,7 @@ use crate::{Error, Result};
 use resample::AreaResampler;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
-use tract_onnx::prelude::*;
+use tract_core::internal::*;
 
 /// The network, embedded (≈ 216 KB: float16 weight storage, float32 compute).
 pub(crate) static MODEL_ONNX: &[u8] = include_bytes!("../../models/detector/detector.onnx");
@@ -183,7 +183,7 @@ impl ShapePlan {
 pub struct FaceDetector {
     config: DetectorConfig,
     /// The network without its first layer when that runs as a [`Stem`].
-    model: tract_onnx::pb::ModelProto,
+    model: crate::onnx::pb::ModelProto,
     stem: Option<StemWeights>,
     /// Strides of the network's heads, in network pixels, in the order of its outputs.
     strides: Vec<usize>,
@@ -549,6 +549,7 @@ fn nms(cands: &mut [Detection], iou_thr: f32, max_out: usize, out: &mut Vec<Dete
 
 #[cfg(test)]
 mod tests {
+    use tract_onnx::prelude::InferenceModelExt;
     use super::*;
 
     fn det(x: f32, y: f32, s: f32, score: f32) -> Detection {

@@ -17,9 +17,9 @@
 //! (`DequantizeLinear`, `Cast` and `Constant` of weights, initializers); anything else leaves the
 //! graph to tract.
 
+use crate::onnx::pb::{ModelProto, NodeProto};
 use crate::stem::{attr, is_relu, values_by_name};
-use tract_onnx::pb::{ModelProto, NodeProto};
-use tract_onnx::prelude::*;
+use tract_core::internal::*;
 
 /// Outputs of a layer accumulated together: four 256-bit registers, which stay in registers
 /// over the whole input (accumulating in the output buffer instead made every product a load and
@@ -106,7 +106,7 @@ pub(crate) struct Dense {
 /// The names of the values that are weights — initializers, and the outputs of `Constant`,
 /// `DequantizeLinear` and `Cast` nodes fed by weights alone (evaluated by tract once, at load) —
 /// and whether each node is such a weight maker.
-fn weights_of(graph: &tract_onnx::pb::GraphProto) -> (Vec<String>, Vec<bool>) {
+fn weights_of(graph: &crate::onnx::pb::GraphProto) -> (Vec<String>, Vec<bool>) {
     let mut names: Vec<String> = graph.initializer.iter().map(|t| t.name.clone()).collect();
     let mut makers = Vec::with_capacity(graph.node.len());
     for n in &graph.node {
@@ -288,7 +288,7 @@ impl Dense {
                     ..
                 } => {
                     let (Some(b), Some(c)) = (tensors.next(), tensors.next()) else {
-                        tract_onnx::tract_core::internal::bail!("weights missing");
+                        tract_core::internal::bail!("weights missing");
                     };
                     let (bv, cv) = (
                         b.try_as_plain_ram()?.as_slice::<f32>()?,

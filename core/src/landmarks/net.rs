@@ -8,7 +8,7 @@ use super::dense::Dense;
 use crate::error::{Error, Result};
 use crate::stem::{Stem, StemWeights, with_f32_slice};
 use std::sync::Arc;
-use tract_onnx::prelude::*;
+use tract_core::internal::*;
 
 /// A loaded network with named outputs and reusable inputs.
 #[derive(Debug)]
@@ -232,7 +232,7 @@ fn with_input_slice(t: &mut Arc<Tensor>, f: impl FnOnce(&mut [f32])) -> Result<(
 
 /// The graph of an ONNX file (for the tests that check how the shipped networks are written).
 #[cfg(test)]
-fn onnx_graph(bytes: &[u8]) -> tract_onnx::pb::GraphProto {
+fn onnx_graph(bytes: &[u8]) -> crate::onnx::pb::GraphProto {
     crate::onnx::parse(bytes).unwrap().graph.unwrap()
 }
 
@@ -386,7 +386,7 @@ mod tests {
             .iter_mut()
             .find(|n| n.op_type == "Flatten")
             .unwrap();
-        flatten.attribute.push(tract_onnx::pb::AttributeProto {
+        flatten.attribute.push(crate::onnx::pb::AttributeProto {
             name: "pads".into(),
             ints: vec![1, 1, 1, 1],
             ..Default::default()
