@@ -549,8 +549,8 @@ fn nms(cands: &mut [Detection], iou_thr: f32, max_out: usize, out: &mut Vec<Dete
 
 #[cfg(test)]
 mod tests {
-    use tract_onnx::prelude::InferenceModelExt;
     use super::*;
+    use tract_onnx::prelude::InferenceModelExt;
 
     fn det(x: f32, y: f32, s: f32, score: f32) -> Detection {
         Detection {
