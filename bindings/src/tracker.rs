@@ -65,6 +65,13 @@ pub struct TrackerConfig {
     /// default): on for stills (`process_image`, image running mode), off in video mode, where it
     /// gains nothing.
     pub mirror_average: Option<bool>,
+    /// The ultra-light mode: the learning-free gradient landmark detector (no landmark network
+    /// loaded; 32 points, 27 of them in `landmarks`, the others placed by the mean face with
+    /// weight 0) and the weak-perspective FFBP fit; no gestures or gaze. Far less accurate than
+    /// M3 (`core/models/gradient_metrics.json`). Its face check is weak: take the thresholds of
+    /// `ultra_light_tracker_config()`. Default off.
+    #[uniffi(default = false)]
+    pub ultra_light: bool,
 }
 
 /// The default settings: video mode, one face, default intrinsics, filter on.
@@ -85,6 +92,21 @@ pub fn default_tracker_config() -> TrackerConfig {
         gaze_filter: false,
         shape_frames: c.shape_frames as u32,
         mirror_average: None,
+        ultra_light: false,
+    }
+}
+
+/// The ultra-light mode's settings (`TrackerConfig.ultra_light` on, detections accepted on the
+/// detector's score, tracked windows kept while the gradient points' mean confidence is at least
+/// 0.3); the rest as `default_tracker_config()`.
+#[uniffi::export]
+pub fn ultra_light_tracker_config() -> TrackerConfig {
+    let c = core_track::TrackerConfig::ultra_light();
+    TrackerConfig {
+        ultra_light: true,
+        min_detection_confidence: c.min_detection_confidence,
+        min_tracking_confidence: c.min_face_confidence,
+        ..default_tracker_config()
     }
 }
 
@@ -134,6 +156,11 @@ fn to_core(
         min_face_confidence: c.min_tracking_confidence,
         min_ncc_score: c.min_match_score,
         search_margin: c.search_margin,
+        landmarks: if c.ultra_light {
+            core_track::LandmarkMode::Gradient
+        } else {
+            core_track::LandmarkMode::M3
+        },
         ..core_track::TrackerConfig::default()
     };
     core.validate()?;
@@ -223,6 +250,10 @@ pub struct Face {
     pub score: f32,
     /// 68 points, iBUG order, pixels of the upright image.
     pub landmarks: Vec<Point2>,
+    /// Per landmark, 0..1, how much the estimator stands by it (the fit's weight): 1 for every
+    /// M3 point; in the ultra-light mode the gradient detector's confidences, 0 for the points it
+    /// does not measure.
+    pub landmark_confidence: Vec<f32>,
     /// Most probable head-yaw class, degrees (−60, −30, 0, 30, 60).
     pub yaw_class_deg: i32,
     /// Yaw class probabilities in that order.
@@ -273,6 +304,7 @@ impl Face {
                 .iter()
                 .map(|p| Point2 { x: p[0], y: p[1] })
                 .collect(),
+            landmark_confidence: l.weights.to_vec(),
             yaw_class_deg: l.yaw_class_deg(),
             yaw_probs: l.yaw_probs.to_vec(),
             gestures: Gestures {
@@ -922,6 +954,50 @@ mod tests {
         let mesh = face_mesh_triangles();
         assert!(mesh.len() >= 90 * 3 && mesh.len().is_multiple_of(3));
         assert!(mesh.iter().all(|&i| i < 68));
+    }
+
+    /// The ultra-light tracker finds and follows the face without M3: 27 landmarks with a
+    /// confidence, the rest 0, a pose from FFBP near the full pipeline's (same face, within a
+    /// quarter of its distance and 20° of yaw/pitch/roll), and the M3-only outputs at rest.
+    #[test]
+    fn ultra_light_tracker_follows_the_face() {
+        let (upright, w, h) = upright_face();
+        let desc = gray_desc(w, h, 0, false);
+        let full = FaceTracker::new(default_tracker_config()).unwrap();
+        let want = full.process_frame(&upright, desc, 1).unwrap().faces[0].clone();
+        let config = ultra_light_tracker_config();
+        assert!(config.ultra_light && !default_tracker_config().ultra_light);
+        let light = FaceTracker::new(config).unwrap();
+        for ts in 1..=3 {
+            let r = light.process_frame(&upright, desc, ts).unwrap();
+            assert_eq!(r.faces.len(), 1, "frame {ts}");
+            let f = &r.faces[0];
+            let measured = f.landmark_confidence.iter().filter(|&&c| c > 0.0).count();
+            assert!((20..=27).contains(&measured), "{measured} points measured");
+            assert!(
+                f.landmark_confidence
+                    .iter()
+                    .all(|c| (0.0..=1.0).contains(c))
+            );
+            let (t, u) = (&f.pose.translation_mm, &want.pose.translation_mm);
+            let d = ((t.x - u.x).powi(2) + (t.y - u.y).powi(2) + (t.z - u.z).powi(2)).sqrt();
+            let dist = (u.x * u.x + u.y * u.y + u.z * u.z).sqrt();
+            assert!(d < 0.25 * dist, "frame {ts}: {t:?} vs {u:?}");
+            for (a, b) in [
+                (f.pose.yaw_deg, want.pose.yaw_deg),
+                (f.pose.pitch_deg, want.pose.pitch_deg),
+                (f.pose.roll_deg, want.pose.roll_deg),
+            ] {
+                assert!(
+                    (a - b).abs() < 20.0,
+                    "frame {ts}: {:?} vs {:?}",
+                    f.pose,
+                    want.pose
+                );
+            }
+            assert_eq!(f.gestures.smile, 0.0);
+        }
+        assert_eq!(want.landmark_confidence, vec![1.0; 68]);
     }
 
     /// One tracker shared by threads (uniffi objects are shared across threads): stills always

@@ -163,6 +163,7 @@ fn frames_and_trackers_never_panic() {
             gaze_filter: r.below(2) == 1,
             shape_frames: r.small(),
             mirror_average: [None, Some(false), Some(true)][r.below(3) as usize],
+            ultra_light: r.below(2) == 0,
         };
         no_panic("FaceTracker::new", case, || {
             typed("FaceTracker::new", case, FaceTracker::new(cfg));

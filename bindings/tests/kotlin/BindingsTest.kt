@@ -13,6 +13,7 @@ import io.monotrack.FaceState
 import io.monotrack.FaceTracker
 import io.monotrack.RunningMode
 import io.monotrack.defaultTrackerConfig
+import io.monotrack.ultraLightTrackerConfig
 import io.monotrack.runBenchmark
 import io.monotrack.FitMethod
 import io.monotrack.FrameDesc
@@ -261,6 +262,25 @@ class BindingsTest {
             val moved = plain.zip(averaged).maxOf { (a, b) -> kotlin.math.hypot(a.x - b.x, a.y - b.y) }
             // The mode moves points, by less than the nets' own error on a ~100 px face.
             assertTrue(moved > 0.01f && moved < 10f, "largest move $moved px")
+        }
+    }
+
+    @Test
+    fun ultraLightTrackerFollowsTheFaceWithoutLandmarkNetworks() {
+        assertEquals(false, defaultTrackerConfig().ultraLight)
+        FaceTracker(ultraLightTrackerConfig()).use { t ->
+            assertEquals(true, t.config().ultraLight)
+            val (buf, stride) = rgbaFrame()
+            val d = desc(PixelFormat.RGBA8, stride, 0)
+            for (ts in 1L..3L) {
+                val f = t.processFrame(buf, d, ts * 33_000_000L).faces.single()
+                assertEquals(68, f.landmarkConfidence.size)
+                val measured = f.landmarkConfidence.count { it > 0f }
+                assertTrue(measured in 20..27, "$measured points measured")
+                // The nose tip lies inside the astronaut's face box, as in the full pipeline.
+                val nose = f.landmarks[30]
+                assertTrue(nose.x in 176f..273f && nose.y in 88f..181f, "nose at $nose")
+            }
         }
     }
 

@@ -2679,6 +2679,12 @@ public struct Face: Equatable, Hashable {
      */
     public var landmarks: [Point2]
     /**
+     * Per landmark, 0..1, how much the estimator stands by it (the fit's weight): 1 for every
+     * M3 point; in the ultra-light mode the gradient detector's confidences, 0 for the points it
+     * does not measure.
+     */
+    public var landmarkConfidence: [Float]
+    /**
      * Most probable head-yaw class, degrees (−60, −30, 0, 30, 60).
      */
     public var yawClassDeg: Int32
@@ -2741,6 +2747,11 @@ public struct Face: Equatable, Hashable {
          * 68 points, iBUG order, pixels of the upright image.
          */landmarks: [Point2], 
         /**
+         * Per landmark, 0..1, how much the estimator stands by it (the fit's weight): 1 for every
+         * M3 point; in the ultra-light mode the gradient detector's confidences, 0 for the points it
+         * does not measure.
+         */landmarkConfidence: [Float], 
+        /**
          * Most probable head-yaw class, degrees (−60, −30, 0, 30, 60).
          */yawClassDeg: Int32, 
         /**
@@ -2778,6 +2789,7 @@ public struct Face: Equatable, Hashable {
         self.bbox = bbox
         self.score = score
         self.landmarks = landmarks
+        self.landmarkConfidence = landmarkConfidence
         self.yawClassDeg = yawClassDeg
         self.yawProbs = yawProbs
         self.gestures = gestures
@@ -2811,6 +2823,7 @@ public struct FfiConverterTypeFace: FfiConverterRustBuffer {
                 bbox: FfiConverterTypeRect.read(from: &buf), 
                 score: FfiConverterFloat.read(from: &buf), 
                 landmarks: FfiConverterSequenceTypePoint2.read(from: &buf), 
+                landmarkConfidence: FfiConverterSequenceFloat.read(from: &buf), 
                 yawClassDeg: FfiConverterInt32.read(from: &buf), 
                 yawProbs: FfiConverterSequenceFloat.read(from: &buf), 
                 gestures: FfiConverterTypeGestures.read(from: &buf), 
@@ -2830,6 +2843,7 @@ public struct FfiConverterTypeFace: FfiConverterRustBuffer {
         FfiConverterTypeRect.write(value.bbox, into: &buf)
         FfiConverterFloat.write(value.score, into: &buf)
         FfiConverterSequenceTypePoint2.write(value.landmarks, into: &buf)
+        FfiConverterSequenceFloat.write(value.landmarkConfidence, into: &buf)
         FfiConverterInt32.write(value.yawClassDeg, into: &buf)
         FfiConverterSequenceFloat.write(value.yawProbs, into: &buf)
         FfiConverterTypeGestures.write(value.gestures, into: &buf)
@@ -5263,6 +5277,14 @@ public struct TrackerConfig: Equatable, Hashable {
      * gains nothing.
      */
     public var mirrorAverage: Bool?
+    /**
+     * The ultra-light mode: the learning-free gradient landmark detector (no landmark network
+     * loaded; 32 points, 27 of them in `landmarks`, the others placed by the mean face with
+     * weight 0) and the weak-perspective FFBP fit; no gestures or gaze. Far less accurate than
+     * M3 (`core/models/gradient_metrics.json`). Its face check is weak: take the thresholds of
+     * `ultra_light_tracker_config()`. Default off.
+     */
+    public var ultraLight: Bool
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -5318,7 +5340,14 @@ public struct TrackerConfig: Equatable, Hashable {
          * landmark nets but the eyes' run twice; `core/models/MODEL_CARD.md`). `None` (the
          * default): on for stills (`process_image`, image running mode), off in video mode, where it
          * gains nothing.
-         */mirrorAverage: Bool?) {
+         */mirrorAverage: Bool?, 
+        /**
+         * The ultra-light mode: the learning-free gradient landmark detector (no landmark network
+         * loaded; 32 points, 27 of them in `landmarks`, the others placed by the mean face with
+         * weight 0) and the weak-perspective FFBP fit; no gestures or gaze. Far less accurate than
+         * M3 (`core/models/gradient_metrics.json`). Its face check is weak: take the thresholds of
+         * `ultra_light_tracker_config()`. Default off.
+         */ultraLight: Bool = false) {
         self.runningMode = runningMode
         self.maxFaces = maxFaces
         self.camera = camera
@@ -5332,6 +5361,7 @@ public struct TrackerConfig: Equatable, Hashable {
         self.gazeFilter = gazeFilter
         self.shapeFrames = shapeFrames
         self.mirrorAverage = mirrorAverage
+        self.ultraLight = ultraLight
     }
 
     
@@ -5362,7 +5392,8 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
                 flowFilter: FfiConverterBool.read(from: &buf), 
                 gazeFilter: FfiConverterBool.read(from: &buf), 
                 shapeFrames: FfiConverterUInt32.read(from: &buf), 
-                mirrorAverage: FfiConverterOptionBool.read(from: &buf)
+                mirrorAverage: FfiConverterOptionBool.read(from: &buf), 
+                ultraLight: FfiConverterBool.read(from: &buf)
         )
     }
 
@@ -5380,6 +5411,7 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
         FfiConverterBool.write(value.gazeFilter, into: &buf)
         FfiConverterUInt32.write(value.shapeFrames, into: &buf)
         FfiConverterOptionBool.write(value.mirrorAverage, into: &buf)
+        FfiConverterBool.write(value.ultraLight, into: &buf)
     }
 }
 
@@ -7211,6 +7243,18 @@ public func runCameraBenchmark(sourceLuma: Data, sourceWidth: UInt32, sourceHeig
     )
 })
 }
+/**
+ * The ultra-light mode's settings (`TrackerConfig.ultra_light` on, detections accepted on the
+ * detector's score, tracked windows kept while the gradient points' mean confidence is at least
+ * 0.3); the rest as `default_tracker_config()`.
+ */
+public func ultraLightTrackerConfig() -> TrackerConfig  {
+    return try!  FfiConverterTypeTrackerConfig_lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_func_ultra_light_tracker_config(uniffiCallStatus
+    )
+})
+}
 
 private enum InitializationResult {
     case ok
@@ -7264,6 +7308,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_func_run_camera_benchmark() != 28614) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_func_ultra_light_tracker_config() != 48254) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_method_bodytracker_fit() != 15052) {

@@ -501,6 +501,12 @@ RustBuffer uniffi_monotrack_ffi_fn_func_run_benchmark(ForeignBytes bytes, RustBu
 RustBuffer uniffi_monotrack_ffi_fn_func_run_camera_benchmark(RustBuffer source_luma, uint32_t source_width, uint32_t source_height, RustBuffer camera, uint32_t frames, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_ULTRA_LIGHT_TRACKER_CONFIG
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_FN_FUNC_ULTRA_LIGHT_TRACKER_CONFIG
+RustBuffer uniffi_monotrack_ffi_fn_func_ultra_light_tracker_config(RustCallStatus *_Nonnull out_status
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_FFI_MONOTRACK_FFI_RUSTBUFFER_ALLOC
 #define UNIFFI_FFIDEF_FFI_MONOTRACK_FFI_RUSTBUFFER_ALLOC
 RustBuffer ffi_monotrack_ffi_rustbuffer_alloc(uint64_t size, RustCallStatus *_Nonnull out_status
@@ -836,6 +842,12 @@ uint16_t uniffi_monotrack_ffi_checksum_func_run_benchmark(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_RUN_CAMERA_BENCHMARK
 #define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_RUN_CAMERA_BENCHMARK
 uint16_t uniffi_monotrack_ffi_checksum_func_run_camera_benchmark(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_ULTRA_LIGHT_TRACKER_CONFIG
+#define UNIFFI_FFIDEF_UNIFFI_MONOTRACK_FFI_CHECKSUM_FUNC_ULTRA_LIGHT_TRACKER_CONFIG
+uint16_t uniffi_monotrack_ffi_checksum_func_ultra_light_tracker_config(void
     
 );
 #endif

@@ -27,11 +27,11 @@ pub mod live;
 pub mod models;
 pub mod ncc;
 
-pub use models::{ModelDetector, Tracker, detector_config_for};
+pub use models::{GradientLandmarks, Landmarker, ModelDetector, Tracker, detector_config_for};
 
 use crate::camera::Intrinsics;
 use crate::error::{Error, Result};
-use crate::fit::{FaceFit, Msbp, MsbpConfig, ShapeAccumulator};
+use crate::fit::{FaceFit, Ffbp, FfbpConfig, Msbp, MsbpConfig, ShapeAccumulator};
 use crate::gaze::{
     GazeCalibration, GazeConfig, GazeRay, PointOfGaze, Target, point_of_gaze_from_rays,
     raw_eye_rays,
@@ -208,6 +208,18 @@ pub enum Mode {
     Video,
 }
 
+/// Which landmark estimator and fit the shipped tracker runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum LandmarkMode {
+    /// M3's networks and the MSBP fit.
+    #[default]
+    M3,
+    /// The ultra-light mode: the learning-free gradient detector (32 points, no landmark network
+    /// loaded) and the weak-perspective FFBP fit weighted by the points' confidences. No gestures
+    /// or gaze, and no face classifier (`models::GradientLandmarks`).
+    Gradient,
+}
+
 /// Tracker settings. Every field has a default (`#[serde(default)]`), so a JSON object with only
 /// the fields to change is a valid config.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -273,6 +285,24 @@ pub struct TrackerConfig {
     /// frame where a face reappears elsewhere (98.6 → 100 % correct frames on the synthetic
     /// sequences of `track_eval`).
     pub redetect_immediately: bool,
+    /// The landmark estimator and fit of [`crate::track::Tracker`] (and the fit of any
+    /// [`FaceTracker`]): M3 with MSBP, or the ultra-light gradient detector with FFBP.
+    pub landmarks: LandmarkMode,
+}
+
+impl TrackerConfig {
+    /// The ultra-light mode's settings: [`LandmarkMode::Gradient`], a detection accepted on the
+    /// detector's score alone (the gradient points' mean confidence is no face classifier), and a
+    /// tracked window kept while that confidence is at least 0.3 (95 % of the faces68 validation
+    /// faces on their boxes, 57 % of windows away from them).
+    pub fn ultra_light() -> Self {
+        Self {
+            landmarks: LandmarkMode::Gradient,
+            min_detection_confidence: 0.0,
+            min_face_confidence: 0.3,
+            ..Self::default()
+        }
+    }
 }
 
 impl Default for TrackerConfig {
@@ -296,6 +326,7 @@ impl Default for TrackerConfig {
             match_iou: 0.3,
             new_face_interval: 15,
             redetect_immediately: true,
+            landmarks: LandmarkMode::M3,
         }
     }
 }
@@ -552,6 +583,7 @@ struct Slot {
     shape_acc: ShapeAccumulator,
     msbp_init: Msbp,
     msbp_track: Msbp,
+    ffbp: Ffbp,
     /// The last frame's gaze direction, for the optional gaze filter.
     gaze_dir: Option<Vector3<f64>>,
 }
@@ -580,6 +612,7 @@ impl Slot {
                 outer_iterations: cfg.tracking_fit_rounds,
                 ..cfg.msbp
             }),
+            ffbp: Ffbp::new(FfbpConfig::default()),
             gaze_dir: None,
         })
     }
@@ -638,6 +671,8 @@ pub struct FaceTracker<D: RegionDetector, L: LandmarkEstimator> {
     luma: GrayImage,
     points: [[f32; 2]; N_POINTS],
     points64: [[f64; 2]; N_LANDMARKS],
+    /// The landmarks' weights in the fit (the estimator's per-point confidences).
+    weights64: [f64; N_LANDMARKS],
     projected: [[f64; 2]; N_LANDMARKS],
     result: TrackingResult,
     frame_size: (usize, usize),
@@ -723,6 +758,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             luma: GrayImage::default(),
             points: [[0.0; 2]; N_POINTS],
             points64: [[0.0; 2]; N_LANDMARKS],
+            weights64: [1.0; N_LANDMARKS],
             projected: [[0.0; 2]; N_LANDMARKS],
             result: TrackingResult {
                 faces: Vec::with_capacity(config.max_faces),
@@ -1107,14 +1143,25 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             for (o, p) in self.points64.iter_mut().zip(&s.landmarks.points) {
                 *o = [f64::from(p[0]), f64::from(p[1])];
             }
+            for (w, c) in self.weights64.iter_mut().zip(&s.landmarks.weights) {
+                *w = f64::from(*c);
+            }
             let tracking = video && s.state == FaceState::Tracked && s.fit.is_some();
-            let fit = if tracking {
-                s.msbp_track
-                    .fit(&self.points64, None, &camera, s.fit.as_ref())?
+            let ultra_light = self.config.landmarks == LandmarkMode::Gradient;
+            let fit = if ultra_light {
+                s.ffbp.fit(&self.points64, Some(&self.weights64), &camera)?
+            } else if tracking {
+                s.msbp_track.fit(
+                    &self.points64,
+                    Some(&self.weights64),
+                    &camera,
+                    s.fit.as_ref(),
+                )?
             } else {
-                s.msbp_init.fit(&self.points64, None, &camera, None)?
+                s.msbp_init
+                    .fit(&self.points64, Some(&self.weights64), &camera, None)?
             };
-            if video && s.msbp_init.fixed_shape().is_none() {
+            if video && !ultra_light && s.msbp_init.fixed_shape().is_none() {
                 s.shape_acc.push(&fit.shape);
                 if s.shape_acc.is_complete() {
                     let shape = s.shape_acc.median();
@@ -1133,6 +1180,14 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                     &mut self.projected,
                 );
                 s.model_box = bbox64(&self.projected);
+                if ultra_light {
+                    // The gradient points are too coarse to place the next template (a biased
+                    // chin or brow grows the box frame by frame): the region the detector and
+                    // the template match found is the template.
+                    s.model_box = s.rect;
+                    s.calib = BoxCalib::IDENTITY;
+                    s.calib_pending = false;
+                }
                 if s.calib_pending {
                     s.calib = BoxCalib::between(&s.model_box, &s.rect);
                     s.calib_pending = false;

@@ -2,11 +2,11 @@
 //! [`crate::landmarks::M3`] gives landmarks and validates tracked windows. [`Tracker`] is the
 //! pipeline apps use (the FFI's `FaceTracker` and the CLI's `track` wrap it).
 
-use super::{FaceTracker, LandmarkEstimator, Mode, RegionDetector, TrackerConfig};
+use super::{FaceTracker, LandmarkEstimator, LandmarkMode, Mode, RegionDetector, TrackerConfig};
 use crate::detect::{Detection, DetectorConfig, FaceDetector};
 use crate::error::Result;
 use crate::image::{GrayImage, Rect};
-use crate::landmarks::{FaceLandmarks, M3};
+use crate::landmarks::{FaceLandmarks, GradientDetector, GradientPoints, M3};
 
 impl LandmarkEstimator for M3 {
     fn estimate(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
@@ -28,6 +28,121 @@ impl LandmarkEstimator for M3 {
 
     fn face_box(&self, out: &FaceLandmarks) -> Option<Rect> {
         M3::level1_box(self, out)
+    }
+}
+
+/// The learning-free gradient detector as a [`LandmarkEstimator`] (the ultra-light mode): its 32
+/// points as 68-point landmarks with per-point weights ([`GradientPoints::to_landmarks`]), each
+/// search started from the roll it found last.
+///
+/// It has no face classifier: its face confidence is the mean confidence of its points with a
+/// 68-point counterpart ([`GradientPoints::mean_confidence`]), a weak one (on faces68 validation
+/// faces a median of 0.41, on windows of the same images away from the faces 0.32;
+/// [`TrackerConfig::ultra_light`] sets the thresholds for it).
+#[derive(Debug, Clone, Default)]
+pub struct GradientLandmarks {
+    detector: GradientDetector,
+    points: GradientPoints,
+    /// The last face's region: the last roll starts the search only on the same face.
+    last: Rect,
+}
+
+impl GradientLandmarks {
+    /// The last face's 32 points, confidences and roll.
+    pub fn points(&self) -> &GradientPoints {
+        &self.points
+    }
+}
+
+impl LandmarkEstimator for GradientLandmarks {
+    fn estimate(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
+        let roll = if face.iou(&self.last) > 0.3 {
+            self.points.roll_deg
+        } else {
+            0.0
+        };
+        self.detector.detect(image, face, roll, &mut self.points)?;
+        self.last = *face;
+        *out = FaceLandmarks::default();
+        self.points.to_landmarks(out);
+        Ok(())
+    }
+
+    fn face_confidence(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        out: &mut FaceLandmarks,
+    ) -> Result<f32> {
+        self.estimate(image, face, out)?;
+        Ok(self.points.mean_confidence())
+    }
+
+    /// [`Self::face_confidence`] left the whole result in `out`.
+    fn complete(&mut self, _: &GrayImage, _: &Rect, _: &mut FaceLandmarks) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// The landmark estimator of the shipped tracker: M3, or the gradient detector in the
+/// ultra-light mode ([`crate::track::LandmarkMode`]).
+#[derive(Debug)]
+pub enum Landmarker {
+    /// The M3 networks.
+    M3(Box<M3>),
+    /// The learning-free gradient detector.
+    Gradient(Box<GradientLandmarks>),
+}
+
+impl Landmarker {
+    /// M3's mirror-average mode ([`M3::set_mirror_average`]); nothing for the gradient detector.
+    pub fn set_mirror_average(&mut self, on: bool) {
+        if let Self::M3(m3) = self {
+            m3.set_mirror_average(on);
+        }
+    }
+
+    /// M3, when that is the estimator.
+    pub fn m3(&self) -> Option<&M3> {
+        match self {
+            Self::M3(m3) => Some(m3),
+            Self::Gradient(_) => None,
+        }
+    }
+}
+
+impl LandmarkEstimator for Landmarker {
+    fn estimate(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
+        match self {
+            Self::M3(m) => LandmarkEstimator::estimate(m.as_mut(), image, face, out),
+            Self::Gradient(g) => g.estimate(image, face, out),
+        }
+    }
+
+    fn face_confidence(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        out: &mut FaceLandmarks,
+    ) -> Result<f32> {
+        match self {
+            Self::M3(m) => LandmarkEstimator::face_confidence(m.as_mut(), image, face, out),
+            Self::Gradient(g) => g.face_confidence(image, face, out),
+        }
+    }
+
+    fn complete(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
+        match self {
+            Self::M3(m) => LandmarkEstimator::complete(m.as_mut(), image, face, out),
+            Self::Gradient(g) => g.complete(image, face, out),
+        }
+    }
+
+    fn face_box(&self, out: &FaceLandmarks) -> Option<Rect> {
+        match self {
+            Self::M3(m) => LandmarkEstimator::face_box(m.as_ref(), out),
+            Self::Gradient(_) => None,
+        }
     }
 }
 
@@ -68,9 +183,9 @@ impl RegionDetector for ModelDetector {
 }
 
 /// The face tracker over the shipped models.
-pub type Tracker = FaceTracker<ModelDetector, M3>;
+pub type Tracker = FaceTracker<ModelDetector, Landmarker>;
 
-impl FaceTracker<ModelDetector, M3> {
+impl FaceTracker<ModelDetector, Landmarker> {
     /// A tracker over the embedded detector (default settings, score threshold
     /// [`TrackerConfig::min_detection_score`]: M3's face check decides) and M3 — in [`Mode::Image`]
     /// in its mirror-average mode ([`M3::set_mirror_average`]; `estimator_mut` changes it).
@@ -99,9 +214,15 @@ impl FaceTracker<ModelDetector, M3> {
     /// # Errors
     /// As [`FaceTracker::with_default_models`].
     pub fn with_detector_config(config: TrackerConfig, detector: DetectorConfig) -> Result<Self> {
-        let mut m3 = M3::new()?;
-        m3.set_mirror_average(config.mode == Mode::Image);
-        FaceTracker::new(ModelDetector::new(detector)?, m3, config)
+        let landmarker = match config.landmarks {
+            LandmarkMode::M3 => {
+                let mut m3 = M3::new()?;
+                m3.set_mirror_average(config.mode == Mode::Image);
+                Landmarker::M3(Box::new(m3))
+            }
+            LandmarkMode::Gradient => Landmarker::Gradient(Box::default()),
+        };
+        FaceTracker::new(ModelDetector::new(detector)?, landmarker, config)
     }
 }
 

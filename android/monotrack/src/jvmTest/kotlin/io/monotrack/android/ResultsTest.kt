@@ -35,6 +35,7 @@ private fun face(landmarks: List<Point2>, gaze: Gaze) = Face(
     bbox = Rect(x = 0f, y = 0f, width = 100f, height = 100f),
     score = 0.9f,
     landmarks = landmarks,
+    landmarkConfidence = List(landmarks.size) { 1f },
     yawClassDeg = 0,
     yawProbs = listOf(0f, 0f, 1f, 0f, 0f),
     gestures = Gestures(0.7f, 0.1f, 0.1f, 0.1f, 0.2f, 0.3f, 0.5f),
