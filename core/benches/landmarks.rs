@@ -1,13 +1,15 @@
 //! Measures the whole M3 per face (level-1 crop and net, brows, both eyes, mouth: warps, filters,
 //! networks and merge), one thread, in both modes (default and mirror average), and level 1 alone
-//! (the tracker's face check). The image is a synthetic 640×480 pattern with a 200 px face box:
+//! (the tracker's face check); and the ultra-light mode's gradient detector. The image is a synthetic 640×480 pattern with a 200 px face box:
 //! every stage's cost is independent of the pixel values (fixed-size warps, filters and networks).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::filter::Bilateral;
 use monotrack_core::landmarks::warp::{Affine, sample};
-use monotrack_core::landmarks::{EMBEDDED_FILES, FaceLandmarks, M3, embedded_file};
+use monotrack_core::landmarks::{
+    EMBEDDED_FILES, FaceLandmarks, GradientDetector, GradientPoints, M3, embedded_file,
+};
 use std::hint::black_box;
 
 fn image() -> GrayImage {
@@ -57,6 +59,17 @@ fn bench(c: &mut Criterion) {
         })
     });
     m3.set_mirror_average(false);
+    // The ultra-light mode's gradient detector on the same face (its cost depends a little on the
+    // pixels: the roll search may stop early).
+    let mut gradient = GradientDetector::new();
+    let mut points = GradientPoints::default();
+    c.bench_function("gradient_per_face", |b| {
+        b.iter(|| {
+            gradient
+                .detect(black_box(&img), black_box(&face), 0.0, &mut points)
+                .unwrap()
+        })
+    });
     c.bench_function("m3_level1_face_confidence", |b| {
         b.iter(|| {
             m3.face_confidence(black_box(&img), black_box(&face))
