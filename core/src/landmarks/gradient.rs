@@ -723,10 +723,11 @@ impl GradientDetector {
             *w = (-0.5 * d * d).exp();
         }
         for y in r.y0..r.y1 {
-            let mut s = 0.0;
-            for x in r.x0..r.x1 {
-                s += weights[x] * self.value(what, y * PATCH_W + x);
-            }
+            let row = y * PATCH_W;
+            let s = (r.x0..r.x1)
+                .zip(&weights[r.x0..r.x1])
+                .map(|(x, w)| w * self.value(what, row + x))
+                .sum();
             self.proj[y] = s;
         }
     }
