@@ -157,6 +157,13 @@ const MEAN: [[f32; 2]; N_GRADIENT] = [
     [0.497, 0.712],
 ];
 
+/// The patch rows the eye search reads: the eye regions (the mean eye row ± 0.12 box) with the
+/// centroid windows and corner bands around them, and slack for a roll of up to about 30°.
+const EYE_ROWS: (usize, usize) = (
+    ((MARGIN_TOP + 0.21 - 0.3) * SCALE as f32) as usize,
+    ((MARGIN_TOP + 0.21 + 0.3) * SCALE as f32) as usize,
+);
+
 /// Confidence of a point placed from the expected geometry alone.
 const PRIOR_CONFIDENCE: f32 = 0.15;
 
@@ -480,6 +487,8 @@ pub struct GradientDetector {
     label: Vec<u32>,
     sizes: Vec<u32>,
     stack: Vec<usize>,
+    /// A band of the patch sampled alone (the eye search's rows).
+    band: Vec<u8>,
     /// The eyes' centres (dark centroids) found last, patch pixels: right, left.
     eye_centres: [[f32; 2]; 2],
 }
@@ -516,6 +525,7 @@ impl GradientDetector {
             sizes: Vec::with_capacity(256),
             stack: Vec::with_capacity(n),
             eye_centres: [[0.0; 2]; 2],
+            band: Vec::with_capacity(PATCH_W * (EYE_ROWS.1 - EYE_ROWS.0)),
         }
     }
 
@@ -609,7 +619,8 @@ impl GradientDetector {
         // Up to three rounds (a tilted face needs them; on faces68 validation three rounds and
         // two measured within 0.4 % NME).
         for _ in 0..3 {
-            let map = self.sample(image, &frame)?;
+            // Only the rows the eye search reads: a third of the patch.
+            let map = self.sample_rows(image, &frame, EYE_ROWS)?;
             self.eyes(pts, conf);
             let (r, l) = (eye_centre(pts, 0), eye_centre(pts, 1));
             let delta = (l[1] - r[1]).atan2(l[0] - r[0]);
@@ -642,6 +653,17 @@ impl GradientDetector {
 
     /// Samples the canonical patch of `frame` and returns its map to the image.
     fn sample(&mut self, image: &GrayImage, frame: &Frame) -> Result<Affine> {
+        self.sample_rows(image, frame, (0, PATCH_H))
+    }
+
+    /// Samples rows `rows.0..rows.1` of the canonical patch of `frame` (the others keep what they
+    /// held) and returns the whole patch's map to the image.
+    fn sample_rows(
+        &mut self,
+        image: &GrayImage,
+        frame: &Frame,
+        rows: (usize, usize),
+    ) -> Result<Affine> {
         let (c, s) = (frame.roll.cos() as f64, frame.roll.sin() as f64);
         let k = 1.0 / SCALE as f64;
         let (bw, bh) = (frame.w as f64, frame.h as f64);
@@ -659,57 +681,78 @@ impl GradientDetector {
             cy as f64 + s * bw * u0 + c * bh * v0,
         ];
         let map = Affine { m };
-        sample(image, &map, PATCH_W, PATCH_H, &mut self.patch)?;
+        if rows == (0, PATCH_H) {
+            sample(image, &map, PATCH_W, PATCH_H, &mut self.patch)?;
+        } else {
+            // The band's own map: the whole patch's, shifted down by the band's first row.
+            let y0 = rows.0 as f64;
+            let band = Affine {
+                m: [m[0], m[1], m[2] + m[1] * y0, m[3], m[4], m[5] + m[4] * y0],
+            };
+            sample(image, &band, PATCH_W, rows.1 - rows.0, &mut self.band)?;
+            self.patch.resize(PATCH_W * PATCH_H, 0);
+            self.patch[rows.0 * PATCH_W..rows.1 * PATCH_W].copy_from_slice(&self.band);
+        }
         Ok(map)
     }
 
     /// Double sigmoidal filtering and squared gradients over `r` (Alg. 1–2).
     fn prepare(&mut self, r: Region) {
         let g = self.config.sigmoid_gain;
-        let (mut s, mut s2, mut n) = (0f32, 0f32, 0f32);
+        let (x0, x1) = (r.x0, r.x1);
+        let (mut s, mut s2) = (0u32, 0u64);
         for y in r.y0..r.y1 {
-            for &v in &self.patch[y * PATCH_W + r.x0..y * PATCH_W + r.x1] {
-                let v = v as f32;
-                s += v;
-                s2 += v * v;
-                n += 1.0;
+            for &v in &self.patch[y * PATCH_W + x0..y * PATCH_W + x1] {
+                s += u32::from(v);
+                s2 += u64::from(v) * u64::from(v);
             }
         }
-        let mean = s / n;
-        let sd = (s2 / n - mean * mean).max(1.0).sqrt();
+        let n = ((x1 - x0) * (r.y1 - r.y0)) as f32;
+        let mean = s as f32 / n;
+        let sd = (s2 as f32 / n - mean * mean).max(1.0).sqrt();
+        // Both passes as `sigmoid(k·v + c)`: one multiply-add per pixel before the sigmoid.
+        let (k, c) = (g / sd, -g * mean / sd);
         let (mut t, mut t2) = (0f32, 0f32);
         for y in r.y0..r.y1 {
-            for x in r.x0..r.x1 {
-                let i = y * PATCH_W + x;
-                let v = sigmoid(g * (self.patch[i] as f32 - mean) / sd);
-                self.f[i] = v;
+            let row = y * PATCH_W;
+            let (src, dst) = (
+                &self.patch[row + x0..row + x1],
+                &mut self.f[row + x0..row + x1],
+            );
+            for (d, &v) in dst.iter_mut().zip(src) {
+                let v = sigmoid(k * v as f32 + c);
+                *d = v;
                 t += v;
                 t2 += v * v;
             }
         }
         let mean = t / n;
         let sd = (t2 / n - mean * mean).max(1e-6).sqrt();
+        let (k, c) = (g / sd, -g * mean / sd);
         for y in r.y0..r.y1 {
-            for x in r.x0..r.x1 {
-                let i = y * PATCH_W + x;
-                self.f[i] = sigmoid(g * (self.f[i] - mean) / sd);
+            let row = y * PATCH_W;
+            for v in &mut self.f[row + x0..row + x1] {
+                *v = sigmoid(k * *v + c);
             }
         }
+        // Central differences inside the region; its border gets none (0).
         for y in r.y0..r.y1 {
-            for x in r.x0..r.x1 {
-                let i = y * PATCH_W + x;
-                let gx = if x > r.x0 && x + 1 < r.x1 {
-                    0.5 * (self.f[i + 1] - self.f[i - 1])
-                } else {
-                    0.0
-                };
-                let gy = if y > r.y0 && y + 1 < r.y1 {
-                    0.5 * (self.f[i + PATCH_W] - self.f[i - PATCH_W])
-                } else {
-                    0.0
-                };
-                self.ex[i] = gx * gx;
-                self.ey[i] = gy * gy;
+            let row = y * PATCH_W;
+            let inner_y = y > r.y0 && y + 1 < r.y1;
+            self.ex[row + x0] = 0.0;
+            self.ex[row + x1 - 1] = 0.0;
+            for x in x0 + 1..x1.saturating_sub(1).max(x0 + 1) {
+                let gx = 0.5 * (self.f[row + x + 1] - self.f[row + x - 1]);
+                self.ex[row + x] = gx * gx;
+            }
+            if inner_y {
+                let (up, here, down) = (row - PATCH_W, row, row + PATCH_W);
+                for x in x0..x1 {
+                    let gy = 0.5 * (self.f[down + x] - self.f[up + x]);
+                    self.ey[here + x] = gy * gy;
+                }
+            } else {
+                self.ey[row + x0..row + x1].fill(0.0);
             }
         }
     }
@@ -1134,20 +1177,22 @@ impl GradientDetector {
                 conf[7] = PRIOR_CONFIDENCE;
             }
         }
-        // The sides: binarised Ex over the face's sides, short clusters removed.
+        // The sides: binarised Ex over the face's sides, short clusters removed. (Two bands,
+        // one per side, leaving out the middle, were measured no faster and 0.2 % less accurate
+        // on the contour.)
         let r = Region::new(cx - 1.3 * d, ey, cx + 1.3 * d, pts[7][1] + 0.1 * d);
         self.prepare(r);
         let mut max = 0f32;
         for y in r.y0..r.y1 {
-            for x in r.x0..r.x1 {
-                max = max.max(self.ex[y * PATCH_W + x]);
+            for &v in &self.ex[y * PATCH_W + r.x0..y * PATCH_W + r.x1] {
+                max = max.max(v);
             }
         }
         let t = max * p.p_x / 100.0;
         for y in r.y0..r.y1 {
+            let row = y * PATCH_W;
             for x in r.x0..r.x1 {
-                let i = y * PATCH_W + x;
-                self.mask[i] = u8::from(max > 1e-6 && self.ex[i] >= t);
+                self.mask[row + x] = u8::from(max > 1e-6 && self.ex[row + x] >= t);
             }
         }
         self.remove_short_clusters(r, (0.1 * d).max(3.0) as u32);
@@ -1157,7 +1202,7 @@ impl GradientDetector {
             // The edge pixel on this row (± 1 row) nearest the expected x, within 0.4 eye
             // distances.
             let mut best: Option<(f32, f32)> = None;
-            for yy in y.saturating_sub(1)..=(y + 1).min(r.y1 - 1) {
+            for yy in y.saturating_sub(1).max(r.y0)..=(y + 1).min(r.y1 - 1) {
                 for x in r.x0..r.x1 {
                     if self.mask[yy * PATCH_W + x] != 0 {
                         let dist = (x as f32 + 0.5 - e[0]).abs();
