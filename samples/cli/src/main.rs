@@ -108,6 +108,10 @@ enum Command {
         /// Gaze targets (CONTRACT.md `T.json`): each face gets its point of gaze.
         #[arg(long)]
         targets: Option<PathBuf>,
+        /// The landmark detector: M3, or the ultra-light mode's gradient detector with FFBP
+        /// (`TrackerConfig::ultra_light`'s thresholds unless --config gives a file).
+        #[arg(long, value_enum, default_value = "m3")]
+        landmarks: landmarks::Landmarker,
     },
     /// The whole pipeline on a clip made from the committed sample image: overlays + timing table.
     Demo {
@@ -231,15 +235,24 @@ fn run_track(
     overlay: Option<&Path>,
     config: Option<&Path>,
     targets: Option<&Path>,
+    landmarker: landmarks::Landmarker,
 ) -> Result<bool, String> {
-    let cfg: monotrack_core::TrackerConfig = match config {
+    let gradient = landmarker == landmarks::Landmarker::Gradient;
+    if gradient && targets.is_some() {
+        return Err("--targets needs the eyes' gaze, which only --landmarks m3 gives".into());
+    }
+    let mut cfg: monotrack_core::TrackerConfig = match config {
         Some(p) => {
             let text = std::fs::read_to_string(p)
                 .map_err(|e| format!("cannot read {}: {e}", p.display()))?;
             serde_json::from_str(&text).map_err(|e| format!("{}: {e}", p.display()))?
         }
+        None if gradient => monotrack_core::TrackerConfig::ultra_light(),
         None => monotrack_core::TrackerConfig::default(),
     };
+    if gradient {
+        cfg.landmarks = monotrack_core::track::LandmarkMode::Gradient;
+    }
     let mut tracker =
         monotrack_core::track::Tracker::with_default_models(cfg).map_err(|e| e.to_string())?;
     if let Some(p) = targets {
@@ -297,12 +310,14 @@ fn main() -> ExitCode {
             overlay,
             config,
             targets,
+            landmarks: landmarker,
         } => run_track(
             &input,
             out.as_deref(),
             overlay.as_deref(),
             config.as_deref(),
             targets.as_deref(),
+            landmarker,
         ),
         Command::Demo {
             overlay,

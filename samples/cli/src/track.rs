@@ -434,15 +434,34 @@ pub fn face_json(face: &TrackedFace, targets: Option<&[Target]>) -> Value {
         ]),
     );
     m.insert("score".into(), json!(round(f64::from(face.score), 4)));
+    // A point the estimator does not measure has weight 0 (the ultra-light mode's gradient
+    // detector has 27 of the 68): `null`, as are the fields only M3 gives.
+    let gradient = lm.weights.contains(&0.0);
     m.insert(
         "landmarks68".into(),
         Value::Array(
             lm.points
                 .iter()
-                .map(|p| json!([round(f64::from(p[0]), 2), round(f64::from(p[1]), 2)]))
+                .zip(&lm.weights)
+                .map(|(p, w)| {
+                    if *w == 0.0 {
+                        Value::Null
+                    } else {
+                        json!([round(f64::from(p[0]), 2), round(f64::from(p[1]), 2)])
+                    }
+                })
                 .collect(),
         ),
     );
+    if gradient {
+        for k in ["yaw_class_deg", "yaw_probs", "gestures", "gaze"] {
+            m.insert(k.into(), Value::Null);
+        }
+        put_fit(&mut m, &face.fit);
+        m.insert("shape_held".into(), json!(face.shape_held));
+        m.insert("flow_points".into(), json!(face.flow_points));
+        return Value::Object(m);
+    }
     m.insert("yaw_class_deg".into(), json!(lm.yaw_class_deg()));
     let probs = |v: &[f32]| -> Vec<f64> { v.iter().map(|p| round(f64::from(*p), 4)).collect() };
     m.insert("yaw_probs".into(), json!(probs(&lm.yaw_probs)));

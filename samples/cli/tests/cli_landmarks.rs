@@ -394,3 +394,40 @@ fn gradient_mode_follows_the_contract_on_the_face() {
     ]);
     assert!(!out.status.success());
 }
+
+/// `track --landmarks gradient`: the ultra-light tracker over a frame directory; each FACE's
+/// `landmarks68` has the 27 measured points and `null` elsewhere, the M3-only fields are `null`,
+/// and there is a fit.
+#[test]
+fn track_in_gradient_mode_reports_the_measured_points() {
+    let dir = dir_with_astronaut("track-grad");
+    let frames = dir.join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    for i in 0..3 {
+        std::fs::copy(
+            dir.join("astronaut.jpg"),
+            frames.join(format!("{i:03}.jpg")),
+        )
+        .unwrap();
+    }
+    let out = monotrack(&["track", frames.to_str().unwrap(), "--landmarks", "gradient"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<serde_json::Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 3);
+    for line in &lines {
+        let face = &line["faces"][0];
+        assert!(centred_on_the_face(face), "{face}");
+        let l68 = face["landmarks68"].as_array().unwrap();
+        assert_eq!(l68.iter().filter(|p| !p.is_null()).count(), 27);
+        assert!(face["gestures"].is_null() && face["gaze"].is_null());
+        assert!(face["fit_rms_px"].as_f64().unwrap().is_finite());
+    }
+}
