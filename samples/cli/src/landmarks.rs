@@ -165,7 +165,9 @@ fn vec3(v: &[f32; 3]) -> Value {
     )
 }
 
-/// The CONTRACT's FACE object without the fit fields.
+/// The CONTRACT's FACE object without the fit fields. A point the estimator does not measure
+/// (weight 0: the gradient detector has 27 of the 68) is `null`, and with such points the fields
+/// only M3 gives are `null` too.
 fn face_json(rect: &Rect, score: f32, lm: &FaceLandmarks) -> Map<String, Value> {
     let mut face = Map::new();
     face.insert(
@@ -178,10 +180,22 @@ fn face_json(rect: &Rect, score: f32, lm: &FaceLandmarks) -> Map<String, Value> 
         json!(
             lm.points
                 .iter()
-                .map(|p| [round(f64::from(p[0]), 3), round(f64::from(p[1]), 3)])
+                .zip(&lm.weights)
+                .map(|(p, w)| if *w == 0.0 {
+                    Value::Null
+                } else {
+                    json!([round(f64::from(p[0]), 3), round(f64::from(p[1]), 3)])
+                })
                 .collect::<Vec<_>>()
         ),
     );
+    face.insert("face_prob".into(), json!(round(f64::from(lm.face_prob), 4)));
+    if lm.weights.contains(&0.0) {
+        for k in ["yaw_class_deg", "yaw_probs", "gestures", "gaze"] {
+            face.insert(k.into(), Value::Null);
+        }
+        return face;
+    }
     face.insert("yaw_class_deg".into(), json!(lm.yaw_class_deg()));
     face.insert(
         "yaw_probs".into(),
@@ -192,7 +206,6 @@ fn face_json(rect: &Rect, score: f32, lm: &FaceLandmarks) -> Map<String, Value> 
                 .collect::<Vec<_>>()
         ),
     );
-    face.insert("face_prob".into(), json!(round(f64::from(lm.face_prob), 4)));
     face.insert(
         "gestures".into(),
         json!({"mouth": probs(&MOUTH_GESTURES, &lm.mouth), "brows": probs(&BROW_GESTURES, &lm.brows)}),
@@ -205,40 +218,23 @@ fn face_json(rect: &Rect, score: f32, lm: &FaceLandmarks) -> Map<String, Value> 
     face
 }
 
-/// The CONTRACT's FACE object of the gradient detector, without the fit fields.
+/// [`face_json`] of the gradient detector's face, with its own 32 points, their confidences and
+/// the roll it found.
 fn gradient_face_json(
     rect: &Rect,
     score: f32,
     lm: &FaceLandmarks,
     g: &GradientPoints,
 ) -> Map<String, Value> {
-    let pt = |p: &[f32; 2]| json!([round(f64::from(p[0]), 3), round(f64::from(p[1]), 3)]);
-    let mut face = Map::new();
-    face.insert(
-        "box".into(),
-        json!([rect.x, rect.y, rect.w, rect.h].map(|v| round(f64::from(v), 2))),
-    );
-    face.insert("score".into(), json!(round(f64::from(score), 4)));
-    face.insert(
-        "landmarks68".into(),
-        json!(
-            lm.points
-                .iter()
-                .zip(&lm.weights)
-                .enumerate()
-                .map(
-                    |(k, (p, _))| if monotrack_core::landmarks::GRADIENT_TO_68.contains(&Some(k)) {
-                        pt(p)
-                    } else {
-                        Value::Null
-                    }
-                )
-                .collect::<Vec<_>>()
-        ),
-    );
+    let mut face = face_json(rect, score, lm);
     face.insert(
         "landmarks32".into(),
-        json!(g.points.iter().map(pt).collect::<Vec<_>>()),
+        json!(
+            g.points
+                .iter()
+                .map(|p| [round(f64::from(p[0]), 3), round(f64::from(p[1]), 3)])
+                .collect::<Vec<_>>()
+        ),
     );
     face.insert(
         "confidence32".into(),
@@ -250,10 +246,6 @@ fn gradient_face_json(
         ),
     );
     face.insert("roll_deg".into(), json!(round(f64::from(g.roll_deg), 2)));
-    face.insert("face_prob".into(), json!(round(f64::from(lm.face_prob), 4)));
-    for k in ["yaw_class_deg", "yaw_probs", "gestures", "gaze"] {
-        face.insert(k.into(), Value::Null);
-    }
     face
 }
 
