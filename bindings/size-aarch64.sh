@@ -1,10 +1,14 @@
 #!/usr/bin/env bash
 # What an app adds per ABI: the monotrack-ffi shared library (models inside) built for aarch64,
 # stripped. There is no Android NDK here, so the library is linked for aarch64-unknown-linux-gnu
-# (the same code as aarch64-linux-android, another libc) with the Android build's 16 KB page
-# alignment, as a proxy. Prints the stripped and gzipped sizes, the LOAD segments' alignment and
-# the share of each crate in the code and data (from the unstripped symbol sizes).
-# PROFILE (default release) picks the cargo profile; extra cargo arguments pass through.
+# (the same code as aarch64-linux-android, another libc) as a proxy, by the NDK's linker (LLVM lld,
+# driven by clang) with the Android build's flags from android/cargo-config.toml: 16 KB page
+# alignment and packed relocations. (A library linked this way is measured, not loaded: glibc's
+# loader does not read Android's packed relocations; the tests under qemu link the usual way.)
+# Prints the stripped and gzipped sizes, the LOAD segments' alignment and the share of each crate
+# in the code and data (from the unstripped symbol sizes).
+# PROFILE (default release; release-small builds tract-core for size) picks the cargo profile;
+# extra cargo arguments pass through.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 T=aarch64-unknown-linux-gnu
@@ -13,12 +17,17 @@ if ! command -v aarch64-linux-gnu-gcc >/dev/null; then
   echo "installing the aarch64 cross gcc"
   (apt-get update -qq && apt-get install -y -qq gcc-aarch64-linux-gnu libc6-dev-arm64-cross) >/dev/null
 fi
+if ! command -v ld.lld >/dev/null || ! command -v clang >/dev/null; then
+  echo "installing clang and lld (the NDK's compiler driver and linker)"
+  (apt-get update -qq && apt-get install -y -qq clang lld) >/dev/null
+fi
 rustup target list --installed | grep -qx "$T" || rustup target add "$T"
-export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=aarch64-linux-gnu-gcc
+export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=clang
 export CC_aarch64_unknown_linux_gnu=aarch64-linux-gnu-gcc
 export AR_aarch64_unknown_linux_gnu=aarch64-linux-gnu-ar
 cargo rustc -p monotrack-ffi --lib --profile "$PROFILE" --target "$T" --crate-type cdylib "$@" \
-  -- -C link-arg=-Wl,-z,max-page-size=16384
+  -- -C link-arg=--target=aarch64-linux-gnu -C link-arg=-fuse-ld=lld \
+  -C link-arg=-Wl,-z,max-page-size=16384 -C link-arg=-Wl,--pack-dyn-relocs=android
 tdir=${CARGO_TARGET_DIR:-target}
 dir="$tdir/$T/$PROFILE"
 [ "$PROFILE" = dev ] && dir="$tdir/$T/debug"
