@@ -8,9 +8,11 @@
 //! | kernel | portable | aarch64 | x86-64 |
 //! |---|---|---|---|
 //! | [`plane`]: an 8-bit plane made upright (rotation, mirroring) | 8×8 tiles transposed in `u64` words | 16×16 tiles in NEON registers | 16×16 tiles in SSE2 registers |
+//! | Lucas–Kanade windows (`track::flow`: sampling, gradients, sums) | 16 lanes in arrays | 4 registers per lane group (`track/flow/arm64.rs`) | AVX2, AVX-512 (in `track/flow.rs`) |
 //!
-//! The M3 trunk layers, patch warps, bilateral filter and LK windows keep their x86-64 forms beside
-//! their pipeline modules (`conv`, `landmarks::{dense, warp, filter}`, `track::flow`); on aarch64
-//! those stages run their portable forms, and the trunk layers run in tract's NEON kernels.
+//! The M3 trunk layers, patch warps, bilateral filter and NCC keep their x86-64 forms beside their
+//! pipeline modules (`conv`, `landmarks::{dense, warp, filter}`, `track::ncc`); on aarch64 those
+//! stages run their portable forms (which the compiler vectorises for NEON where it can), and the
+//! trunk layers run in tract's NEON kernels.
 
 pub(crate) mod plane;

@@ -14,8 +14,8 @@
 //!   next one's. The previous window's gradients come from bordered rows held in registers,
 //!   their shifted cells by lane shifts: read back from memory at offsets of one and two cells,
 //!   each load straddled two recent stores and waited for them to reach the cache.
-//!   AVX-512 (masked byte loads at the window's edge), AVX2 and portable kernels give the same
-//!   bits: every sum has sixteen lanes and one order. `MONOTRACK_FLOW=portable|avx2` picks a
+//!   AVX-512 (masked byte loads at the window's edge), AVX2, NEON (`flow/arm64.rs`) and portable
+//!   kernels give the same bits: every sum has sixteen lanes and one order. `MONOTRACK_FLOW=portable|avx2` picks a
 //!   narrower set.
 //!   [`PyramidalLk::track_guided`] starts each point at a guess (OpenCV's initial flow), so the
 //!   levels need only cover the guess's error.
@@ -318,6 +318,9 @@ enum Kernels {
     /// so windows up to the image's last column take the vector path.
     #[cfg(target_arch = "x86_64")]
     Avx512,
+    /// NEON (aarch64's baseline): four registers per lane group (`flow/arm64.rs`).
+    #[cfg(target_arch = "aarch64")]
+    Neon,
 }
 
 impl Kernels {
@@ -338,6 +341,10 @@ impl Kernels {
 
     /// The widest this CPU has.
     fn widest() -> Self {
+        #[cfg(target_arch = "aarch64")]
+        if crate::cpu::neon() {
+            return Kernels::Neon;
+        }
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::is_x86_feature_detected as has;
@@ -371,7 +378,10 @@ pub struct PyramidalLk {
     /// in one pass, do not run (near the image's edge, or on the portable path).
     moving: Vec<f32>,
     stride: usize,
-    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    #[cfg_attr(
+        not(any(target_arch = "x86_64", target_arch = "aarch64")),
+        allow(dead_code)
+    )]
     kernels: Kernels,
 }
 
@@ -660,6 +670,20 @@ impl PyramidalLk {
                 return sums;
             }
         }
+        #[cfg(target_arch = "aarch64")]
+        if self.kernels == Kernels::Neon {
+            let (st, at) = (self.stride, slot * n * self.stride);
+            let outs = [
+                &mut self.patch[at..at + n * st],
+                &mut self.gx[at..at + n * st],
+                &mut self.gy[at..at + n * st],
+            ];
+            #[allow(unsafe_code)]
+            // SAFETY: NEON is part of every aarch64 target's baseline.
+            if let Some(sums) = unsafe { arm64::bordered_gradients(img, x, y, n, st, outs) } {
+                return sums;
+            }
+        }
         self.sample_bordered(img, x, y);
         self.gradients(n, slot)
     }
@@ -767,6 +791,14 @@ impl PyramidalLk {
                 Kernels::Portable => None,
             };
             if let Some(sums) = sums {
+                return sums;
+            }
+        }
+        #[cfg(target_arch = "aarch64")]
+        if self.kernels == Kernels::Neon {
+            #[allow(unsafe_code)]
+            // SAFETY: NEON is part of every aarch64 target's baseline.
+            if let Some(sums) = unsafe { arm64::mismatch(img, x, y, n, st, [patch, gx, gy]) } {
                 return sums;
             }
         }
@@ -1004,7 +1036,7 @@ fn gradients_avx2(
 /// another), each from the bordered rows above, at and below it; `row(r, [up, mid, down], acc)`
 /// adds window row r to `acc`. Evaluates to `(even, odd)`. A macro, not a generic function, so
 /// each kernel's closures stay inlined in its own target features (as `mismatch_avx2`'s macros).
-#[cfg(target_arch = "x86_64")]
+#[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
 macro_rules! walk_bordered_rows {
     ($n:expr, $along_x:ident, $bordered:ident, $row:ident, $zero:expr) => {{
         let (up, top) = $bordered(0, $along_x(0));
@@ -1027,6 +1059,9 @@ macro_rules! walk_bordered_rows {
         (even, odd)
     }};
 }
+
+#[cfg(target_arch = "aarch64")]
+mod arm64;
 
 /// [`bordered_gradients_avx512`] on AVX2: each bordered row in two registers (lanes 0–7, 8–15),
 /// its cells one and two to the right by shifts across the pair; the window's rows of sixteen
@@ -1592,6 +1627,74 @@ mod tests {
             // more points as textureless).
             let tracked = body.1.iter().filter(|&&s| s).count();
             assert!(tracked > n / 3, "{half_window}: {:?}", body.1);
+        }
+    }
+
+    /// The NEON window kernels against the portable ones, bit for bit: windows of one lane group
+    /// and of two (whose bordered rows are too wide for the one-pass gradient kernel), points in
+    /// the middle, near the border (clamped sampling) and near the right and bottom edges.
+    #[cfg(target_arch = "aarch64")]
+    #[test]
+    fn the_neon_kernels_give_the_portable_points() {
+        let id = [[1.0, 0.0], [0.0, 1.0]];
+        let mut pyramids = Vec::new();
+        for img in [
+            warped(id, [0.0, 0.0]),
+            warped([[1.02, 0.03], [-0.02, 0.99]], [3.3, -2.1]),
+        ] {
+            let mut p = Pyramid::new();
+            p.build(&img, 3);
+            pyramids.push(p);
+        }
+        let mut from = grid();
+        from.extend([
+            [1.5, 2.5],
+            [637.2, 477.9],
+            [-3.0, 240.0],
+            [631.3, 200.6],
+            [300.4, 472.2],
+        ]);
+        let n = from.len();
+        let run = |kernels, half_window| {
+            let cfg = LkConfig {
+                half_window,
+                ..LkConfig::default()
+            };
+            let mut lk = PyramidalLk::new(cfg).unwrap();
+            lk.kernels = kernels;
+            let (mut to, mut st, mut err) = (vec![[9.0; 2]; n], vec![true; n], vec![9.0; n]);
+            lk.track(
+                &pyramids[0],
+                &pyramids[1],
+                &from,
+                &mut to,
+                &mut st,
+                &mut err,
+            )
+            .unwrap();
+            (to, st, err)
+        };
+        // The NEON kernels serve inner windows of the default size (not only the fallback).
+        let mut lk = PyramidalLk::new(LkConfig::default()).unwrap();
+        let (n, st, img) = (11, lk.stride, &pyramids[0].levels()[0]);
+        let outs = [
+            &mut lk.patch[..n * st],
+            &mut lk.gx[..n * st],
+            &mut lk.gy[..n * st],
+        ];
+        #[allow(unsafe_code)]
+        // SAFETY: NEON is part of every aarch64 target's baseline.
+        let sums = unsafe { arm64::bordered_gradients(img, 100.3, 200.7, n, st, outs) };
+        let window = [&lk.patch[..n * st], &lk.gx[..n * st], &lk.gy[..n * st]];
+        #[allow(unsafe_code)]
+        // SAFETY: as above.
+        let mismatch = unsafe { arm64::mismatch(img, 101.1, 199.4, n, st, window) };
+        assert!(sums.is_some() && mismatch.is_some());
+        for half_window in [2, 5, 7, 9, 15] {
+            let portable = run(Kernels::Portable, half_window);
+            assert_eq!(portable, run(Kernels::Neon, half_window), "{half_window}");
+            let tracked = portable.1.iter().filter(|&&s| s).count();
+            assert!(tracked > n / 3, "{half_window}: {:?}", portable.1);
         }
     }
 
