@@ -5,7 +5,7 @@
 use crate::MonotrackError;
 use crate::error::{guard, guard_infallible};
 use crate::gaze::GazeTarget;
-use crate::tracker::{TrackerConfig, TrackingResult, build_tracker, result};
+use crate::tracker::{Outputs, TrackerConfig, TrackingResult, build_tracker, result};
 use crate::types::FrameDesc;
 use monotrack_core::gaze::Target;
 use monotrack_core::image::{Frame, FrameDesc as CoreFrameDesc};
@@ -37,8 +37,8 @@ pub trait LiveStreamListener: Send + Sync {
     fn on_error(&self, timestamp_ns: i64, frames_dropped: u64, error: MonotrackError);
 }
 
-/// Hands the core's deliveries to the app's listener as FFI records.
-struct Forward(Arc<dyn LiveStreamListener>);
+/// Hands the core's deliveries to the app's listener as FFI records with the config's outputs.
+struct Forward(Arc<dyn LiveStreamListener>, Outputs);
 
 impl LiveListener for Forward {
     fn on_result(
@@ -53,7 +53,7 @@ impl LiveListener for Forward {
         self.0.on_result(LiveStreamResult {
             timestamp_ns,
             frames_dropped,
-            result: result(r, w as u32, h as u32, targets),
+            result: result(r, w as u32, h as u32, targets, self.1),
         });
     }
 
@@ -91,7 +91,8 @@ impl LiveFaceTracker {
                 ..config
             };
             let tracker = build_tracker(&video, false)?;
-            let stream = LiveStream::start(tracker, Box::new(Forward(listener)))?;
+            let stream =
+                LiveStream::start(tracker, Box::new(Forward(listener, Outputs::from(&config))))?;
             Ok(Arc::new(Self {
                 config,
                 stream: Mutex::new(Some(stream)),

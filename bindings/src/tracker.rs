@@ -8,6 +8,7 @@ use crate::gaze::{GazeTarget, PlanePoint, PointOfGaze};
 use crate::types::{ActionUnits, CameraIntrinsics, FrameDesc, HeadPose, Point2, ShapeUnits, Vec3};
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::detect::DetectorConfig;
+use monotrack_core::fit::MsbpConfig;
 use monotrack_core::gaze::{GazeConfig, GazeFilter, Target};
 use monotrack_core::image::{Frame, Rect as CoreRect};
 use monotrack_core::model::FaceModel;
@@ -72,6 +73,39 @@ pub struct TrackerConfig {
     /// `ultra_light_tracker_config()`. Default off.
     #[uniffi(default = false)]
     pub ultra_light: bool,
+    /// Gesture probabilities in each `Face` (default on). Off, `Face.gestures` is `None`; the
+    /// gesture heads share the zone networks that place the landmarks, so this saves only their
+    /// decoding.
+    #[uniffi(default = true)]
+    pub gestures: bool,
+    /// The gaze outputs (default on): M3's eye directions (`Face.gaze`) and the point-of-gaze
+    /// stage (`Face.point_of_gaze`: the ray from between the eyes, the tap calibration, the
+    /// targets), which is skipped when off; both are then `None` and taps are refused.
+    #[uniffi(default = true)]
+    pub gaze: bool,
+    /// Expressions: the 3D fit's action units (default on). Off, the fit solves pose and shape
+    /// only, skipping its six one-unit solves per round, and `Face.action_units` is `None`.
+    #[uniffi(default = true)]
+    pub expressions: bool,
+}
+
+/// Which optional outputs a tracker's faces carry (its config's toggles; the ultra-light mode has
+/// no gestures, gaze or action units).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Outputs {
+    gestures: bool,
+    gaze: bool,
+    expressions: bool,
+}
+
+impl From<&TrackerConfig> for Outputs {
+    fn from(c: &TrackerConfig) -> Self {
+        Self {
+            gestures: c.gestures && !c.ultra_light,
+            gaze: c.gaze && !c.ultra_light,
+            expressions: c.expressions && !c.ultra_light,
+        }
+    }
 }
 
 /// The default settings: video mode, one face, default intrinsics, filter on.
@@ -93,6 +127,9 @@ pub fn default_tracker_config() -> TrackerConfig {
         shape_frames: c.shape_frames as u32,
         mirror_average: None,
         ultra_light: false,
+        gestures: true,
+        gaze: true,
+        expressions: true,
     }
 }
 
@@ -160,6 +197,11 @@ fn to_core(
             core_track::LandmarkMode::Gradient
         } else {
             core_track::LandmarkMode::M3
+        },
+        gaze: Outputs::from(c).gaze,
+        msbp: MsbpConfig {
+            animation_units: Outputs::from(c).expressions,
+            ..MsbpConfig::default()
         },
         ..core_track::TrackerConfig::default()
     };
@@ -258,21 +300,23 @@ pub struct Face {
     pub yaw_class_deg: i32,
     /// Yaw class probabilities in that order.
     pub yaw_probs: Vec<f32>,
-    /// Gestures.
-    pub gestures: Gestures,
-    /// Gaze.
-    pub gaze: Gaze,
+    /// Gestures; `None` when `TrackerConfig.gestures` is off or in the ultra-light mode.
+    pub gestures: Option<Gestures>,
+    /// M3's gaze directions; `None` when `TrackerConfig.gaze` is off or in the ultra-light mode.
+    pub gaze: Option<Gaze>,
     /// Head pose.
     pub pose: HeadPose,
     /// The 11 shape units.
     pub shape_units: ShapeUnits,
-    /// The 6 action (animation) units.
-    pub action_units: ActionUnits,
+    /// The 6 action (animation) units; `None` when `TrackerConfig.expressions` is off or in the
+    /// ultra-light mode.
+    pub action_units: Option<ActionUnits>,
     /// RMS reprojection error of the 3D fit, pixels.
     pub fit_rms_px: f64,
     /// Where the face looks: the gaze ray from between the eyes, and the target it lands on when
-    /// targets are set (`FaceTracker::set_gaze_targets`).
-    pub point_of_gaze: PointOfGaze,
+    /// targets are set (`FaceTracker::set_gaze_targets`); `None` when `TrackerConfig.gaze` is off
+    /// or in the ultra-light mode.
+    pub point_of_gaze: Option<PointOfGaze>,
     /// The fitted face model's 68 vertices (iBUG order, the landmarks' points on the 3D face),
     /// camera frame, millimetres: with `face_mesh_triangles()` and the intrinsics, the mesh an AR
     /// overlay draws over the upright image.
@@ -288,8 +332,8 @@ fn v3(v: &[f32; 3]) -> Vec3 {
 }
 
 impl Face {
-    /// From the core's face; `targets` name the gaze targets.
-    fn from_tracked(f: &TrackedFace, targets: &[Target]) -> Self {
+    /// From the core's face; `targets` name the gaze targets, `out` says which outputs it carries.
+    fn from_tracked(f: &TrackedFace, targets: &[Target], out: Outputs) -> Self {
         let l = &f.landmarks;
         Self {
             id: f.id,
@@ -307,7 +351,7 @@ impl Face {
             landmark_confidence: l.weights.to_vec(),
             yaw_class_deg: l.yaw_class_deg(),
             yaw_probs: l.yaw_probs.to_vec(),
-            gestures: Gestures {
+            gestures: out.gestures.then(|| Gestures {
                 smile: l.mouth[0],
                 frown: l.mouth[1],
                 kiss: l.mouth[2],
@@ -315,17 +359,19 @@ impl Face {
                 brow_raise: l.brows[0],
                 brow_frown: l.brows[1],
                 brow_neutral: l.brows[2],
-            },
-            gaze: Gaze {
+            }),
+            gaze: out.gaze.then(|| Gaze {
                 left: v3(&l.gaze_left),
                 right: v3(&l.gaze_right),
                 combined: v3(&l.gaze_combined),
-            },
+            }),
             pose: HeadPose::from(&f.fit.pose),
             shape_units: ShapeUnits::from(&f.fit.shape[..]),
-            action_units: ActionUnits::from(&f.fit.animation[..]),
+            action_units: out
+                .expressions
+                .then(|| ActionUnits::from(&f.fit.animation[..])),
             fit_rms_px: f.fit.report.rms_px,
-            point_of_gaze: PointOfGaze::from_core(&f.gaze, targets),
+            point_of_gaze: f.gaze.as_ref().map(|g| PointOfGaze::from_core(g, targets)),
             vertices_mm: {
                 f.fit
                     .posed_vertices()
@@ -392,6 +438,7 @@ pub(crate) fn result(
     w: u32,
     h: u32,
     targets: &[Target],
+    out: Outputs,
 ) -> TrackingResult {
     let t = &r.timings;
     TrackingResult {
@@ -400,7 +447,7 @@ pub(crate) fn result(
         faces: r
             .faces
             .iter()
-            .map(|f| Face::from_tracked(f, targets))
+            .map(|f| Face::from_tracked(f, targets, out))
             .collect(),
         timings: StageTimings {
             convert_us: t.image_us,
@@ -418,8 +465,8 @@ pub(crate) fn result(
 struct State {
     config: TrackerConfig,
     video: Tracker,
-    /// For `process_image`: a separate image-mode tracker, made on first use, so stills never
-    /// disturb the video tracks.
+    /// For `process_image` in video running mode: a separate image-mode tracker, made on first
+    /// use, so stills never disturb the video tracks (in image running mode `video` serves).
     stills: Option<Tracker>,
 }
 
@@ -498,7 +545,13 @@ impl FaceTracker {
                     e => e.into(),
                 })?;
             let v = &g.video;
-            Ok(result(v.result(), w, h, v.gaze_targets()))
+            Ok(result(
+                v.result(),
+                w,
+                h,
+                v.gaze_targets(),
+                Outputs::from(&g.config),
+            ))
         })
     }
 
@@ -515,16 +568,22 @@ impl FaceTracker {
             let (w, h) = upright_size(&desc);
             let frame = Frame::new(bytes, desc.try_into()?)?;
             let mut g = self.lock();
-            if g.stills.is_none() {
-                let mut t = build_tracker(&g.config, true)?;
-                t.set_gaze_targets(g.video.gaze_targets().to_vec());
-                g.stills = Some(t);
-            }
-            let stills = g.stills.as_mut().ok_or_else(|| MonotrackError::Internal {
-                msg: "no image tracker".into(),
-            })?;
+            let out = Outputs::from(&g.config);
+            let stills = if g.config.running_mode == RunningMode::Image {
+                // The tracker is an image-mode one already: no second one.
+                &mut g.video
+            } else {
+                if g.stills.is_none() {
+                    let mut t = build_tracker(&g.config, true)?;
+                    t.set_gaze_targets(g.video.gaze_targets().to_vec());
+                    g.stills = Some(t);
+                }
+                g.stills.as_mut().ok_or_else(|| MonotrackError::Internal {
+                    msg: "no image tracker".into(),
+                })?
+            };
             stills.process_frame(&frame, 0)?;
-            Ok(result(stills.result(), w, h, stills.gaze_targets()))
+            Ok(result(stills.result(), w, h, stills.gaze_targets(), out))
         })
     }
 
@@ -956,6 +1015,63 @@ mod tests {
         assert!(mesh.iter().all(|&i| i < 68));
     }
 
+    /// The output toggles: off, the face carries no gestures, gaze or action units and taps are
+    /// refused, while the landmarks, pose and shape stay those of the full tracker (the
+    /// expressions' solves only move the action units and, through them, the fit a little).
+    #[test]
+    fn output_toggles_leave_their_fields_out() {
+        let (upright, w, h) = upright_face();
+        let desc = gray_desc(w, h, 0, false);
+        let full = FaceTracker::new(default_tracker_config()).unwrap();
+        let want = full.process_frame(&upright, desc, 1).unwrap().faces[0].clone();
+        let lean = FaceTracker::new(TrackerConfig {
+            gestures: false,
+            gaze: false,
+            expressions: false,
+            ..default_tracker_config()
+        })
+        .unwrap();
+        let screen = crate::gaze::screen_target("phone".into(), 70.0, 150.0, 35.0, -8.0).unwrap();
+        lean.set_gaze_targets(vec![screen]).unwrap();
+        let f = lean.process_frame(&upright, desc, 1).unwrap().faces[0].clone();
+        assert!(f.gestures.is_none() && f.gaze.is_none() && f.point_of_gaze.is_none());
+        assert!(f.action_units.is_none());
+        assert!(want.gestures.is_some() && want.point_of_gaze.is_some());
+        assert!(want.action_units.is_some());
+        assert_eq!(f.landmarks, want.landmarks);
+        assert!(
+            (f.pose.yaw_deg - want.pose.yaw_deg).abs() < 3.0,
+            "{:?}",
+            f.pose
+        );
+        let (z, want_z) = (f.pose.translation_mm.z, want.pose.translation_mm.z);
+        assert!((z - want_z).abs() < 0.05 * want_z, "{z} vs {want_z} mm");
+        let tap = PlanePoint {
+            u_mm: 35.0,
+            v_mm: 50.0,
+        };
+        assert!(matches!(
+            lean.add_calibration_point("phone".into(), tap, 1),
+            Err(MonotrackError::InvalidConfig { .. })
+        ));
+    }
+
+    /// In the image running mode stills go through the one tracker built: no second one.
+    #[test]
+    fn image_mode_builds_one_tracker() {
+        let (upright, w, h) = upright_face();
+        let tracker = FaceTracker::new(TrackerConfig {
+            running_mode: RunningMode::Image,
+            ..default_tracker_config()
+        })
+        .unwrap();
+        let r = tracker
+            .process_image(&upright, gray_desc(w, h, 0, false))
+            .unwrap();
+        assert_eq!(r.faces.len(), 1);
+        assert!(tracker.lock().stills.is_none());
+    }
+
     /// The ultra-light tracker finds and follows the face without M3: 27 landmarks with a
     /// confidence, the rest 0, a pose from FFBP near the full pipeline's (same face, within a
     /// quarter of its distance and 20° of yaw/pitch/roll), and the M3-only outputs at rest.
@@ -995,7 +1111,8 @@ mod tests {
                     want.pose
                 );
             }
-            assert_eq!(f.gestures.smile, 0.0);
+            assert!(f.gestures.is_none() && f.gaze.is_none() && f.point_of_gaze.is_none());
+            assert!(f.action_units.is_none());
         }
         assert_eq!(want.landmark_confidence, vec![1.0; 68]);
     }
@@ -1048,7 +1165,7 @@ mod tests {
             .unwrap()
             .faces[0]
             .clone();
-        let g = &f.point_of_gaze;
+        let g = f.point_of_gaze.as_ref().unwrap();
         assert!((200.0..3000.0).contains(&g.origin_mm.z), "{g:?}");
         let d = &g.direction;
         assert!(((d.x * d.x + d.y * d.y + d.z * d.z).sqrt() - 1.0).abs() < 1e-9);
@@ -1093,14 +1210,14 @@ mod tests {
             .unwrap()
             .faces[0]
             .clone();
-        let h = after.point_of_gaze.target.unwrap();
+        let h = after.point_of_gaze.unwrap().target.unwrap();
         let miss = ((h.point.u_mm - tap.u_mm).powi(2) + (h.point.v_mm - tap.v_mm).powi(2)).sqrt();
         assert!(h.hit && miss < 10.0, "{h:?}: {miss} mm from the tap");
         tracker.reset_gaze_calibration();
         // Targets can be cleared; a bad one is refused.
         tracker.set_gaze_targets(vec![]).unwrap();
         let r = tracker.process_frame(&upright, desc, 76 * ms).unwrap();
-        assert!(r.faces[0].point_of_gaze.target.is_none());
+        assert!(r.faces[0].point_of_gaze.as_ref().unwrap().target.is_none());
         let flat = crate::gaze::GazeTarget {
             id: "flat".into(),
             corners_mm: vec![

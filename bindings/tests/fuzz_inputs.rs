@@ -164,6 +164,9 @@ fn frames_and_trackers_never_panic() {
             shape_frames: r.small(),
             mirror_average: [None, Some(false), Some(true)][r.below(3) as usize],
             ultra_light: r.below(2) == 0,
+            gestures: r.below(2) == 0,
+            gaze: r.below(2) == 0,
+            expressions: r.below(2) == 0,
         };
         no_panic("FaceTracker::new", case, || {
             typed("FaceTracker::new", case, FaceTracker::new(cfg));

@@ -19,6 +19,7 @@ import io.monotrack.FitMethod
 import io.monotrack.FrameDesc
 import io.monotrack.MonotrackException
 import io.monotrack.PixelFormat
+import io.monotrack.PlanePoint
 import io.monotrack.Point2
 import io.monotrack.fitLandmarks
 import io.monotrack.lumaImage
@@ -223,7 +224,7 @@ class BindingsTest {
             assertTrue(nose.x in 176f..273f && nose.y in 88f..181f, "nose at $nose")
             assertTrue(kotlin.math.abs(f.pose.yawDeg) < 30.0, "frontal: yaw ${f.pose.yawDeg}")
             assertTrue(f.pose.translationMm.z in 200.0..2000.0)
-            assertTrue(f.shapeUnits.eyesWidth.isFinite() && f.actionUnits.openMouth.isFinite())
+            assertTrue(f.shapeUnits.eyesWidth.isFinite() && f.actionUnits!!.openMouth.isFinite())
             val second = t.processFrame(buf, d, 2_000_000L)
             assertEquals(FaceState.TRACKED, second.faces[0].state)
             assertEquals(f.id, second.faces[0].id)
@@ -280,7 +281,28 @@ class BindingsTest {
                 // The nose tip lies inside the astronaut's face box, as in the full pipeline.
                 val nose = f.landmarks[30]
                 assertTrue(nose.x in 176f..273f && nose.y in 88f..181f, "nose at $nose")
+                // No networks, so no gestures, gaze or action units.
+                assertTrue(f.gestures == null && f.gaze == null && f.pointOfGaze == null && f.actionUnits == null)
             }
+        }
+    }
+
+    @Test
+    fun outputTogglesLeaveTheirFieldsOut() {
+        val (buf, stride) = rgbaFrame()
+        val d = desc(PixelFormat.RGBA8, stride, 0)
+        val lean = defaultTrackerConfig().copy(gestures = false, gaze = false, expressions = false)
+        FaceTracker(lean).use { t ->
+            val f = t.processFrame(buf, d, 1L).faces.single()
+            assertTrue(f.gestures == null && f.gaze == null && f.pointOfGaze == null && f.actionUnits == null)
+            assertEquals(68, f.landmarks.size)
+            assertThrows(MonotrackException.InvalidConfig::class.java) {
+                t.addCalibrationPoint("phone", PlanePoint(1.0, 1.0), 1L)
+            }
+        }
+        FaceTracker(defaultTrackerConfig()).use { t ->
+            val f = t.processFrame(buf, d, 1L).faces.single()
+            assertTrue(f.gestures != null && f.gaze != null && f.pointOfGaze != null && f.actionUnits != null)
         }
     }
 

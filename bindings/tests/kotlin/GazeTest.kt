@@ -57,17 +57,17 @@ class GazeTest {
         val (buf, desc) = face()
         FaceTracker(defaultTrackerConfig()).use { t ->
             t.setGazeTargets(listOf(screenTarget("phone", 70.0, 150.0, 35.0, -8.0)))
-            val first = t.processFrame(buf, desc, 10_000_000L).faces.single().pointOfGaze
+            val first = t.processFrame(buf, desc, 10_000_000L).faces.single().pointOfGaze!!
             assertTrue(first.originMm.z in 200.0..3000.0, "origin ${first.originMm}")
             assertEquals("phone", first.target!!.nearest)
             assertThrows(MonotrackException.InvalidFrame::class.java) {
                 t.addCalibrationPoint("phone", PlanePoint(10.0, 10.0), 5_000_000_000L)
             }
             assertEquals(1u, t.addCalibrationPoint("phone", PlanePoint(20.0, 90.0), 11_000_000L))
-            val hit = t.processFrame(buf, desc, 43_000_000L).faces.single().pointOfGaze.target!!
+            val hit = t.processFrame(buf, desc, 43_000_000L).faces.single().pointOfGaze!!.target!!
             assertTrue(hit.hit && hypot(hit.point.uMm - 20.0, hit.point.vMm - 90.0) < 10.0, "landed at ${hit.point}")
             t.setGazeTargets(emptyList())
-            assertNull(t.processFrame(buf, desc, 76_000_000L).faces.single().pointOfGaze.target)
+            assertNull(t.processFrame(buf, desc, 76_000_000L).faces.single().pointOfGaze!!.target)
         }
     }
 }

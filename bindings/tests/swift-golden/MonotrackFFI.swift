@@ -2693,13 +2693,13 @@ public struct Face: Equatable, Hashable {
      */
     public var yawProbs: [Float]
     /**
-     * Gestures.
+     * Gestures; `None` when `TrackerConfig.gestures` is off or in the ultra-light mode.
      */
-    public var gestures: Gestures
+    public var gestures: Gestures?
     /**
-     * Gaze.
+     * M3's gaze directions; `None` when `TrackerConfig.gaze` is off or in the ultra-light mode.
      */
-    public var gaze: Gaze
+    public var gaze: Gaze?
     /**
      * Head pose.
      */
@@ -2709,18 +2709,20 @@ public struct Face: Equatable, Hashable {
      */
     public var shapeUnits: ShapeUnits
     /**
-     * The 6 action (animation) units.
+     * The 6 action (animation) units; `None` when `TrackerConfig.expressions` is off or in the
+     * ultra-light mode.
      */
-    public var actionUnits: ActionUnits
+    public var actionUnits: ActionUnits?
     /**
      * RMS reprojection error of the 3D fit, pixels.
      */
     public var fitRmsPx: Double
     /**
      * Where the face looks: the gaze ray from between the eyes, and the target it lands on when
-     * targets are set (`FaceTracker::set_gaze_targets`).
+     * targets are set (`FaceTracker::set_gaze_targets`); `None` when `TrackerConfig.gaze` is off
+     * or in the ultra-light mode.
      */
-    public var pointOfGaze: PointOfGaze
+    public var pointOfGaze: PointOfGaze?
     /**
      * The fitted face model's 68 vertices (iBUG order, the landmarks' points on the 3D face),
      * camera frame, millimetres: with `face_mesh_triangles()` and the intrinsics, the mesh an AR
@@ -2758,11 +2760,11 @@ public struct Face: Equatable, Hashable {
          * Yaw class probabilities in that order.
          */yawProbs: [Float], 
         /**
-         * Gestures.
-         */gestures: Gestures, 
+         * Gestures; `None` when `TrackerConfig.gestures` is off or in the ultra-light mode.
+         */gestures: Gestures?, 
         /**
-         * Gaze.
-         */gaze: Gaze, 
+         * M3's gaze directions; `None` when `TrackerConfig.gaze` is off or in the ultra-light mode.
+         */gaze: Gaze?, 
         /**
          * Head pose.
          */pose: HeadPose, 
@@ -2770,15 +2772,17 @@ public struct Face: Equatable, Hashable {
          * The 11 shape units.
          */shapeUnits: ShapeUnits, 
         /**
-         * The 6 action (animation) units.
-         */actionUnits: ActionUnits, 
+         * The 6 action (animation) units; `None` when `TrackerConfig.expressions` is off or in the
+         * ultra-light mode.
+         */actionUnits: ActionUnits?, 
         /**
          * RMS reprojection error of the 3D fit, pixels.
          */fitRmsPx: Double, 
         /**
          * Where the face looks: the gaze ray from between the eyes, and the target it lands on when
-         * targets are set (`FaceTracker::set_gaze_targets`).
-         */pointOfGaze: PointOfGaze, 
+         * targets are set (`FaceTracker::set_gaze_targets`); `None` when `TrackerConfig.gaze` is off
+         * or in the ultra-light mode.
+         */pointOfGaze: PointOfGaze?, 
         /**
          * The fitted face model's 68 vertices (iBUG order, the landmarks' points on the 3D face),
          * camera frame, millimetres: with `face_mesh_triangles()` and the intrinsics, the mesh an AR
@@ -2826,13 +2830,13 @@ public struct FfiConverterTypeFace: FfiConverterRustBuffer {
                 landmarkConfidence: FfiConverterSequenceFloat.read(from: &buf), 
                 yawClassDeg: FfiConverterInt32.read(from: &buf), 
                 yawProbs: FfiConverterSequenceFloat.read(from: &buf), 
-                gestures: FfiConverterTypeGestures.read(from: &buf), 
-                gaze: FfiConverterTypeGaze.read(from: &buf), 
+                gestures: FfiConverterOptionTypeGestures.read(from: &buf), 
+                gaze: FfiConverterOptionTypeGaze.read(from: &buf), 
                 pose: FfiConverterTypeHeadPose.read(from: &buf), 
                 shapeUnits: FfiConverterTypeShapeUnits.read(from: &buf), 
-                actionUnits: FfiConverterTypeActionUnits.read(from: &buf), 
+                actionUnits: FfiConverterOptionTypeActionUnits.read(from: &buf), 
                 fitRmsPx: FfiConverterDouble.read(from: &buf), 
-                pointOfGaze: FfiConverterTypePointOfGaze.read(from: &buf), 
+                pointOfGaze: FfiConverterOptionTypePointOfGaze.read(from: &buf), 
                 verticesMm: FfiConverterSequenceTypeVec3.read(from: &buf)
         )
     }
@@ -2846,13 +2850,13 @@ public struct FfiConverterTypeFace: FfiConverterRustBuffer {
         FfiConverterSequenceFloat.write(value.landmarkConfidence, into: &buf)
         FfiConverterInt32.write(value.yawClassDeg, into: &buf)
         FfiConverterSequenceFloat.write(value.yawProbs, into: &buf)
-        FfiConverterTypeGestures.write(value.gestures, into: &buf)
-        FfiConverterTypeGaze.write(value.gaze, into: &buf)
+        FfiConverterOptionTypeGestures.write(value.gestures, into: &buf)
+        FfiConverterOptionTypeGaze.write(value.gaze, into: &buf)
         FfiConverterTypeHeadPose.write(value.pose, into: &buf)
         FfiConverterTypeShapeUnits.write(value.shapeUnits, into: &buf)
-        FfiConverterTypeActionUnits.write(value.actionUnits, into: &buf)
+        FfiConverterOptionTypeActionUnits.write(value.actionUnits, into: &buf)
         FfiConverterDouble.write(value.fitRmsPx, into: &buf)
-        FfiConverterTypePointOfGaze.write(value.pointOfGaze, into: &buf)
+        FfiConverterOptionTypePointOfGaze.write(value.pointOfGaze, into: &buf)
         FfiConverterSequenceTypeVec3.write(value.verticesMm, into: &buf)
     }
 }
@@ -5285,6 +5289,23 @@ public struct TrackerConfig: Equatable, Hashable {
      * `ultra_light_tracker_config()`. Default off.
      */
     public var ultraLight: Bool
+    /**
+     * Gesture probabilities in each `Face` (default on). Off, `Face.gestures` is `None`; the
+     * gesture heads share the zone networks that place the landmarks, so this saves only their
+     * decoding.
+     */
+    public var gestures: Bool
+    /**
+     * The gaze outputs (default on): M3's eye directions (`Face.gaze`) and the point-of-gaze
+     * stage (`Face.point_of_gaze`: the ray from between the eyes, the tap calibration, the
+     * targets), which is skipped when off; both are then `None` and taps are refused.
+     */
+    public var gaze: Bool
+    /**
+     * Expressions: the 3D fit's action units (default on). Off, the fit solves pose and shape
+     * only, skipping its six one-unit solves per round, and `Face.action_units` is `None`.
+     */
+    public var expressions: Bool
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -5347,7 +5368,21 @@ public struct TrackerConfig: Equatable, Hashable {
          * weight 0) and the weak-perspective FFBP fit; no gestures or gaze. Far less accurate than
          * M3 (`core/models/gradient_metrics.json`). Its face check is weak: take the thresholds of
          * `ultra_light_tracker_config()`. Default off.
-         */ultraLight: Bool = false) {
+         */ultraLight: Bool = false, 
+        /**
+         * Gesture probabilities in each `Face` (default on). Off, `Face.gestures` is `None`; the
+         * gesture heads share the zone networks that place the landmarks, so this saves only their
+         * decoding.
+         */gestures: Bool = true, 
+        /**
+         * The gaze outputs (default on): M3's eye directions (`Face.gaze`) and the point-of-gaze
+         * stage (`Face.point_of_gaze`: the ray from between the eyes, the tap calibration, the
+         * targets), which is skipped when off; both are then `None` and taps are refused.
+         */gaze: Bool = true, 
+        /**
+         * Expressions: the 3D fit's action units (default on). Off, the fit solves pose and shape
+         * only, skipping its six one-unit solves per round, and `Face.action_units` is `None`.
+         */expressions: Bool = true) {
         self.runningMode = runningMode
         self.maxFaces = maxFaces
         self.camera = camera
@@ -5362,6 +5397,9 @@ public struct TrackerConfig: Equatable, Hashable {
         self.shapeFrames = shapeFrames
         self.mirrorAverage = mirrorAverage
         self.ultraLight = ultraLight
+        self.gestures = gestures
+        self.gaze = gaze
+        self.expressions = expressions
     }
 
     
@@ -5393,7 +5431,10 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
                 gazeFilter: FfiConverterBool.read(from: &buf), 
                 shapeFrames: FfiConverterUInt32.read(from: &buf), 
                 mirrorAverage: FfiConverterOptionBool.read(from: &buf), 
-                ultraLight: FfiConverterBool.read(from: &buf)
+                ultraLight: FfiConverterBool.read(from: &buf), 
+                gestures: FfiConverterBool.read(from: &buf), 
+                gaze: FfiConverterBool.read(from: &buf), 
+                expressions: FfiConverterBool.read(from: &buf)
         )
     }
 
@@ -5412,6 +5453,9 @@ public struct FfiConverterTypeTrackerConfig: FfiConverterRustBuffer {
         FfiConverterUInt32.write(value.shapeFrames, into: &buf)
         FfiConverterOptionBool.write(value.mirrorAverage, into: &buf)
         FfiConverterBool.write(value.ultraLight, into: &buf)
+        FfiConverterBool.write(value.gestures, into: &buf)
+        FfiConverterBool.write(value.gaze, into: &buf)
+        FfiConverterBool.write(value.expressions, into: &buf)
     }
 }
 
@@ -6584,6 +6628,30 @@ fileprivate struct FfiConverterOptionString: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionTypeActionUnits: FfiConverterRustBuffer {
+    typealias SwiftType = ActionUnits?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeActionUnits.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeActionUnits.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterOptionTypeCameraIntrinsics: FfiConverterRustBuffer {
     typealias SwiftType = CameraIntrinsics?
 
@@ -6600,6 +6668,78 @@ fileprivate struct FfiConverterOptionTypeCameraIntrinsics: FfiConverterRustBuffe
         switch try readInt(&buf) as Int8 {
         case 0: return nil
         case 1: return try FfiConverterTypeCameraIntrinsics.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypeGaze: FfiConverterRustBuffer {
+    typealias SwiftType = Gaze?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeGaze.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeGaze.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypeGestures: FfiConverterRustBuffer {
+    typealias SwiftType = Gestures?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeGestures.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeGestures.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionTypePointOfGaze: FfiConverterRustBuffer {
+    typealias SwiftType = PointOfGaze?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypePointOfGaze.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypePointOfGaze.read(from: &buf)
         default: throw UniffiInternalError.unexpectedOptionalTag
         }
     }

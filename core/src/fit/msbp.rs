@@ -43,6 +43,9 @@ pub struct MsbpConfig {
     pub shape_prior: f64,
     /// Weight of the prior on animation units, px² per unit².
     pub animation_prior: f64,
+    /// Whether step 3 fits the animation units (expressions). Off, they stay 0 and each round
+    /// skips its six one-unit solves: pose and shape only, for apps that draw no expressions.
+    pub animation_units: bool,
     /// Yaw seeds (degrees) for step 1 when there is no previous pose.
     pub yaw_seeds_deg: [f64; 3],
     /// Step-1 solver.
@@ -62,6 +65,7 @@ impl Default for MsbpConfig {
             outer_iterations: 3,
             shape_prior: 1.0,
             animation_prior: 0.5,
+            animation_units: true,
             yaw_seeds_deg: [0.0, -40.0, 40.0],
             lm: LevenbergMarquardt::default(),
             bfgs: Bfgs::default(),
@@ -422,7 +426,7 @@ impl Msbp {
             }
 
             // Step 3: each animation unit in turn, its own pairs only.
-            for k in 0..N_ANIM {
+            for k in (0..N_ANIM).filter(|_| cfg.animation_units) {
                 let mut others = anim;
                 others[k] = 0.0;
                 let mut base = [Vector3::zeros(); N_LANDMARKS];
@@ -639,5 +643,52 @@ mod tests {
         );
         assert!((fit.pose.translation - truth.translation).norm() < 1.0);
         assert!(fit.report.rms_px < 0.01 && fit.report.converged);
+    }
+
+    /// With the animation units off, a smiling face's pose is still found, its units stay 0, and
+    /// the fit is poorer than with them on (the expression is left unexplained).
+    #[test]
+    fn animation_units_off_fit_pose_and_shape_only() {
+        let cam = Intrinsics::default_for(640, 480).unwrap();
+        let truth = Pose::from_euler_deg(10.0, -5.0, 3.0, Vector3::new(10.0, -20.0, 550.0));
+        let m = FaceModel::builtin();
+        let mut anim = [0.0; N_ANIM];
+        anim[0] = 0.8;
+        anim[3] = -0.6;
+        let mut obs = [[0.0; 2]; N_LANDMARKS];
+        m.project_into(
+            &[0.0; N_SHAPE],
+            &anim,
+            &truth.rotation,
+            &truth.translation,
+            &cam,
+            &mut obs,
+        );
+        let fit = |animation_units| {
+            Msbp::new(MsbpConfig {
+                animation_units,
+                ..MsbpConfig::default()
+            })
+            .fit(&obs, None, &cam, None)
+            .unwrap()
+        };
+        let (on, off) = (fit(true), fit(false));
+        assert_eq!(off.animation, [0.0; N_ANIM]);
+        assert!(
+            on.animation.iter().any(|a| a.abs() > 0.1),
+            "{:?}",
+            on.animation
+        );
+        assert!(
+            off.pose.rotation_angle_to(&truth) < 1.0,
+            "{:?}",
+            off.pose.euler_deg()
+        );
+        assert!(
+            on.report.rms_px < off.report.rms_px,
+            "{} vs {}",
+            on.report.rms_px,
+            off.report.rms_px
+        );
     }
 }

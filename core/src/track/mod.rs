@@ -288,6 +288,11 @@ pub struct TrackerConfig {
     /// The landmark estimator and fit of [`crate::track::Tracker`] (and the fit of any
     /// [`FaceTracker`]): M3 with MSBP, or the ultra-light gradient detector with FFBP.
     pub landmarks: LandmarkMode,
+    /// Whether the point-of-gaze stage runs (default on): each face's gaze ray from between its
+    /// eyes, the tap calibration's correction and the targets it lands on. Off,
+    /// [`TrackedFace::gaze`] is `None` and taps are refused. M3's per-eye directions
+    /// ([`FaceLandmarks`]) come from the eye networks, which the eye landmarks need anyway.
+    pub gaze: bool,
 }
 
 impl TrackerConfig {
@@ -327,6 +332,7 @@ impl Default for TrackerConfig {
             new_face_interval: 15,
             redetect_immediately: true,
             landmarks: LandmarkMode::M3,
+            gaze: true,
         }
     }
 }
@@ -486,8 +492,8 @@ pub struct TrackedFace {
     pub flow_points: u32,
     /// Where the face looks: the gaze ray from between its eyes (corrected by the tap
     /// calibration), its source and confidence, and the target it lands on when targets are set
-    /// ([`FaceTracker::set_gaze_targets`]).
-    pub gaze: PointOfGaze,
+    /// ([`FaceTracker::set_gaze_targets`]). `None` when [`TrackerConfig::gaze`] is off.
+    pub gaze: Option<PointOfGaze>,
 }
 
 /// The result of one [`FaceTracker::process`] call; owned by the tracker and refilled each call.
@@ -792,13 +798,19 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
     ///
     /// # Errors
     /// [`Error::InvalidInput`] for an unknown target, a non-finite point, or no frame with a face
-    /// within 250 ms of `timestamp_ns`.
+    /// within 250 ms of `timestamp_ns`; [`Error::InvalidConfig`] when the gaze stage is off
+    /// ([`TrackerConfig::gaze`]).
     pub fn add_calibration_point(
         &mut self,
         target: usize,
         point_mm: [f64; 2],
         timestamp_ns: i64,
     ) -> Result<usize> {
+        if !self.config.gaze {
+            return Err(Error::InvalidConfig(
+                "the gaze stage is off (TrackerConfig::gaze): taps cannot calibrate it".into(),
+            ));
+        }
         let t = self.gaze.targets.get(target).ok_or_else(|| {
             Error::InvalidInput(format!(
                 "no gaze target {target} ({} set)",
@@ -1210,23 +1222,26 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             faces: 0,
             rays: [[still; 2]; MAX_FACES_LIMIT],
         };
+        let gaze_on = self.config.gaze;
         for s in self.slots.iter_mut().filter(|s| s.active) {
             if let Some(fit) = s.fit {
                 let g = &self.gaze;
-                let raw = raw_eye_rays(&s.landmarks, &fit);
-                let gaze = point_of_gaze_from_rays(
-                    &raw,
-                    &fit,
-                    &g.calibration,
-                    &g.config,
-                    s.gaze_dir.as_ref(),
-                    &g.targets,
-                );
-                s.gaze_dir = Some(gaze.ray.direction);
-                if frame.faces < MAX_FACES_LIMIT {
-                    frame.rays[frame.faces] = raw;
-                    frame.faces += 1;
-                }
+                let gaze = gaze_on.then(|| {
+                    let raw = raw_eye_rays(&s.landmarks, &fit);
+                    if frame.faces < MAX_FACES_LIMIT {
+                        frame.rays[frame.faces] = raw;
+                        frame.faces += 1;
+                    }
+                    point_of_gaze_from_rays(
+                        &raw,
+                        &fit,
+                        &g.calibration,
+                        &g.config,
+                        s.gaze_dir.as_ref(),
+                        &g.targets,
+                    )
+                });
+                s.gaze_dir = gaze.as_ref().map(|g| g.ray.direction);
                 self.result.faces.push(TrackedFace {
                     id: s.id,
                     rect: s.rect,

@@ -1,4 +1,4 @@
-// Helpers for drawing results. Conventions (shared/CONTRACT.md): image pixels of the upright,
+// Helpers for drawing results. Conventions (CONTRACT.md at the repository root): image pixels of the upright,
 // mirrored-as-asked frame, x right, y down, origin at the top-left corner of the top-left pixel;
 // camera frame x right, y down, z forward, millimetres; the pose maps model X to R·X + t.
 import CoreGraphics
@@ -72,9 +72,10 @@ extension Face {
 
     /// Gaze arrows (from, to) for the subject's right and left eye: from each eye's landmark centroid
     /// along the gaze direction's image-plane part, `lengthPx` long for a gaze across the optical
-    /// axis (an orthographic sketch for overlays). Nil without 68 landmarks.
+    /// axis (an orthographic sketch for overlays). Nil without 68 landmarks or without gaze
+    /// (`TrackerConfig.gaze` off, or the ultra-light mode).
     public func gazeArrows(lengthPx: CGFloat) -> (right: (CGPoint, CGPoint), left: (CGPoint, CGPoint))? {
-        guard landmarks.count == landmarkCount else { return nil }
+        guard landmarks.count == landmarkCount, let gaze = gaze else { return nil }
         func centroid(_ r: ClosedRange<Int>) -> CGPoint {
             let pts = landmarks[r]
             let n = CGFloat(pts.count)

@@ -87,6 +87,7 @@ fn print_table(r: &CameraBenchReport, c: &FrameDesc) {
         r.path,
         r.cpu
     );
+    println!("models loaded in {:.1} ms", r.model_load_us / 1000.0);
     println!(
         "{:<10} {:>20} {:>20}",
         "stage", "tracked µs (p90)", "detected µs (p90)"

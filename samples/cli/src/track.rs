@@ -487,8 +487,8 @@ pub fn face_json(face: &TrackedFace, targets: Option<&[Target]>) -> Value {
         }),
     );
     put_fit(&mut m, &face.fit);
-    if let Some(t) = targets {
-        put_point_of_gaze(&mut m, &face.gaze, t);
+    if let (Some(t), Some(g)) = (targets, &face.gaze) {
+        put_point_of_gaze(&mut m, g, t);
     }
     m.insert("shape_held".into(), json!(face.shape_held));
     m.insert("flow_points".into(), json!(face.flow_points));
@@ -857,14 +857,14 @@ mod tests {
                 fit,
                 shape_held: true,
                 flow_points: 60,
-                gaze: monotrack_core::gaze::point_of_gaze(
+                gaze: Some(monotrack_core::gaze::point_of_gaze(
                     &lm,
                     &fit,
                     &Default::default(),
                     &Default::default(),
                     None,
                     &[],
-                ),
+                )),
             }],
             detector_ran: false,
             timings: StageTimings {

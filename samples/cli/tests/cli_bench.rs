@@ -31,12 +31,20 @@ fn bench_reports_every_stage_from_camera_frames() {
         let keys: Vec<&str> = v.as_object().unwrap().keys().map(|k| k.as_str()).collect();
         assert_eq!(
             keys,
-            ["cpu", "detected", "frames", "path", "tracked"],
+            [
+                "cpu",
+                "detected",
+                "frames",
+                "model_load_us",
+                "path",
+                "tracked"
+            ],
             "{args:?}"
         );
         assert!(["native", "portable"].contains(&v["path"].as_str().unwrap()));
         assert!(!v["cpu"].as_str().unwrap().is_empty());
         assert_eq!(v["frames"], 8);
+        assert!(v["model_load_us"].as_f64().unwrap() > 0.0);
         for kind in ["tracked", "detected"] {
             let stages = v[kind].as_object().unwrap();
             let names: Vec<&str> = stages.keys().map(|k| k.as_str()).collect();

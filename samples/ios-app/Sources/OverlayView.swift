@@ -37,9 +37,12 @@ struct OverlayView: View {
                         context.stroke(line(m.map(from), m.map(to)), with: .color(.yellow), lineWidth: 2)
                     }
                 }
-                let mouth = face.gestures.mouth, brows = face.gestures.brows
-                let label = String(format: "%@ %.2f  brows %@ %.2f  yaw %.0f°",
-                                   mouth.name, mouth.probability, brows.name, brows.probability, face.pose.yawDeg)
+                var label = String(format: "yaw %.0f°", face.pose.yawDeg)
+                if let g = face.gestures {
+                    let mouth = g.mouth, brows = g.brows
+                    label = String(format: "%@ %.2f  brows %@ %.2f  ", mouth.name, mouth.probability,
+                                   brows.name, brows.probability) + label
+                }
                 let corner = m.map(CGPoint(x: CGFloat(face.bbox.x), y: CGFloat(face.bbox.y)))
                 context.draw(Text(label).font(.caption).foregroundColor(.white), at: corner, anchor: .bottomLeading)
             }

@@ -1,6 +1,6 @@
 // Pure Kotlin (no android.* imports): result helpers shared by apps, unit-tested on the JVM.
 //
-// Conventions (shared/CONTRACT.md): image coordinates in pixels of the upright, mirrored-as-asked
+// Conventions (CONTRACT.md at the repository root): image coordinates in pixels of the upright, mirrored-as-asked
 // frame, x right, y down, origin at the top-left corner of the top-left pixel; camera frame x right,
 // y down, z forward, millimetres; the pose maps a model point X to R·X + t.
 package io.monotrack.android
@@ -114,9 +114,11 @@ private fun Face.centroid(indices: IntRange): Point2 {
  * component, [lengthPx] long for a gaze perpendicular to the optical axis (an orthographic sketch:
  * enough for an overlay, not a measurement).
  *
- * @return (subject's right eye, subject's left eye), or null when the face lacks 68 landmarks.
+ * @return (subject's right eye, subject's left eye), or null when the face lacks 68 landmarks or
+ *   carries no gaze (`TrackerConfig.gaze` off, or the ultra-light mode).
  */
 public fun Face.gazeArrows(lengthPx: Float): Pair<Arrow, Arrow>? {
+    val gaze = gaze ?: return null
     if (landmarks.size != LANDMARK_COUNT) return null
     fun arrow(eye: Point2, g: Vec3) = Arrow(
         eye,

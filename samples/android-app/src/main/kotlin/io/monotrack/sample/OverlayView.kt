@@ -82,17 +82,11 @@ class OverlayView @JvmOverloads constructor(context: Context, attrs: AttributeSe
                     canvas.drawLine(m.x(a.from.x), m.y(a.from.y), m.x(a.to.x), m.y(a.to.y), gazePaint)
                 }
             }
-            val (mouth, pm) = face.gestures.mouth()
-            val (brows, pb) = face.gestures.brows()
-            val label = String.format(
-                Locale.ROOT,
-                "%s %.2f  brows %s %.2f  yaw %.0f°",
-                mouth,
-                pm,
-                brows,
-                pb,
-                face.pose.yawDeg,
-            )
+            val label = face.gestures?.let { g ->
+                val (mouth, pm) = g.mouth()
+                val (brows, pb) = g.brows()
+                String.format(Locale.ROOT, "%s %.2f  brows %s %.2f  yaw %.0f°", mouth, pm, brows, pb, face.pose.yawDeg)
+            } ?: String.format(Locale.ROOT, "yaw %.0f°", face.pose.yawDeg)
             canvas.drawText(label, m.x(face.bbox.x), m.y(face.bbox.y) - TEXT_GAP_PX, textPaint)
         }
     }
