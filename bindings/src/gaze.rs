@@ -61,7 +61,8 @@ pub struct PointOfGaze {
     pub direction: Vec3,
     /// Eyes or head.
     pub source: GazeSource,
-    /// 0..1: how far the eyes are trusted (head yaw, agreement of the two eyes).
+    /// 0..1: how far the eyes are trusted (head yaw, agreement of the two eyes, how open they
+    /// are); below 0.25 the head direction stands in (`source` is `Head`).
     pub confidence: f64,
     /// Angle between the head's facing direction and the gaze, degrees.
     pub head_to_gaze_deg: f64,

@@ -4,7 +4,7 @@
 
 use crate::MonotrackError;
 use crate::error::{guard, guard_infallible};
-use crate::gaze::GazeTarget;
+use crate::gaze::{GazeTarget, PlanePoint};
 use crate::tracker::{Outputs, TrackerConfig, TrackingResult, build_tracker, result};
 use crate::types::FrameDesc;
 use monotrack_core::gaze::Target;
@@ -33,7 +33,8 @@ pub struct LiveStreamResult {
 pub trait LiveStreamListener: Send + Sync {
     /// The faces of one frame.
     fn on_result(&self, result: LiveStreamResult);
-    /// Tracking the frame taken at `timestamp_ns` failed; the stream goes on with the next frame.
+    /// Tracking the frame taken at `timestamp_ns` failed, or a tap at that time could not be used
+    /// (`LiveFaceTracker::add_calibration_point`); the stream goes on with the next frame.
     fn on_error(&self, timestamp_ns: i64, frames_dropped: u64, error: MonotrackError);
 }
 
@@ -58,7 +59,13 @@ impl LiveListener for Forward {
     }
 
     fn on_error(&mut self, timestamp_ns: i64, frames_dropped: u64, error: monotrack_core::Error) {
-        self.0.on_error(timestamp_ns, frames_dropped, error.into());
+        // As `FaceTracker`'s calls: what the input of a frame or a tap could not give (a frame
+        // the tracker refuses, a tap with no face near its time) is `InvalidFrame`.
+        let error = match error {
+            monotrack_core::Error::InvalidInput(msg) => MonotrackError::InvalidFrame { msg },
+            e => e.into(),
+        };
+        self.0.on_error(timestamp_ns, frames_dropped, error);
     }
 }
 
@@ -68,6 +75,8 @@ impl LiveListener for Forward {
 #[derive(uniffi::Object)]
 pub struct LiveFaceTracker {
     config: TrackerConfig,
+    /// The ids of the gaze targets set, in order (taps name their target by id).
+    target_ids: Mutex<Vec<String>>,
     /// `None` once shut down.
     stream: Mutex<Option<LiveStream>>,
 }
@@ -95,6 +104,7 @@ impl LiveFaceTracker {
                 LiveStream::start(tracker, Box::new(Forward(listener, Outputs::from(&config))))?;
             Ok(Arc::new(Self {
                 config,
+                target_ids: Mutex::new(Vec::new()),
                 stream: Mutex::new(Some(stream)),
             }))
         })
@@ -153,6 +163,8 @@ impl LiveFaceTracker {
     pub fn set_gaze_targets(&self, targets: Vec<GazeTarget>) -> Result<(), MonotrackError> {
         guard(|| {
             let core = crate::gaze::to_core(&targets)?;
+            *self.target_ids.lock().unwrap_or_else(|p| p.into_inner()) =
+                targets.iter().map(|t| t.id.clone()).collect();
             if let Some(s) = self
                 .stream
                 .lock()
@@ -163,6 +175,64 @@ impl LiveFaceTracker {
             }
             Ok(())
         })
+    }
+
+    /// Tells the tracker the user looked at `point` on the target `target_id` at `timestamp_ns`
+    /// (as `FaceTracker::add_calibration_point`, in the frames' clock). The tap is learnt on the
+    /// worker before the next frame; one it cannot use (no frame with a face within 250 ms of
+    /// it) reaches the listener's `on_error` with the tap's timestamp.
+    ///
+    /// # Errors
+    /// `InvalidConfig` for an unknown target, a non-finite point, or the gaze output turned off
+    /// (`TrackerConfig.gaze`); `InvalidFrame` once shut down.
+    pub fn add_calibration_point(
+        &self,
+        target_id: String,
+        point: PlanePoint,
+        timestamp_ns: i64,
+    ) -> Result<(), MonotrackError> {
+        guard(|| {
+            if !Outputs::from(&self.config).gaze() {
+                return Err(MonotrackError::InvalidConfig {
+                    msg: "the gaze output is off (TrackerConfig.gaze): taps cannot calibrate it"
+                        .into(),
+                });
+            }
+            let index = self
+                .target_ids
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .iter()
+                .position(|id| *id == target_id)
+                .ok_or_else(|| MonotrackError::InvalidConfig {
+                    msg: format!("no gaze target {target_id:?}"),
+                })?;
+            if !(point.u_mm.is_finite() && point.v_mm.is_finite()) {
+                return Err(MonotrackError::InvalidConfig {
+                    msg: format!("calibration point {point:?} is not finite"),
+                });
+            }
+            let g = self.stream.lock().unwrap_or_else(|p| p.into_inner());
+            let stream = g.as_ref().ok_or_else(|| MonotrackError::InvalidFrame {
+                msg: "the live tracker was shut down".into(),
+            })?;
+            stream.add_calibration_point(index, [point.u_mm, point.v_mm], timestamp_ns);
+            Ok(())
+        })
+    }
+
+    /// Forgets the tap calibration (a new user), before the next frame.
+    pub fn reset_gaze_calibration(&self) {
+        guard_infallible(|| {
+            if let Some(s) = self
+                .stream
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .as_ref()
+            {
+                s.reset_gaze_calibration();
+            }
+        });
     }
 }
 
@@ -217,5 +287,69 @@ mod tests {
         live.shutdown();
         live.shutdown();
         assert!(live.process_async(&[90; 64 * 48], desc, 6).is_err());
+    }
+
+    /// Taps on a live tracker: learnt on the worker, the next frame's point of gaze lands near the
+    /// tap; an unusable tap (no face near its time) reaches `on_error`; unknown targets and taps
+    /// with the gaze output off are refused at once.
+    #[test]
+    fn taps_calibrate_the_live_tracker() {
+        use crate::tracker::tests::{gray_desc, upright_face};
+        let (upright, w, h) = upright_face();
+        let desc = gray_desc(w, h, 0, false);
+        let (tx, rx) = mpsc::channel();
+        let live =
+            LiveFaceTracker::new(default_tracker_config(), Arc::new(Channel(Mutex::new(tx))))
+                .unwrap();
+        let screen = crate::gaze::screen_target("phone".into(), 70.0, 150.0, 35.0, -8.0).unwrap();
+        live.set_gaze_targets(vec![screen]).unwrap();
+        let ms = 1_000_000;
+        let next = |ts: i64| {
+            live.process_async(&upright, desc, ts).unwrap();
+            rx.recv_timeout(Duration::from_secs(60)).unwrap()
+        };
+        assert!(next(10 * ms).unwrap().result.faces.len() == 1);
+        let tap = PlanePoint {
+            u_mm: 35.0,
+            v_mm: 50.0,
+        };
+        assert!(matches!(
+            live.add_calibration_point("tv".into(), tap, 10 * ms),
+            Err(MonotrackError::InvalidConfig { .. })
+        ));
+        live.add_calibration_point("phone".into(), tap, 12 * ms)
+            .unwrap();
+        let after = next(43 * ms).unwrap();
+        let h = after.result.faces[0]
+            .point_of_gaze
+            .as_ref()
+            .unwrap()
+            .target
+            .clone()
+            .unwrap();
+        let miss = ((h.point.u_mm - tap.u_mm).powi(2) + (h.point.v_mm - tap.v_mm).powi(2)).sqrt();
+        assert!(h.hit && miss < 10.0, "{h:?}: {miss} mm from the tap");
+        // No frame near this tap: reported, and the stream goes on.
+        live.add_calibration_point("phone".into(), tap, 900 * ms)
+            .unwrap();
+        assert!(matches!(
+            next(950 * ms),
+            Err(MonotrackError::InvalidFrame { .. })
+        ));
+        assert!(rx.recv_timeout(Duration::from_secs(60)).unwrap().is_ok());
+        live.reset_gaze_calibration();
+        live.shutdown();
+        let off = LiveFaceTracker::new(
+            TrackerConfig {
+                gaze: false,
+                ..default_tracker_config()
+            },
+            Arc::new(Channel(Mutex::new(mpsc::channel().0))),
+        )
+        .unwrap();
+        assert!(matches!(
+            off.add_calibration_point("phone".into(), tap, 1),
+            Err(MonotrackError::InvalidConfig { .. })
+        ));
     }
 }

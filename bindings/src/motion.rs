@@ -28,6 +28,8 @@ pub enum MotionFeature {
     LinearVelocity,
     /// Rate of change of the flexion angle, degrees/s.
     AngularVelocity,
+    /// Magnitude of the acceleration relative to the pelvis, mm/s².
+    LinearAcceleration,
 }
 
 impl From<core_motion::Feature> for MotionFeature {
@@ -37,6 +39,7 @@ impl From<core_motion::Feature> for MotionFeature {
             core_motion::Feature::Abduction => Self::Abduction,
             core_motion::Feature::LinearVelocity => Self::LinearVelocity,
             core_motion::Feature::AngularVelocity => Self::AngularVelocity,
+            core_motion::Feature::LinearAcceleration => Self::LinearAcceleration,
         }
     }
 }

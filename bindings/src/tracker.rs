@@ -98,6 +98,13 @@ pub(crate) struct Outputs {
     expressions: bool,
 }
 
+impl Outputs {
+    /// Whether the faces carry gaze (and taps can calibrate it).
+    pub(crate) fn gaze(self) -> bool {
+        self.gaze
+    }
+}
+
 impl From<&TrackerConfig> for Outputs {
     fn from(c: &TrackerConfig) -> Self {
         Self {
@@ -837,13 +844,13 @@ pub fn run_benchmark(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::types::PixelFormat;
     use monotrack_core::camera::Rotation;
 
     /// A packed 8-bit frame of `w`×`h` turned by `rotation` (then mirrored).
-    fn gray_desc(w: usize, h: usize, rotation: u32, mirrored: bool) -> FrameDesc {
+    pub(crate) fn gray_desc(w: usize, h: usize, rotation: u32, mirrored: bool) -> FrameDesc {
         FrameDesc {
             width: w as u32,
             height: h as u32,
@@ -858,7 +865,7 @@ mod tests {
 
     /// The upright test picture: the sample face cropped to a landscape 512×400 (so quarter turns
     /// swap the axes).
-    fn upright_face() -> (Vec<u8>, usize, usize) {
+    pub(crate) fn upright_face() -> (Vec<u8>, usize, usize) {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/data/astronaut.jpg");
         let img = image::open(path).unwrap().to_luma8();
         let (w, h) = (512usize, 400usize);

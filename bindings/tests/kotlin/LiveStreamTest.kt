@@ -8,10 +8,12 @@ import io.monotrack.FrameDesc
 import io.monotrack.HeadPose
 import io.monotrack.MonotrackException
 import io.monotrack.PixelFormat
+import io.monotrack.PlanePoint
 import io.monotrack.RunningMode
 import io.monotrack.android.LiveEvent
 import io.monotrack.android.LiveTracker
 import io.monotrack.defaultTrackerConfig
+import io.monotrack.screenTarget
 import java.io.File
 import java.nio.ByteBuffer
 import java.util.Collections
@@ -181,6 +183,33 @@ class LiveStreamTest {
             val e = first.await()
             assertEquals(7L, e.timestampNs)
             assertTrue(e is LiveEvent.Faces && e.result.faces.size == 1)
+        }
+    }
+
+    @Test
+    fun tapsCalibrateTheLiveTrackerAndUnusableOnesReachTheListenerAsFailures() {
+        val (w, h, u) = upright
+        val events = java.util.concurrent.LinkedBlockingQueue<LiveEvent>()
+        LiveTracker(defaultTrackerConfig()) { events.add(it) }.use { t ->
+            t.setGazeTargets(listOf(screenTarget("phone", 70.0, 150.0, 35.0, -8.0)))
+            t.process(directOf(u), grayDesc(w, h), 10_000_000L)
+            assertTrue(events.poll(60, TimeUnit.SECONDS) is LiveEvent.Faces)
+            assertThrows(MonotrackException.InvalidConfig::class.java) {
+                t.addCalibrationPoint("tv", PlanePoint(35.0, 50.0), 10_000_000L)
+            }
+            t.addCalibrationPoint("phone", PlanePoint(35.0, 50.0), 12_000_000L)
+            t.process(directOf(u), grayDesc(w, h), 43_000_000L)
+            val after = events.poll(60, TimeUnit.SECONDS)
+            assertTrue(after is LiveEvent.Faces, "$after")
+            val hit = (after as LiveEvent.Faces).result.faces.single().pointOfGaze!!.target!!
+            assertTrue(hit.hit && abs(hit.point.uMm - 35.0) < 10.0 && abs(hit.point.vMm - 50.0) < 10.0, "$hit")
+            // No face near this tap's time: the listener hears it, then the frame's faces.
+            t.addCalibrationPoint("phone", PlanePoint(35.0, 50.0), 900_000_000L)
+            t.process(directOf(u), grayDesc(w, h), 950_000_000L)
+            val failed = events.poll(60, TimeUnit.SECONDS)
+            assertTrue(failed is LiveEvent.Failed && failed.timestampNs == 900_000_000L, "$failed")
+            assertTrue((failed as LiveEvent.Failed).error is MonotrackException.InvalidFrame)
+            assertTrue(events.poll(60, TimeUnit.SECONDS) is LiveEvent.Faces)
         }
     }
 }

@@ -17,7 +17,8 @@
   in mirror-average mode (the stills default).
 - Baselines on the same faces: the head's facing direction as the gaze (eyes assumed straight
   ahead), and the blendshape teacher M3 learnt from (how far the two teachers disagree).
-- Per |yaw| bin, and split by the SDK's gaze confidence (core::gaze: eye agreement x head yaw).
+- Per |yaw| bin, and split by the SDK's gaze confidence (core::gaze: eye agreement x head yaw x
+  eye openness).
 Writes core/models/m3/gaze_metrics.json and prints a table.
 
 With --fit-correction it also fits the thesis' head-proportional correction (eq. 6.4: each eye's
@@ -42,6 +43,7 @@ CENTRE_DEPTH = 0.3  # eyeball centre behind the corners' midpoint, in corner dis
 EYES = {"right": (33, 133, 468), "left": (362, 263, 473)}  # the subject's eyes
 YAW_BINS = [(0, 15), (15, 30), (30, 45), (45, 90)]
 MAX_YAW_DEG = 60.0  # core::gaze::GazeConfig::default().max_yaw_deg
+CLOSED_EYE, OPEN_EYE = 0.10, 0.18  # its closed_eye_ratio, open_eye_ratio
 
 
 def unit(v):
@@ -98,11 +100,24 @@ def teacher_offset(teacher):
     return np.mean(angles, axis=0)
 
 
-def confidence(right, left, yaw):
+def eye_openness(points):
+    """core::gaze::eye_openness: the less open eye's aspect ratio in the 68 landmarks."""
+    p = np.asarray(points, np.float64)
+
+    def ratio(e):
+        width = np.linalg.norm(p[e] - p[e + 3])
+        lids = np.linalg.norm(p[e + 1] - p[e + 5]) + np.linalg.norm(p[e + 2] - p[e + 4])
+        return lids / (2.0 * width) if width > 0 else 0.0
+
+    return min(ratio(36), ratio(42))
+
+
+def confidence(right, left, yaw, points):
     """core::gaze::point_of_gaze's confidence."""
     agree = np.clip((np.dot(unit(right), unit(left)) - 0.9) / 0.1, 0.0, 1.0)
     turn = np.clip(1.0 - abs(yaw) / MAX_YAW_DEG, 0.0, 1.0)
-    return float(agree * turn)
+    openness = np.clip((eye_openness(points) - CLOSED_EYE) / (OPEN_EYE - CLOSED_EYE), 0.0, 1.0)
+    return float(agree * turn * openness)
 
 
 def summary(errs):
@@ -233,7 +248,7 @@ def main():
             for lo, hi in YAW_BINS:
                 if lo <= yaw < hi:
                     bins[f"{lo}-{hi}"].append(per["combined"][-1])
-            c = confidence(g["right"], g["left"], o["pose"]["yaw_deg"])
+            c = confidence(g["right"], g["left"], o["pose"]["yaw_deg"], o["landmarks68"])
             by_conf["confidence >= 0.5" if c >= 0.5 else "confidence < 0.5"].append(per["combined"][-1])
         metrics[mode] = {
             "per_eye_and_combined": {k: summary(v) for k, v in per.items()},

@@ -311,3 +311,75 @@ fn the_driver_zones_example_is_hit_zone_by_zone() {
         assert_eq!(h.target, Some(i), "{}", t.id);
     }
 }
+
+/// A fitted face at 500 mm, turned by `yaw_deg`.
+fn facing(yaw_deg: f64) -> FaceFit {
+    FaceFit {
+        pose: crate::fit::Pose::from_euler_deg(yaw_deg, 0.0, 0.0, Vector3::new(0.0, 0.0, 500.0)),
+        shape: [0.0; crate::model::N_SHAPE],
+        animation: [0.0; crate::model::N_ANIM],
+        report: crate::fit::FitReport {
+            rms_px: 0.0,
+            iterations: 0,
+            termination: crate::fit::Termination::CostConverged,
+            converged: true,
+        },
+    }
+}
+
+/// Where the eyes are trusted and where the head direction replaces them: closed eyes, a head
+/// turned past the yaw limit, two eyes that disagree.
+#[test]
+fn the_head_direction_replaces_closed_turned_or_disagreeing_eyes() {
+    let cfg = GazeConfig::default();
+    let none = GazeCalibration::default();
+    let down = [0.1, 0.2, -1.0];
+    let eyes =
+        |d0: [f64; 3], d1: [f64; 3]| [ray([-30.0, 0.0, 500.0], d0), ray([30.0, 0.0, 500.0], d1)];
+    let look = |rays: &[GazeRay; 2], openness: f64, yaw: f64| {
+        point_of_gaze_from_rays(rays, openness, &facing(yaw), &none, &cfg, None, &[])
+    };
+    let open = look(&eyes(down, down), 0.3, 0.0);
+    assert_eq!(open.source, GazeSource::Eyes);
+    assert!((open.confidence - 1.0).abs() < 1e-9, "{open:?}");
+    assert!(open.ray.direction.angle(&Vector3::from(down)) < 1e-9);
+    // Closed: confidence 0, the head's direction (towards the camera for a frontal face).
+    let closed = look(&eyes(down, down), 0.05, 0.0);
+    assert_eq!((closed.source, closed.confidence), (GazeSource::Head, 0.0));
+    assert!(closed.ray.direction.angle(&Vector3::new(0.0, 0.0, -1.0)) < 1e-6);
+    // Half-closed: half the trust, still the eyes.
+    let half = look(&eyes(down, down), 0.14, 0.0);
+    assert!((half.confidence - 0.5).abs() < 1e-9 && half.source == GazeSource::Eyes);
+    // Turned 50° of the 60° limit: below the 0.25 floor.
+    let turned = look(&eyes(down, down), 0.3, 50.0);
+    assert_eq!(turned.source, GazeSource::Head);
+    assert!((turned.confidence - 1.0 / 6.0).abs() < 1e-9);
+    // Eyes 40° apart.
+    let apart = look(&eyes([0.35, 0.0, -1.0], [-0.35, 0.0, -1.0]), 0.3, 0.0);
+    assert_eq!((apart.source, apart.confidence), (GazeSource::Head, 0.0));
+}
+
+/// The eye aspect ratio of drawn eyes: open, closed, and the less open of the two.
+#[test]
+fn eye_openness_is_the_less_open_eyes_aspect_ratio() {
+    // An eye 30 px wide whose lids are `h` px apart at both lid points.
+    let draw = |points: &mut [[f32; 2]; 68], first: usize, x0: f32, h: f32| {
+        let (y, top, bottom) = (100.0, 100.0 - h / 2.0, 100.0 + h / 2.0);
+        let eye = [
+            [x0, y],
+            [x0 + 10.0, top],
+            [x0 + 20.0, top],
+            [x0 + 30.0, y],
+            [x0 + 20.0, bottom],
+            [x0 + 10.0, bottom],
+        ];
+        points[first..first + 6].copy_from_slice(&eye);
+    };
+    let mut p = [[0.0f32; 2]; 68];
+    draw(&mut p, 36, 100.0, 9.0);
+    draw(&mut p, 42, 160.0, 9.0);
+    assert!((eye_openness(&p) - 0.3).abs() < 1e-6);
+    draw(&mut p, 42, 160.0, 0.0);
+    assert_eq!(eye_openness(&p), 0.0);
+    assert_eq!(eye_openness(&[[0.0; 2]; 68]), 0.0);
+}

@@ -18,6 +18,9 @@ pub enum Feature {
     LinearVelocity,
     /// Rate of change of the flexion angle, degrees/s (where flexion is defined).
     AngularVelocity,
+    /// Magnitude of the acceleration relative to the pelvis, mm/s² (every joint but the pelvis):
+    /// the Savitzky–Golay second derivative of the smoothed trajectory.
+    LinearAcceleration,
 }
 
 impl Feature {
@@ -28,6 +31,7 @@ impl Feature {
             Self::Abduction => "abduction",
             Self::LinearVelocity => "linear_velocity",
             Self::AngularVelocity => "angular_velocity",
+            Self::LinearAcceleration => "linear_acceleration",
         }
     }
 
@@ -38,6 +42,7 @@ impl Feature {
             Self::Abduction => "abduction",
             Self::LinearVelocity => "speed",
             Self::AngularVelocity => "angular speed",
+            Self::LinearAcceleration => "acceleration",
         }
     }
 
@@ -48,6 +53,7 @@ impl Feature {
             Self::Abduction,
             Self::LinearVelocity,
             Self::AngularVelocity,
+            Self::LinearAcceleration,
         ]
         .into_iter()
         .find(|f| f.name() == name)
@@ -62,7 +68,7 @@ impl Feature {
                 Thorax | LShoulder | RShoulder | LElbow | RElbow | LHip | RHip | LKnee | RKnee
             ),
             Self::Abduction => matches!(joint, LShoulder | RShoulder | LHip | RHip),
-            Self::LinearVelocity => joint != Pelvis,
+            Self::LinearVelocity | Self::LinearAcceleration => joint != Pelvis,
         }
     }
 }
@@ -146,6 +152,15 @@ pub(crate) fn series(
             let f: Vec<f64> = pos.iter().map(|p| flexion(joint, p)).collect();
             sg.apply(&f, 1).into_iter().map(|v| v / dt).collect()
         }
+        Feature::LinearAcceleration => {
+            let axes = [0, 1, 2].map(|c| {
+                let x: Vec<f64> = pos.iter().map(|p| p[joint.index()][c]).collect();
+                sg.apply(&x, 2)
+            });
+            (0..pos.len())
+                .map(|i| norm(&[axes[0][i], axes[1][i], axes[2][i]]) / (dt * dt))
+                .collect()
+        }
     }
 }
 
@@ -161,6 +176,7 @@ pub(crate) fn dynamic_range(feature: Feature, r: &[f64]) -> (f64, f64) {
         Feature::Flexion | Feature::Abduction => 10.0,
         Feature::LinearVelocity => 100.0,
         Feature::AngularVelocity => 30.0,
+        Feature::LinearAcceleration => 1000.0,
     };
     (lo, (hi - lo).max(floor))
 }

@@ -5,19 +5,20 @@ use crate::body::N_JOINTS;
 use nalgebra::DMatrix;
 
 /// Savitzky–Golay filter coefficients: a polynomial of `order` fitted by least squares to each
-/// window of `window` samples, evaluated (value, first derivative per sample) at the sample.
+/// window of `window` samples, evaluated (value, first and second derivative per sample) at the
+/// sample.
 /// Near the ends the window shifts inwards instead of padding, so no sample is invented.
 #[derive(Debug, Clone)]
 pub(crate) struct SavitzkyGolay {
     window: usize,
     /// `coeffs[d][e]`: the weights of the window's samples for derivative `d` at window offset `e`.
-    coeffs: [Vec<Vec<f64>>; 2],
+    coeffs: [Vec<Vec<f64>>; 3],
 }
 
 impl SavitzkyGolay {
     /// `order` < `window` (`MotionConfig` checks its own: odd `window` ≥ 3).
     pub(crate) fn new(window: usize, order: usize) -> Self {
-        let coeffs = [0, 1].map(|d| {
+        let coeffs = [0, 1, 2].map(|d| {
             (0..window)
                 .map(|e| Self::weights(window, order, e, d))
                 .collect::<Vec<_>>()
@@ -36,13 +37,14 @@ impl SavitzkyGolay {
             return vec![0.0; window];
         }
         let pinv = inv * a.transpose();
-        // The fitted polynomial in (k − at): its coefficient `deriv` (times deriv!, 1 for the
-        // value and the first derivative) is its value or slope at `at`.
-        (0..window).map(|k| pinv[(deriv, k)]).collect()
+        // The fitted polynomial in (k − at): its coefficient `deriv` times deriv! is its value,
+        // slope or curvature at `at`.
+        let factorial = (1..=deriv).product::<usize>() as f64;
+        (0..window).map(|k| factorial * pinv[(deriv, k)]).collect()
     }
 
-    /// The filtered series (`deriv` 0: values, 1: first derivative per sample). Series shorter than
-    /// the window are fitted whole.
+    /// The filtered series (`deriv` 0: values, 1: first, 2: second derivative per sample). Series
+    /// shorter than the window are fitted whole.
     pub(crate) fn apply(&self, x: &[f64], deriv: usize) -> Vec<f64> {
         let n = x.len();
         if n < self.window {

@@ -143,7 +143,7 @@ impl Weights {
             })?;
             let feature = Feature::from_name(&f.feature).ok_or_else(|| {
                 at(format!(
-                    "unknown feature {:?} (flexion, abduction, linear_velocity, angular_velocity)",
+                    "unknown feature {:?} (flexion, abduction, linear_velocity, angular_velocity, linear_acceleration)",
                     f.feature
                 ))
             })?;

@@ -65,11 +65,13 @@ fn savitzky_golay_is_exact_on_cubics_to_the_ends() {
     let sg = SavitzkyGolay::new(9, 3);
     let f = |t: f64| 2.0 - 0.5 * t + 0.03 * t * t - 0.001 * t * t * t;
     let df = |t: f64| -0.5 + 0.06 * t - 0.003 * t * t;
+    let ddf = |t: f64| 0.06 - 0.006 * t;
     let x: Vec<f64> = (0..30).map(|i| f(f64::from(i))).collect();
-    let (v, d) = (sg.apply(&x, 0), sg.apply(&x, 1));
+    let (v, d, dd) = (sg.apply(&x, 0), sg.apply(&x, 1), sg.apply(&x, 2));
     for i in 0..30 {
         assert!((v[i] - x[i]).abs() < 1e-9, "{i}");
         assert!((d[i] - df(i as f64)).abs() < 1e-9, "{i}");
+        assert!((dd[i] - ddf(i as f64)).abs() < 1e-9, "{i}");
     }
     // Shorter than the window: fitted whole.
     assert_eq!(sg.apply(&x[..4], 0).len(), 4);
@@ -192,4 +194,17 @@ fn bad_inputs_are_typed_errors() {
             other => panic!("{json}: {other:?}"),
         }
     }
+}
+
+/// The shipped example weights (every feature kind, acceleration included) score a 90-frame
+/// swing against itself as equal and a copy whose arm swings faster lower.
+#[test]
+fn the_example_weights_score_a_swing() {
+    let w = Weights::from_json(include_bytes!("../../../examples/motion_weights.json")).unwrap();
+    let r = swing(90, |t| t, 0.0, [0.0; 3], 1.0);
+    let same = compare(&r, &r, &w, &MotionConfig::default()).unwrap();
+    assert!(same.overall > 0.99, "{}", same.summary());
+    let faster = swing(90, |t| (t * 1.25).min(1.0), 0.0, [0.0; 3], 1.0);
+    let rep = compare(&r, &faster, &w, &MotionConfig::default()).unwrap();
+    assert!(rep.overall < same.overall, "{}", rep.summary());
 }

@@ -55,6 +55,20 @@ pub trait FrameProcessor: Send + 'static {
 
     /// The gaze targets set.
     fn gaze_targets(&self) -> &[Target];
+
+    /// A tap on gaze target `target` ([`FaceTracker::add_calibration_point`]).
+    ///
+    /// # Errors
+    /// As [`FaceTracker::add_calibration_point`].
+    fn add_calibration_point(
+        &mut self,
+        target: usize,
+        point_mm: [f64; 2],
+        timestamp_ns: i64,
+    ) -> Result<usize>;
+
+    /// Forgets the tap calibration ([`FaceTracker::reset_gaze_calibration`]).
+    fn reset_gaze_calibration(&mut self);
 }
 
 impl<D, L> FrameProcessor for FaceTracker<D, L>
@@ -80,6 +94,19 @@ where
 
     fn gaze_targets(&self) -> &[Target] {
         FaceTracker::gaze_targets(self)
+    }
+
+    fn add_calibration_point(
+        &mut self,
+        target: usize,
+        point_mm: [f64; 2],
+        timestamp_ns: i64,
+    ) -> Result<usize> {
+        FaceTracker::add_calibration_point(self, target, point_mm, timestamp_ns)
+    }
+
+    fn reset_gaze_calibration(&mut self) {
+        FaceTracker::reset_gaze_calibration(self);
     }
 }
 
@@ -110,6 +137,10 @@ struct Slot {
     last_timestamp_ns: Option<i64>,
     /// Gaze targets for the worker to take before its next frame.
     targets: Option<Vec<Target>>,
+    /// Whether the worker forgets the tap calibration before its next frame (before `taps`).
+    reset_calibration: bool,
+    /// Taps (target, point in mm, time) for the worker to learn from before its next frame.
+    taps: Vec<(usize, [f64; 2], i64)>,
     shutdown: bool,
 }
 
@@ -198,6 +229,24 @@ impl LiveStream {
         self.shared.lock().targets = Some(targets);
     }
 
+    /// A tap on gaze target `target` at `point_mm` at `timestamp_ns` (the frames' clock), learnt
+    /// before the next frame is tracked ([`FaceTracker::add_calibration_point`]). A tap the
+    /// tracker cannot use (no face within 250 ms of it, an unknown target) reaches the listener's
+    /// `on_error` with the tap's timestamp.
+    pub fn add_calibration_point(&self, target: usize, point_mm: [f64; 2], timestamp_ns: i64) {
+        self.shared
+            .lock()
+            .taps
+            .push((target, point_mm, timestamp_ns));
+    }
+
+    /// Forgets the tap calibration before the next frame (taps added after this call stay).
+    pub fn reset_gaze_calibration(&self) {
+        let mut slot = self.shared.lock();
+        slot.reset_calibration = true;
+        slot.taps.clear();
+    }
+
     /// Stops the worker (see the type's docs) and waits for it, unless called from the listener
     /// itself (on the worker thread), where it only asks the worker to stop after this delivery.
     pub fn close(&mut self) {
@@ -225,6 +274,7 @@ fn run_worker(
     mut listener: Box<dyn LiveListener>,
 ) {
     let mut working = Pending::default();
+    let mut taps = Vec::new();
     loop {
         let (dropped, targets) = {
             let mut slot = shared.lock();
@@ -235,10 +285,19 @@ fn run_worker(
                 return;
             }
             std::mem::swap(&mut slot.waiting, &mut working);
+            if std::mem::take(&mut slot.reset_calibration) {
+                tracker.reset_gaze_calibration();
+            }
+            std::mem::swap(&mut slot.taps, &mut taps);
             (std::mem::take(&mut slot.dropped), slot.targets.take())
         };
         if let Some(t) = targets {
             tracker.set_gaze_targets(t);
+        }
+        for (target, point, at) in taps.drain(..) {
+            if let Err(e) = tracker.add_calibration_point(target, point, at) {
+                let _ = catch_unwind(AssertUnwindSafe(|| listener.on_error(at, 0, e)));
+            }
         }
         let Some(desc) = working.desc.take() else {
             continue;
@@ -310,6 +369,14 @@ mod tests {
         fn gaze_targets(&self) -> &[Target] {
             &[]
         }
+        fn add_calibration_point(&mut self, target: usize, _: [f64; 2], _: i64) -> Result<usize> {
+            if target == 0 {
+                Ok(1)
+            } else {
+                Err(Error::InvalidInput(format!("no gaze target {target}")))
+            }
+        }
+        fn reset_gaze_calibration(&mut self) {}
     }
 
     struct ToChannel(mpsc::Sender<Event>);
@@ -426,5 +493,31 @@ mod tests {
             vec![Event::Result(1, 0)],
             "frame 1 finished, frame 2 dropped"
         );
+    }
+
+    /// Taps reach the worker's tracker before the next frame; one it refuses reaches the
+    /// listener as an error with the tap's time, and the stream goes on.
+    #[test]
+    fn taps_are_learnt_before_the_next_frame_and_bad_ones_are_reported() {
+        let (mut live, rx, _) = stream(0);
+        let (bytes, desc) = gray(0);
+        let frame = Frame::new(&bytes, desc).unwrap();
+        live.add_calibration_point(0, [1.0, 2.0], 5);
+        live.add_calibration_point(3, [1.0, 2.0], 7);
+        live.submit(&frame, 10).unwrap();
+        let events: Vec<Event> = (0..2)
+            .map(|_| rx.recv_timeout(Duration::from_secs(10)).unwrap())
+            .collect();
+        assert!(
+            matches!(&events[..], [Event::Error(7, 0, msg), Event::Result(10, 0)] if msg.contains("no gaze target 3")),
+            "{events:?}"
+        );
+        // A reset drops the taps not yet taken.
+        live.add_calibration_point(3, [1.0, 2.0], 11);
+        live.reset_gaze_calibration();
+        live.submit(&frame, 12).unwrap();
+        let e = rx.recv_timeout(Duration::from_secs(10)).unwrap();
+        assert_eq!(e, Event::Result(12, 0));
+        live.close();
     }
 }

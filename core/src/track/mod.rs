@@ -33,8 +33,8 @@ use crate::camera::Intrinsics;
 use crate::error::{Error, Result};
 use crate::fit::{FaceFit, Ffbp, FfbpConfig, Msbp, MsbpConfig, ShapeAccumulator};
 use crate::gaze::{
-    GazeCalibration, GazeConfig, GazeRay, PointOfGaze, Target, point_of_gaze_from_rays,
-    raw_eye_rays,
+    GazeCalibration, GazeConfig, GazeRay, PointOfGaze, Target, eye_openness,
+    point_of_gaze_from_rays, raw_eye_rays,
 };
 use crate::image::{Frame, GrayImage, Rect};
 use crate::landmarks::{FaceLandmarks, N_POINTS};
@@ -1234,6 +1234,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                     }
                     point_of_gaze_from_rays(
                         &raw,
+                        eye_openness(&s.landmarks.points),
                         &fit,
                         &g.calibration,
                         &g.config,

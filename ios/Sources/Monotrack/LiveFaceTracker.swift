@@ -7,7 +7,8 @@ import Foundation
 public enum LiveEvent: Sendable {
     /// The frame's faces; `framesDropped` frames were skipped before it because the tracker was busy.
     case faces(LiveStreamResult)
-    /// Tracking the frame taken at `timestampNs` failed; the stream goes on with the next one.
+    /// Tracking the frame taken at `timestampNs` failed, or a tap at that time could not be used;
+    /// the stream goes on with the next one.
     case failed(timestampNs: Int64, framesDropped: UInt64, error: MonotrackError)
 }
 
@@ -60,6 +61,27 @@ public final class LiveTracker: @unchecked Sendable {
         return try pixelBuffer.withMonotrackFrame(orientation: orientation) { data, desc in
             try native.processAsync(bytes: data, desc: desc, timestampNs: timestamps.next(t))
         }
+    }
+
+    /// Sets the targets each face's point of gaze is located among (as `FaceTracker.setGazeTargets`);
+    /// frames from the next one on use them.
+    /// - Throws: `MonotrackError.InvalidConfig` for a bad target or a repeated id.
+    public func setGazeTargets(_ targets: [GazeTarget]) throws {
+        try native.setGazeTargets(targets: targets)
+    }
+
+    /// A tap: the user looked at `point` on the target `targetId` at `timestampNs` (the frames'
+    /// clock). Learnt on the worker before the next frame; a tap it cannot use (no face within
+    /// 250 ms of it) arrives as `LiveEvent.failed` with the tap's time.
+    /// - Throws: `MonotrackError.InvalidConfig` for an unknown target, a non-finite point or the
+    ///   gaze output turned off.
+    public func addCalibrationPoint(targetId: String, point: PlanePoint, timestampNs: Int64) throws {
+        try native.addCalibrationPoint(targetId: targetId, point: point, timestampNs: timestampNs)
+    }
+
+    /// Forgets the tap calibration (a new user) before the next frame.
+    public func resetGazeCalibration() {
+        native.resetGazeCalibration()
     }
 
     /// Stops the worker (a frame being tracked finishes and is delivered, a waiting one is dropped)

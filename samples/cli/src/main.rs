@@ -163,6 +163,10 @@ enum Command {
         /// similarity as the green bar; the file name says phase, joint, feature and score).
         #[arg(long)]
         plot: Option<PathBuf>,
+        /// Frames per second of both sequences (velocities and accelerations are per second;
+        /// Human3.6M's files as `tests/scripts/body_data.py` writes them are 10).
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
     },
     /// 3D body pose and dimensions from 2D joints with a known or floor-calibrated camera.
     BodyFit {
@@ -337,7 +341,8 @@ fn main() -> ExitCode {
             weights,
             json,
             plot,
-        } => motion::run(&reference, &trial, &weights, json, plot.as_deref()).map(|()| true),
+            fps,
+        } => motion::run(&reference, &trial, &weights, json, plot.as_deref(), fps).map(|()| true),
         Command::BodyFit {
             input,
             out,

@@ -105,6 +105,7 @@ fn plot(r: &MotionReport, weights: &Weights, dir: &Path) -> Result<(), String> {
         let unit = match f.feature {
             monotrack_core::motion::Feature::LinearVelocity => "MM/S",
             monotrack_core::motion::Feature::AngularVelocity => "DEG/S",
+            monotrack_core::motion::Feature::LinearAcceleration => "MM/S2",
             _ => "DEG",
         };
         let title = format!(
@@ -173,13 +174,18 @@ pub fn run(
     weights: &Path,
     json_out: bool,
     plot_dir: Option<&Path>,
+    fps: f64,
 ) -> Result<(), String> {
     let r = read_sequence(reference)?;
     let t = read_sequence(trial)?;
     let wbytes =
         std::fs::read(weights).map_err(|e| format!("cannot read {}: {e}", weights.display()))?;
     let w = Weights::from_json(&wbytes).map_err(|e| format!("{}: {e}", weights.display()))?;
-    let rep = compare(&r, &t, &w, &MotionConfig::default()).map_err(|e| e.to_string())?;
+    let config = MotionConfig {
+        fps,
+        ..MotionConfig::default()
+    };
+    let rep = compare(&r, &t, &w, &config).map_err(|e| e.to_string())?;
     if let Some(dir) = plot_dir {
         plot(&rep, &w, dir)?;
     }

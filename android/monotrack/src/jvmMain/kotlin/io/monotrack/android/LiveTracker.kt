@@ -33,7 +33,7 @@ public sealed interface LiveEvent {
         val result: TrackingResult get() = live.result
     }
 
-    /** Tracking this frame failed; the stream goes on with the next one. */
+    /** Tracking this frame failed, or a tap at this time could not be used; the stream goes on. */
     public data class Failed(
         override val timestampNs: Long,
         override val framesDropped: Long,
@@ -106,6 +106,35 @@ public class LiveTracker(
     public fun process(bytes: ByteBuffer, desc: FrameDesc, timestampNs: Long): Boolean {
         check(!closed) { "LiveTracker is closed" }
         return native.processAsync(bytes, desc, timestamps.next(timestampNs))
+    }
+
+    /**
+     * Sets the targets each face's point of gaze is located among (as `FaceTracker.setGazeTargets`);
+     * frames from the next one on use them.
+     *
+     * @throws MonotrackException.InvalidConfig for a bad target or a repeated id.
+     */
+    public fun setGazeTargets(targets: List<io.monotrack.GazeTarget>) {
+        check(!closed) { "LiveTracker is closed" }
+        native.setGazeTargets(targets)
+    }
+
+    /**
+     * A tap: the user looked at [point] on the target [targetId] at [timestampNs] (the frames'
+     * clock). Learnt on the worker before the next frame; a tap it cannot use (no face within
+     * 250 ms of it) arrives as [LiveEvent.Failed] with the tap's time.
+     *
+     * @throws MonotrackException.InvalidConfig for an unknown target, a non-finite point or the gaze
+     *   output turned off.
+     */
+    public fun addCalibrationPoint(targetId: String, point: io.monotrack.PlanePoint, timestampNs: Long) {
+        check(!closed) { "LiveTracker is closed" }
+        native.addCalibrationPoint(targetId, point, timestampNs)
+    }
+
+    /** Forgets the tap calibration (a new user) before the next frame. */
+    public fun resetGazeCalibration() {
+        if (!closed) native.resetGazeCalibration()
     }
 
     /**
