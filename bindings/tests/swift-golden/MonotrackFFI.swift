@@ -1140,6 +1140,18 @@ public func FfiConverterTypeFaceTracker_lower(_ value: FaceTracker) -> UInt64 {
 public protocol LiveFaceTrackerProtocol: AnyObject, Sendable {
     
     /**
+     * Tells the tracker the user looked at `point` on the target `target_id` at `timestamp_ns`
+     * (as `FaceTracker::add_calibration_point`, in the frames' clock). The tap is learnt on the
+     * worker before the next frame; one it cannot use (no frame with a face within 250 ms of
+     * it) reaches the listener's `on_error` with the tap's timestamp.
+     *
+     * # Errors
+     * `InvalidConfig` for an unknown target, a non-finite point, or the gaze output turned off
+     * (`TrackerConfig.gaze`); `InvalidFrame` once shut down.
+     */
+    func addCalibrationPoint(targetId: String, point: PlanePoint, timestampNs: Int64) throws 
+    
+    /**
      * The settings this tracker was built with.
      */
     func config()  -> TrackerConfig
@@ -1154,6 +1166,11 @@ public protocol LiveFaceTrackerProtocol: AnyObject, Sendable {
      * increase, or the tracker was shut down.
      */
     func processAsync(bytes: Data, desc: FrameDesc, timestampNs: Int64) throws  -> Bool
+    
+    /**
+     * Forgets the tap calibration (a new user), before the next frame.
+     */
+    func resetGazeCalibration() 
     
     /**
      * Sets the gaze targets (as `FaceTracker::set_gaze_targets`), from the next frame the
@@ -1249,6 +1266,27 @@ public convenience init(config: TrackerConfig, listener: LiveStreamListener)thro
 
     
     /**
+     * Tells the tracker the user looked at `point` on the target `target_id` at `timestamp_ns`
+     * (as `FaceTracker::add_calibration_point`, in the frames' clock). The tap is learnt on the
+     * worker before the next frame; one it cannot use (no frame with a face within 250 ms of
+     * it) reaches the listener's `on_error` with the tap's timestamp.
+     *
+     * # Errors
+     * `InvalidConfig` for an unknown target, a non-finite point, or the gaze output turned off
+     * (`TrackerConfig.gaze`); `InvalidFrame` once shut down.
+     */
+open func addCalibrationPoint(targetId: String, point: PlanePoint, timestampNs: Int64)throws   {try rustCallWithError(FfiConverterTypeMonotrackError_lift) {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_livefacetracker_add_calibration_point(
+            self.uniffiCloneHandle(),
+        FfiConverterString.lower(targetId),
+        FfiConverterTypePlanePoint_lower(point),
+        FfiConverterInt64.lower(timestampNs),uniffiCallStatus
+    )
+}
+}
+    
+    /**
      * The settings this tracker was built with.
      */
 open func config() -> TrackerConfig  {
@@ -1281,6 +1319,17 @@ open func processAsync(bytes: Data, desc: FrameDesc, timestampNs: Int64)throws  
     )
         }
 })
+}
+    
+    /**
+     * Forgets the tap calibration (a new user), before the next frame.
+     */
+open func resetGazeCalibration()  {try! rustCall() {
+        uniffiCallStatus in
+    uniffi_monotrack_ffi_fn_method_livefacetracker_reset_gaze_calibration(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+}
 }
     
     /**
@@ -1376,7 +1425,8 @@ public protocol LiveStreamListener: AnyObject, Sendable {
     func onResult(result: LiveStreamResult) 
     
     /**
-     * Tracking the frame taken at `timestamp_ns` failed; the stream goes on with the next frame.
+     * Tracking the frame taken at `timestamp_ns` failed, or a tap at that time could not be used
+     * (`LiveFaceTracker::add_calibration_point`); the stream goes on with the next frame.
      */
     func onError(timestampNs: Int64, framesDropped: UInt64, error: MonotrackError) 
     
@@ -1453,7 +1503,8 @@ open func onResult(result: LiveStreamResult)  {try! rustCall() {
 }
     
     /**
-     * Tracking the frame taken at `timestamp_ns` failed; the stream goes on with the next frame.
+     * Tracking the frame taken at `timestamp_ns` failed, or a tap at that time could not be used
+     * (`LiveFaceTracker::add_calibration_point`); the stream goes on with the next frame.
      */
 open func onError(timestampNs: Int64, framesDropped: UInt64, error: MonotrackError)  {try! rustCall() {
         uniffiCallStatus in
@@ -4484,7 +4535,8 @@ public struct PointOfGaze: Equatable, Hashable {
      */
     public var source: GazeSource
     /**
-     * 0..1: how far the eyes are trusted (head yaw, agreement of the two eyes).
+     * 0..1: how far the eyes are trusted (head yaw, agreement of the two eyes, how open they
+     * are); below 0.25 the head direction stands in (`source` is `Head`).
      */
     public var confidence: Double
     /**
@@ -4509,7 +4561,8 @@ public struct PointOfGaze: Equatable, Hashable {
          * Eyes or head.
          */source: GazeSource, 
         /**
-         * 0..1: how far the eyes are trusted (head yaw, agreement of the two eyes).
+         * 0..1: how far the eyes are trusted (head yaw, agreement of the two eyes, how open they
+         * are); below 0.25 the head direction stands in (`source` is `Head`).
          */confidence: Double, 
         /**
          * Angle between the head's facing direction and the gaze, degrees.
@@ -6305,6 +6358,10 @@ public enum MotionFeature: Equatable, Hashable {
      * Rate of change of the flexion angle, degrees/s.
      */
     case angularVelocity
+    /**
+     * Magnitude of the acceleration relative to the pelvis, mm/s².
+     */
+    case linearAcceleration
 
 
 
@@ -6334,6 +6391,8 @@ public struct FfiConverterTypeMotionFeature: FfiConverterRustBuffer {
         
         case 4: return .angularVelocity
         
+        case 5: return .linearAcceleration
+        
         default: throw UniffiInternalError.unexpectedEnumCase
         }
     }
@@ -6356,6 +6415,10 @@ public struct FfiConverterTypeMotionFeature: FfiConverterRustBuffer {
         
         case .angularVelocity:
             writeInt(&buf, Int32(4))
+        
+        
+        case .linearAcceleration:
+            writeInt(&buf, Int32(5))
         
         }
     }
@@ -7459,10 +7522,16 @@ private let initializationResult: InitializationResult = {
     if (uniffi_monotrack_ffi_checksum_method_bodytracker_reset() != 60972) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_monotrack_ffi_checksum_method_livefacetracker_add_calibration_point() != 48846) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_monotrack_ffi_checksum_method_livefacetracker_config() != 56855) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_method_livefacetracker_process_async() != 1800) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_monotrack_ffi_checksum_method_livefacetracker_reset_gaze_calibration() != 738) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_method_livefacetracker_set_gaze_targets() != 36233) {
@@ -7474,7 +7543,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_result() != 52804) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_error() != 22839) {
+    if (uniffi_monotrack_ffi_checksum_method_livestreamlistener_on_error() != 22901) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_monotrack_ffi_checksum_method_motionsession_add_frame() != 11400) {
