@@ -167,6 +167,26 @@ pub fn gaze_targets_from_json(json: String) -> Result<Vec<GazeTarget>, Monotrack
     })
 }
 
+/// The index of the tapped target `target_id` among the targets' `ids` (in the order they were
+/// set), for a tap at a finite `point`.
+pub(crate) fn tap_target<'a>(
+    mut ids: impl Iterator<Item = &'a str>,
+    target_id: &str,
+    point: &PlanePoint,
+) -> Result<usize, MonotrackError> {
+    let index =
+        ids.position(|id| id == target_id)
+            .ok_or_else(|| MonotrackError::InvalidConfig {
+                msg: format!("no gaze target {target_id:?}"),
+            })?;
+    if !(point.u_mm.is_finite() && point.v_mm.is_finite()) {
+        return Err(MonotrackError::InvalidConfig {
+            msg: format!("calibration point {point:?} is not finite"),
+        });
+    }
+    Ok(index)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

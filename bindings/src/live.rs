@@ -198,20 +198,15 @@ impl LiveFaceTracker {
                         .into(),
                 });
             }
-            let index = self
-                .target_ids
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .iter()
-                .position(|id| *id == target_id)
-                .ok_or_else(|| MonotrackError::InvalidConfig {
-                    msg: format!("no gaze target {target_id:?}"),
-                })?;
-            if !(point.u_mm.is_finite() && point.v_mm.is_finite()) {
-                return Err(MonotrackError::InvalidConfig {
-                    msg: format!("calibration point {point:?} is not finite"),
-                });
-            }
+            let index = crate::gaze::tap_target(
+                self.target_ids
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .iter()
+                    .map(String::as_str),
+                &target_id,
+                &point,
+            )?;
             let g = self.stream.lock().unwrap_or_else(|p| p.into_inner());
             let stream = g.as_ref().ok_or_else(|| MonotrackError::InvalidFrame {
                 msg: "the live tracker was shut down".into(),

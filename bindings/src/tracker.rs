@@ -644,19 +644,8 @@ impl FaceTracker {
     ) -> Result<u32, MonotrackError> {
         guard(|| {
             let mut g = self.lock();
-            let index = g
-                .video
-                .gaze_targets()
-                .iter()
-                .position(|t| t.id == target_id)
-                .ok_or_else(|| MonotrackError::InvalidConfig {
-                    msg: format!("no gaze target {target_id:?}"),
-                })?;
-            if !(point.u_mm.is_finite() && point.v_mm.is_finite()) {
-                return Err(MonotrackError::InvalidConfig {
-                    msg: format!("calibration point {point:?} is not finite"),
-                });
-            }
+            let ids = g.video.gaze_targets().iter().map(|t| t.id.as_str());
+            let index = crate::gaze::tap_target(ids, &target_id, &point)?;
             let n = g
                 .video
                 .add_calibration_point(index, [point.u_mm, point.v_mm], timestamp_ns)

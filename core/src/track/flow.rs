@@ -651,7 +651,7 @@ impl PyramidalLk {
     #[inline(always)]
     fn window_gradients(&mut self, img: &GrayImage, x: f32, y: f32, slot: usize) -> [f32; 3] {
         let n = 2 * self.config.half_window + 1;
-        #[cfg(target_arch = "x86_64")]
+        #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
         {
             let (st, at) = (self.stride, slot * n * self.stride);
             let outs = [
@@ -660,27 +660,18 @@ impl PyramidalLk {
                 &mut self.gy[at..at + n * st],
             ];
             #[allow(unsafe_code)]
-            // SAFETY: `kernels` names features `Kernels::detect` found on this CPU.
+            // SAFETY: `kernels` names features `Kernels::detect` found on this CPU (NEON is part
+            // of every aarch64 target's baseline).
             let sums = match self.kernels {
+                #[cfg(target_arch = "x86_64")]
                 Kernels::Avx512 => unsafe { bordered_gradients_avx512(img, x, y, n, st, outs) },
+                #[cfg(target_arch = "x86_64")]
                 Kernels::Avx2 => unsafe { bordered_gradients_avx2(img, x, y, n, st, outs) },
+                #[cfg(target_arch = "aarch64")]
+                Kernels::Neon => unsafe { arm64::bordered_gradients(img, x, y, n, st, outs) },
                 Kernels::Portable => None,
             };
             if let Some(sums) = sums {
-                return sums;
-            }
-        }
-        #[cfg(target_arch = "aarch64")]
-        if self.kernels == Kernels::Neon {
-            let (st, at) = (self.stride, slot * n * self.stride);
-            let outs = [
-                &mut self.patch[at..at + n * st],
-                &mut self.gx[at..at + n * st],
-                &mut self.gy[at..at + n * st],
-            ];
-            #[allow(unsafe_code)]
-            // SAFETY: NEON is part of every aarch64 target's baseline.
-            if let Some(sums) = unsafe { arm64::bordered_gradients(img, x, y, n, st, outs) } {
                 return sums;
             }
         }
@@ -780,25 +771,22 @@ impl PyramidalLk {
             &self.gx[at..at + n * st],
             &self.gy[at..at + n * st],
         );
-        #[cfg(target_arch = "x86_64")]
+        #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
         #[allow(unsafe_code)]
         {
             let window = [patch, gx, gy];
-            // SAFETY: `kernels` names features `Kernels::detect` found on this CPU.
+            // SAFETY: `kernels` names features `Kernels::detect` found on this CPU (NEON is part
+            // of every aarch64 target's baseline).
             let sums = match self.kernels {
+                #[cfg(target_arch = "x86_64")]
                 Kernels::Avx512 => unsafe { mismatch_avx512(img, x, y, n, st, window) },
+                #[cfg(target_arch = "x86_64")]
                 Kernels::Avx2 => unsafe { mismatch_avx2(img, x, y, n, st, window) },
+                #[cfg(target_arch = "aarch64")]
+                Kernels::Neon => unsafe { arm64::mismatch(img, x, y, n, st, window) },
                 Kernels::Portable => None,
             };
             if let Some(sums) = sums {
-                return sums;
-            }
-        }
-        #[cfg(target_arch = "aarch64")]
-        if self.kernels == Kernels::Neon {
-            #[allow(unsafe_code)]
-            // SAFETY: NEON is part of every aarch64 target's baseline.
-            if let Some(sums) = unsafe { arm64::mismatch(img, x, y, n, st, [patch, gx, gy]) } {
                 return sums;
             }
         }
