@@ -474,6 +474,90 @@ pub struct GazeConfig {
     pub closed_eye_ratio: f64,
     /// Eye aspect ratio from which an eye counts as fully open.
     pub open_eye_ratio: f64,
+    /// The thesis' head-pose correction of each eye's gaze and the dominant eye's weight (eq.
+    /// 6.4); the default applies none (see [`HeadCorrection`]).
+    pub head_correction: HeadCorrection,
+}
+
+/// The thesis' correction of each eye's gaze by the head pose (eq. 6.4): the eye-in-head angles
+/// shifted by `K_x (yaw − r_x0)` and `K_y (pitch − r_y0)`, and the eye nearer the camera weighted
+/// more in the combined direction as the head turns. The default leaves M3's gaze as it is:
+/// fitted on the faces68 training split (949 faces, `core/models/train/eval_gaze.py
+/// --fit-correction`: K_x −1.01, K_y 0.68), the correction made the validation error worse
+/// (12.95° → 14.12° mean with equal eye weights, 14.26–14.49° with a dominant eye weighted
+/// 0.7–1.0; `core/models/m3/gaze_metrics.json`), as M3's eye network already sees the head's turn
+/// in its patches.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeadCorrection {
+    /// K_x: degrees of eye-in-head yaw added per degree of head yaw away from `ref_yaw_deg`.
+    pub gain_yaw: f64,
+    /// K_y: likewise for pitch.
+    pub gain_pitch: f64,
+    /// r_x0: the head yaw (degrees) at which the yaw term is 0.
+    pub ref_yaw_deg: f64,
+    /// r_y0: the head pitch (degrees) at which the pitch term is 0.
+    pub ref_pitch_deg: f64,
+    /// w_d: the weight of the eye nearer the camera once the head is turned by
+    /// [`GazeConfig::max_yaw_deg`], from 0.5 (equal weights) at a frontal head, linearly in yaw.
+    pub dominant_weight: f64,
+}
+
+impl Default for HeadCorrection {
+    fn default() -> Self {
+        Self {
+            gain_yaw: 0.0,
+            gain_pitch: 0.0,
+            ref_yaw_deg: 0.0,
+            ref_pitch_deg: 0.0,
+            dominant_weight: 0.5,
+        }
+    }
+}
+
+impl HeadCorrection {
+    /// Each eye's ray with the angle correction applied (the same rays when both gains are 0).
+    pub fn apply(&self, raw: &[GazeRay; 2], fit: &FaceFit) -> [GazeRay; 2] {
+        if self.gain_yaw == 0.0 && self.gain_pitch == 0.0 {
+            return *raw;
+        }
+        let (yaw, pitch, _) = fit.pose.euler_deg();
+        let shift = [
+            (self.gain_yaw * (yaw - self.ref_yaw_deg)).to_radians(),
+            (self.gain_pitch * (pitch - self.ref_pitch_deg)).to_radians(),
+        ];
+        let r = fit.pose.rotation;
+        raw.map(|ray| {
+            // Eye-in-head angles: 0 straight ahead (the head frame's −z), yaw towards +x.
+            let h = r.transpose() * ray.direction;
+            let a = [
+                h.x.atan2(-h.z) + shift[0],
+                h.y.atan2(h.x.hypot(h.z)) + shift[1],
+            ];
+            let back = Vector3::new(
+                a[1].cos() * a[0].sin(),
+                a[1].sin(),
+                -a[1].cos() * a[0].cos(),
+            );
+            GazeRay {
+                origin: ray.origin,
+                direction: r * back,
+            }
+        })
+    }
+
+    /// The weights (right eye, left eye) of the combined direction for a face turned as `fit`.
+    fn eye_weights(&self, fit: &FaceFit, max_yaw_deg: f64) -> (f64, f64) {
+        let (yaw, _, _) = fit.pose.euler_deg();
+        let w = 0.5 + (yaw.abs() / max_yaw_deg).min(1.0) * (self.dominant_weight - 0.5);
+        // The head frame's +x (the subject's left) turned towards the camera: the left eye is
+        // the nearer one.
+        let left_near = (fit.pose.rotation * Vector3::new(1.0, 0.0, 0.0)).z < 0.0;
+        if left_near {
+            (1.0 - w, w)
+        } else {
+            (w, 1.0 - w)
+        }
+    }
 }
 
 impl Default for GazeConfig {
@@ -484,6 +568,7 @@ impl Default for GazeConfig {
             filter: None,
             closed_eye_ratio: 0.10,
             open_eye_ratio: 0.18,
+            head_correction: HeadCorrection::default(),
         }
     }
 }
@@ -550,7 +635,9 @@ pub fn point_of_gaze(
     previous: Option<&Vector3<f64>>,
     targets: &[Target],
 ) -> PointOfGaze {
-    let raw = raw_eye_rays(landmarks, fit);
+    let raw = config
+        .head_correction
+        .apply(&raw_eye_rays(landmarks, fit), fit);
     let openness = eye_openness(&landmarks.points);
     point_of_gaze_from_rays(&raw, openness, fit, calibration, config, previous, targets)
 }
@@ -574,8 +661,9 @@ pub fn eye_openness(points: &[[f32; 2]; 68]) -> f64 {
     ratio(36).min(ratio(42))
 }
 
-/// [`point_of_gaze`] from the face's uncorrected eye rays ([`raw_eye_rays`]), for a caller that
-/// keeps them too (the tracker records them for taps).
+/// [`point_of_gaze`] from the face's eye rays before the tap calibration ([`raw_eye_rays`] with
+/// `config.head_correction` applied), for a caller that keeps them too (the tracker records them
+/// for taps).
 pub fn point_of_gaze_from_rays(
     raw: &[GazeRay; 2],
     openness: f64,
@@ -602,8 +690,9 @@ pub fn point_of_gaze_from_rays(
         .clamp(0.0, 1.0);
     let confidence = agree * turn * open;
     let (mut direction, source) = if confidence >= config.min_eye_confidence {
+        let (wr, wl) = config.head_correction.eye_weights(fit, config.max_yaw_deg);
         (
-            (eyes[0].direction + eyes[1].direction).normalize(),
+            (wr * eyes[0].direction + wl * eyes[1].direction).normalize(),
             GazeSource::Eyes,
         )
     } else {

@@ -383,3 +383,62 @@ fn eye_openness_is_the_less_open_eyes_aspect_ratio() {
     assert_eq!(eye_openness(&p), 0.0);
     assert_eq!(eye_openness(&[[0.0; 2]; 68]), 0.0);
 }
+
+/// The head correction (eq. 6.4): off by default (the same rays and direction); with a yaw gain,
+/// each eye's eye-in-head yaw moves by K_x (yaw − r_x0); a dominant-eye weight pulls the combined
+/// direction towards the eye nearer the camera.
+#[test]
+fn the_head_correction_shifts_eye_angles_and_weights_the_near_eye() {
+    let fit = facing(30.0);
+    let (right, left) = ([0.05, 0.0, -1.0], [-0.05, 0.02, -1.0]);
+    let raw = [
+        ray([-30.0, 0.0, 500.0], right),
+        ray([30.0, 0.0, 500.0], left),
+    ];
+    let off = HeadCorrection::default();
+    assert_eq!(off.apply(&raw, &fit), raw);
+    let eye_yaw = |d: &Vector3<f64>| {
+        let h = fit.pose.rotation.transpose() * d;
+        h.x.atan2(-h.z).to_degrees()
+    };
+    let k = HeadCorrection {
+        gain_yaw: -0.5,
+        ref_yaw_deg: 10.0,
+        ..off
+    };
+    let moved = k.apply(&raw, &fit);
+    for e in 0..2 {
+        let shift = eye_yaw(&moved[e].direction) - eye_yaw(&raw[e].direction);
+        assert!((shift + 10.0).abs() < 1e-9, "eye {e}: {shift}");
+        assert!((moved[e].direction.norm() - 1.0).abs() < 1e-12);
+    }
+    // Equal weights by default; a dominant eye leans the combined direction its way.
+    let look = |config: &GazeConfig| {
+        point_of_gaze_from_rays(
+            &raw,
+            0.3,
+            &fit,
+            &GazeCalibration::default(),
+            config,
+            None,
+            &[],
+        )
+    };
+    let plain = look(&GazeConfig::default());
+    let mean = (raw[0].direction + raw[1].direction).normalize();
+    assert_eq!(plain.ray.direction, mean);
+    let dominant = look(&GazeConfig {
+        head_correction: HeadCorrection {
+            dominant_weight: 1.0,
+            ..off
+        },
+        ..GazeConfig::default()
+    });
+    let near = if (fit.pose.rotation * Vector3::new(1.0, 0.0, 0.0)).z < 0.0 {
+        1
+    } else {
+        0
+    };
+    let to = |g: &PointOfGaze, e: usize| g.ray.direction.angle(&raw[e].direction);
+    assert!(to(&dominant, near) < to(&plain, near), "{dominant:?}");
+}

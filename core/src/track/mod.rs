@@ -1227,7 +1227,10 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             if let Some(fit) = s.fit {
                 let g = &self.gaze;
                 let gaze = gaze_on.then(|| {
-                    let raw = raw_eye_rays(&s.landmarks, &fit);
+                    let raw = g
+                        .config
+                        .head_correction
+                        .apply(&raw_eye_rays(&s.landmarks, &fit), &fit);
                     if frame.faces < MAX_FACES_LIMIT {
                         frame.rays[frame.faces] = raw;
                         frame.faces += 1;
