@@ -1559,17 +1559,7 @@ mod tests {
             }
             pyramids.push(base);
         }
-        // Grid points plus some near the border (the clamped sampling path) and near the right
-        // and bottom edges (the 512-bit kernels' masked loads reach them; the AVX2 ones fall back).
-        let mut from = grid();
-        from.extend([
-            [1.5, 2.5],
-            [637.2, 477.9],
-            [-3.0, 240.0],
-            [631.3, 200.6],
-            [633.8, 121.1],
-            [300.4, 472.2],
-        ]);
+        let from = kernel_points();
         let n = from.len();
         let (prev, next) = (&pyramids[0], &pyramids[1]);
         // Points, status and errors of one run: the body as compiled for baseline x86-64, or its
@@ -1634,14 +1624,7 @@ mod tests {
             p.build(&img, 3);
             pyramids.push(p);
         }
-        let mut from = grid();
-        from.extend([
-            [1.5, 2.5],
-            [637.2, 477.9],
-            [-3.0, 240.0],
-            [631.3, 200.6],
-            [300.4, 472.2],
-        ]);
+        let from = kernel_points();
         let n = from.len();
         let run = |kernels, half_window| {
             let cfg = LkConfig {
@@ -1684,6 +1667,23 @@ mod tests {
             let tracked = portable.1.iter().filter(|&&s| s).count();
             assert!(tracked > n / 3, "{half_window}: {:?}", portable.1);
         }
+    }
+
+    /// Points the vector kernels are held to the portable ones on: the grid plus some near the
+    /// border (the clamped sampling path) and near the right and bottom edges (the 512-bit
+    /// kernels' masked loads reach them; the AVX2 and NEON ones fall back).
+    #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+    fn kernel_points() -> Vec<[f32; 2]> {
+        let mut from = grid();
+        from.extend([
+            [1.5, 2.5],
+            [637.2, 477.9],
+            [-3.0, 240.0],
+            [631.3, 200.6],
+            [633.8, 121.1],
+            [300.4, 472.2],
+        ]);
+        from
     }
 
     fn grid() -> Vec<[f32; 2]> {

@@ -257,6 +257,11 @@ fn run_track(
     if gradient {
         cfg.landmarks = monotrack_core::track::LandmarkMode::Gradient;
     }
+    if targets.is_some() && !cfg.gaze {
+        return Err(
+            "--targets needs the gaze stage, which the --config turns off (\"gaze\": false)".into(),
+        );
+    }
     let mut tracker =
         monotrack_core::track::Tracker::with_default_models(cfg).map_err(|e| e.to_string())?;
     if let Some(p) = targets {

@@ -104,6 +104,21 @@ fn landmarks_and_track_add_the_point_of_gaze() {
         check_face(&l["faces"][0]);
     }
 
+    // Targets with the gaze stage turned off by the config: refused, not silently left out.
+    let no_gaze = dir.join("no_gaze.json");
+    std::fs::write(&no_gaze, r#"{"gaze": false}"#).unwrap();
+    let out = Command::new(exe)
+        .arg("track")
+        .arg(&frames)
+        .arg("--targets")
+        .arg(&targets)
+        .arg("--config")
+        .arg(&no_gaze)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("needs the gaze stage"));
+
     // A bad targets file is a clear error, not a crash.
     std::fs::write(
         &targets,
