@@ -56,12 +56,13 @@ impl GradientLandmarks {
 
 impl LandmarkEstimator for GradientLandmarks {
     fn estimate(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
-        let roll = if face.iou(&self.last) > 0.3 {
-            self.points.roll_deg
+        if face.iou(&self.last) > 0.3 {
+            let roll = self.points.roll_deg;
+            self.detector
+                .detect_tracked(image, face, roll, &mut self.points)?;
         } else {
-            0.0
-        };
-        self.detector.detect(image, face, roll, &mut self.points)?;
+            self.detector.detect(image, face, 0.0, &mut self.points)?;
+        }
         self.last = *face;
         *out = FaceLandmarks::default();
         self.points.to_landmarks(out);

@@ -45,14 +45,15 @@ pub fn parse_rotation(s: &str) -> Result<u32, String> {
     }
 }
 
-/// Runs the benchmark and prints its report (JSON with `json`, else a table); false when the
-/// clip gave no measurement.
+/// Runs the benchmark (the ultra-light mode's pipeline with `ultra_light`) and prints its report
+/// (JSON with `json`, else a table); false when the clip gave no measurement.
 pub fn run(
     format: FormatArg,
     rotation: u32,
     mirrored: bool,
     frames: u32,
     json: bool,
+    ultra_light: bool,
 ) -> Result<bool, String> {
     let rotation = Rotation::from_degrees(rotation as i32).map_err(|e| e.to_string())?;
     let source = crate::demo::source()?;
@@ -62,8 +63,13 @@ pub fn run(
         mirrored,
         ..FrameDesc::packed(sensor.width, sensor.height, format.into())
     };
-    let report = run_camera_benchmark(&source, &camera, frames, &TrackerConfig::default())
-        .map_err(|e| e.to_string())?;
+    let config = if ultra_light {
+        TrackerConfig::ultra_light()
+    } else {
+        TrackerConfig::default()
+    };
+    let report =
+        run_camera_benchmark(&source, &camera, frames, &config).map_err(|e| e.to_string())?;
     if json {
         println!(
             "{}",

@@ -144,6 +144,10 @@ enum Command {
         /// Print the report as one JSON object.
         #[arg(long)]
         json: bool,
+        /// The landmark detector timed: the M3 networks, or the ultra-light mode (the
+        /// learning-free gradient detector with the FFBP fit, no landmark network loaded).
+        #[arg(long, value_enum, default_value = "m3")]
+        landmarks: landmarks::Landmarker,
     },
     /// Score a trial motion against a reference (3D joints from body-fit) and say what to fix.
     CompareMotion {
@@ -339,7 +343,15 @@ fn main() -> ExitCode {
             mirrored,
             frames,
             json,
-        } => bench::run(format, rotation, mirrored, frames, json),
+            landmarks: landmarker,
+        } => bench::run(
+            format,
+            rotation,
+            mirrored,
+            frames,
+            json,
+            landmarker == landmarks::Landmarker::Gradient,
+        ),
         Command::CompareMotion {
             reference,
             trial,

@@ -68,8 +68,23 @@ fn bench_reports_every_stage_from_camera_frames() {
 }
 
 #[test]
+fn bench_times_the_ultra_light_mode() {
+    let v = bench(&["--landmarks", "gradient"]);
+    assert!(v["model_load_us"].as_f64().unwrap() > 0.0);
+    for kind in ["tracked", "detected"] {
+        let stage = |name: &str| v[kind][name]["median_us"].as_f64().unwrap();
+        // The gradient detector is the ultra-light mode's face check: its time is the region's
+        // (CONTRACT.md), and no landmark network runs after it.
+        assert_eq!(stage("landmarks"), 0.0, "{kind}");
+        assert!(stage("region") > 0.0 && stage("fit") > 0.0, "{kind}");
+        assert!(stage("total") >= stage("region"), "{kind}");
+    }
+}
+
+#[test]
 fn bench_rejects_bad_arguments() {
     for args in [
+        &["--landmarks", "dlib"][..],
         &["--rotation", "45"][..],
         &["--format", "yuyv"][..],
         &["--frames", "1"][..],
