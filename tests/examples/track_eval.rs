@@ -6,8 +6,11 @@
 //! ```text
 //! cargo run --profile bench -p monotrack-tests --example track_eval -- \
 //!     [--video ../shared/data/video/obama_3ddfa_demo.mp4 --reference REF.jsonl] [--mirror-average]
-//!     [--only ROW] [--passes N] [--camera-frames]
+//!     [--only ROW] [--passes N] [--camera-frames] [--ultra-light] [--scale A]
 //! ```
+//! `--ultra-light` runs the ultra-light mode's rows instead (`TrackerConfig::ultra_light`,
+//! tracking and re-detect every frame); `--scale A` sets the synthetic motion's relative scale
+//! amplitude (default 0.12, ±12 %).
 //! The clip's luma images go to `process` (every frame a buffer no earlier step read);
 //! `--camera-frames` passes them as `Gray8` camera frames instead (`process_frame`, which copies
 //! each into the tracker's luma buffer: the `image` column, counted in the frame's total).
@@ -32,7 +35,20 @@ use std::process::{Command, Stdio};
 /// NME below which a frame counts as correct (see `tests/tests/track_models.rs`).
 const CORRECT_NME: f32 = 0.10;
 
-fn configs() -> Vec<(&'static str, TrackerConfig)> {
+fn configs(ultra_light: bool) -> Vec<(&'static str, TrackerConfig)> {
+    if ultra_light {
+        let video = TrackerConfig::ultra_light();
+        return vec![
+            ("ultra-light tracking", video),
+            (
+                "ultra-light, re-detect every frame (image mode)",
+                TrackerConfig {
+                    mode: Mode::Image,
+                    ..video
+                },
+            ),
+        ];
+    }
     let video = TrackerConfig::default();
     vec![
         (
@@ -66,6 +82,7 @@ fn configs() -> Vec<(&'static str, TrackerConfig)> {
 /// What `main` reads from the command line besides the video.
 struct Options {
     mirror_average: bool,
+    ultra_light: bool,
     only: Option<usize>,
     passes: usize,
     input: Input,
@@ -73,7 +90,7 @@ struct Options {
 
 fn report(title: &str, clip: &[ClipFrame], opt: &Options) -> Result<(), String> {
     println!("\n### {title}\n\n{}", table_header());
-    for (row, (name, cfg)) in configs().into_iter().enumerate() {
+    for (row, (name, cfg)) in configs(opt.ultra_light).into_iter().enumerate() {
         if opt.only.is_some_and(|only| only != row) {
             continue;
         }
@@ -169,6 +186,7 @@ fn main() -> Result<(), String> {
     };
     let opt = Options {
         mirror_average: args.iter().any(|a| a == "--mirror-average"),
+        ultra_light: args.iter().any(|a| a == "--ultra-light"),
         only: number("--only")?,
         passes: number("--passes")?.unwrap_or(1).max(1),
         input: if args.iter().any(|a| a == "--camera-frames") {
@@ -196,6 +214,13 @@ fn main() -> Result<(), String> {
             crop_margin: Some(0.5),
             seed: 21,
             ..Default::default()
+        };
+        let cfg = match arg("--scale") {
+            Some(v) => SeqConfig {
+                scale_amplitude: v.parse().map_err(|e| format!("--scale {v}: {e}"))?,
+                ..cfg
+            },
+            None => cfg,
         };
         let clip = synthetic_clip(cfg, faces)?;
         report(
