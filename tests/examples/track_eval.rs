@@ -6,11 +6,14 @@
 //! ```text
 //! cargo run --profile bench -p monotrack-tests --example track_eval -- \
 //!     [--video ../shared/data/video/obama_3ddfa_demo.mp4 --reference REF.jsonl] [--mirror-average]
-//!     [--only ROW] [--passes N] [--camera-frames] [--ultra-light] [--scale A]
+//!     [--only ROW] [--passes N] [--camera-frames] [--ultra-light]
+//!     [--scale A] [--roll DEG] [--translation PX] [--period FRAMES]
 //! ```
 //! `--ultra-light` runs the ultra-light mode's rows instead (`TrackerConfig::ultra_light`,
-//! tracking and re-detect every frame); `--scale A` sets the synthetic motion's relative scale
-//! amplitude (default 0.12, ±12 %).
+//! tracking and re-detect every frame). The synthetic motion's relative scale amplitude
+//! (`--scale`, default 0.12), roll amplitude (`--roll`, default 12°), translation amplitude
+//! (`--translation`, default 50 px) and shortest period (`--period`, default 60 frames; the
+//! top speed is 2π·amplitude / period per frame) can be set.
 //! The clip's luma images go to `process` (every frame a buffer no earlier step read);
 //! `--camera-frames` passes them as `Gray8` camera frames instead (`process_frame`, which copies
 //! each into the tracker's luma buffer: the `image` column, counted in the frame's total).
@@ -107,6 +110,10 @@ fn report(title: &str, clip: &[ClipFrame], opt: &Options) -> Result<(), String> 
             s = run()?;
         }
         println!("{}", table_row(name, &s));
+        eprintln!(
+            "{name}: a face reported on {} of {} scored frames",
+            s.with_face, s.scored
+        );
     }
     Ok(())
 }
@@ -215,12 +222,17 @@ fn main() -> Result<(), String> {
             seed: 21,
             ..Default::default()
         };
-        let cfg = match arg("--scale") {
-            Some(v) => SeqConfig {
-                scale_amplitude: v.parse().map_err(|e| format!("--scale {v}: {e}"))?,
-                ..cfg
-            },
-            None => cfg,
+        let float = |name: &str, default: f32| -> Result<f32, String> {
+            arg(name).map_or(Ok(default), |v| {
+                v.parse().map_err(|e| format!("{name} {v}: {e}"))
+            })
+        };
+        let cfg = SeqConfig {
+            scale_amplitude: float("--scale", cfg.scale_amplitude)?,
+            rotation_deg: float("--roll", cfg.rotation_deg)?,
+            translation_px: float("--translation", cfg.translation_px)?,
+            min_period_frames: float("--period", cfg.min_period_frames)?,
+            ..cfg
         };
         let clip = synthetic_clip(cfg, faces)?;
         report(

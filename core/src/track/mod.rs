@@ -37,6 +37,7 @@ use crate::gaze::{
     point_of_gaze_from_rays, raw_eye_rays,
 };
 use crate::image::{Frame, GrayImage, Rect};
+use crate::landmarks::warp::{Affine, sample};
 use crate::landmarks::{FaceLandmarks, N_POINTS};
 use crate::model::{FaceModel, N_LANDMARKS};
 use flow::{FlowFilter, LkConfig, Pyramid};
@@ -653,6 +654,53 @@ impl Slot {
     }
 }
 
+/// A face whose track ended on a loss, kept for [`LOST_FRAMES`] frames: the upright detector
+/// misses faces turned in roll beyond about 25°, which a fast head often is when its track
+/// breaks. While it finds nothing, a window around the face's last place, turned by its last
+/// roll and by ±30° from it (one turn per frame), is searched too.
+#[derive(Debug, Clone, Copy)]
+struct LostFace {
+    /// Centre of the last region, pixels.
+    centre: [f32; 2],
+    /// Larger side of the last region, pixels.
+    size: f32,
+    /// The face's roll then (eye line, radians, image y down).
+    roll: f32,
+    /// Frames since the loss.
+    frames: u32,
+}
+
+/// Frames a lost face is looked for turned.
+const LOST_FRAMES: u32 = 30;
+
+/// Side of the turned window in face sizes (the face may have moved about a face size).
+const TURNED_WINDOW_FACES: f32 = 3.0;
+
+/// Pixels a face spans in the turned window: enough for the face check, a quarter of a VGA
+/// frame's detector work for the window.
+const TURNED_FACE_PX: f32 = 96.0;
+
+/// Turns within this of upright are left to the upright detector, which covers them.
+const UPRIGHT_COVERS: f32 = 15.0 * std::f32::consts::PI / 180.0;
+
+/// The axis-aligned box of `points`.
+fn tight_box(points: &[[f32; 2]]) -> Rect {
+    let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
+    for p in points {
+        x0 = x0.min(p[0]);
+        y0 = y0.min(p[1]);
+        x1 = x1.max(p[0]);
+        y1 = y1.max(p[1]);
+    }
+    Rect::new(x0, y0, x1 - x0, y1 - y0)
+}
+
+/// The roll of `l`'s eye line (outer corners 36 and 45), radians.
+fn eye_roll(l: &FaceLandmarks) -> f32 {
+    let (r, e) = (l.points[36], l.points[45]);
+    (e[1] - r[1]).atan2(e[0] - r[0])
+}
+
 /// The face tracker: detector + landmark estimator + NCC tracking + flow filter + MSBP, generic
 /// over the detector and the landmark estimator.
 #[derive(Debug)]
@@ -672,6 +720,13 @@ pub struct FaceTracker<D: RegionDetector, L: LandmarkEstimator> {
     ranked: Vec<(Rect, f32, f32, FaceLandmarks)>,
     /// Scratch output of the detections' face checks.
     checked: FaceLandmarks,
+    /// The face whose track was lost last, while the tracker looks for it turned (see
+    /// [`LostFace`]).
+    lost: Option<LostFace>,
+    /// The turned window searched for a lost face, and its detections.
+    turned: GrayImage,
+    turned_buf: Vec<u8>,
+    turned_detections: Vec<(Rect, f32)>,
     pyr_prev: Pyramid,
     pyr_cur: Pyramid,
     luma: GrayImage,
@@ -759,6 +814,10 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             detections: Vec::with_capacity(64),
             ranked: Vec::with_capacity(64),
             checked: FaceLandmarks::default(),
+            lost: None,
+            turned: GrayImage::default(),
+            turned_buf: Vec::new(),
+            turned_detections: Vec::with_capacity(64),
             pyr_prev: Pyramid::new(),
             pyr_cur: Pyramid::new(),
             luma: GrayImage::default(),
@@ -897,6 +956,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         self.last_timestamp = None;
         self.redetect_next = true;
         self.frames_since_detect = 0;
+        self.lost = None;
         self.pyr_prev = Pyramid::new();
         self.frame_size = (0, 0);
     }
@@ -940,6 +1000,68 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
     }
 
     /// `camera`: the upright image's intrinsics, `None` for the default.
+    /// Looks for the lost face ([`LostFace`]) in a window around its last place, turned by this
+    /// frame's turn, with the detector and the face check; what passes goes to `ranked` in image
+    /// coordinates, its box from its landmarks mapped back ([`LandmarkEstimator::face_box`]).
+    /// Returns whether a face was found.
+    fn detect_turned(&mut self, image: &GrayImage) -> Result<bool> {
+        let Some(lost) = self.lost else {
+            return Ok(false);
+        };
+        let step = 30f32.to_radians();
+        let mut turns = [lost.roll, lost.roll + step, lost.roll - step];
+        let n = turns.iter().filter(|t| t.abs() >= UPRIGHT_COVERS).count();
+        turns.sort_by_key(|t| t.abs() < UPRIGHT_COVERS);
+        if n == 0 {
+            return Ok(false);
+        }
+        let turn = turns[lost.frames as usize % n];
+        let side = (TURNED_WINDOW_FACES * TURNED_FACE_PX).round() as usize;
+        let k = f64::from(lost.size / TURNED_FACE_PX);
+        let (c, s) = (f64::from(turn.cos()), f64::from(turn.sin()));
+        let half = side as f64 / 2.0;
+        let [cx, cy] = lost.centre.map(f64::from);
+        // Window pixel → image pixel: scaled by k, turned by the roll, centred on the face.
+        let map = Affine {
+            m: [
+                k * c,
+                -k * s,
+                cx - k * (c - s) * half,
+                k * s,
+                k * c,
+                cy - k * (s + c) * half,
+            ],
+        };
+        sample(image, &map, side, side, &mut self.turned_buf)?;
+        self.turned.resize(side, side);
+        self.turned.data_mut().copy_from_slice(&self.turned_buf);
+        self.detector
+            .detect(&self.turned, &mut self.turned_detections)?;
+        self.turned_detections.retain(|(r, s)| {
+            r.is_valid() && s.is_finite() && *s >= self.config.min_detection_score
+        });
+        check_detections(
+            &mut self.estimator,
+            &self.turned,
+            &mut self.turned_detections,
+            self.config.min_detection_confidence,
+            &mut self.checked,
+            &mut self.ranked,
+        )?;
+        for (rect, _, _, landmarks) in &mut self.ranked {
+            for p in &mut landmarks.points {
+                let q = map.apply([f64::from(p[0]), f64::from(p[1])]);
+                *p = [q[0] as f32, q[1] as f32];
+            }
+            *rect = match self.estimator.face_box(landmarks) {
+                Some(b) => b,
+                None => tight_box(&landmarks.points),
+            };
+        }
+        self.ranked.retain(|(r, ..)| r.is_valid());
+        Ok(!self.ranked.is_empty())
+    }
+
     fn process_inner(
         &mut self,
         image: &GrayImage,
@@ -985,14 +1107,22 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         if video {
             for s in self.slots.iter_mut().filter(|s| s.active) {
                 s.seen = false;
+                let lost = LostFace {
+                    centre: s.rect.center(),
+                    size: s.rect.w.max(s.rect.h),
+                    roll: eye_roll(&s.landmarks),
+                    frames: 0,
+                };
                 let Some(hit) = s.ncc.search(image, self.config.search_margin) else {
                     s.end();
                     lost_now = true;
+                    self.lost = Some(lost);
                     continue;
                 };
                 if hit.score < self.config.min_ncc_score {
                     s.end();
                     lost_now = true;
+                    self.lost = Some(lost);
                     continue;
                 }
                 let region = s.calib.apply(&hit.rect);
@@ -1002,6 +1132,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 if conf < self.config.min_face_confidence {
                     s.end();
                     lost_now = true;
+                    self.lost = Some(lost);
                     continue;
                 }
                 s.seen = true;
@@ -1051,6 +1182,10 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 &mut self.checked,
                 &mut self.ranked,
             )?;
+            let mut turned_found = false;
+            if video && self.ranked.is_empty() {
+                turned_found = self.detect_turned(image)?;
+            }
             for k in 0..self.ranked.len() {
                 let (rect, score, _, checked) = self.ranked[k];
                 // The track this detection belongs to, by overlap with its region this frame
@@ -1088,14 +1223,23 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                         {
                             s.start(self.next_id, rect, score);
                             s.landmarks = checked;
-                            s.level1_ready = true;
+                            // A face found turned was checked in the turned window: its
+                            // landmarks come from this frame's own region.
+                            s.level1_ready = !turned_found;
                             self.next_id += 1;
+                            self.lost = None;
                         }
                     }
                 }
             }
         } else {
             self.frames_since_detect = self.frames_since_detect.saturating_add(1);
+        }
+        if let Some(l) = self.lost.as_mut() {
+            l.frames += 1;
+            if l.frames > LOST_FRAMES || !video {
+                self.lost = None;
+            }
         }
         if !video {
             for s in self.slots.iter_mut().filter(|s| s.active && !s.seen) {
@@ -1348,17 +1492,6 @@ mod tests {
         confidence: Vec<f32>,
     }
 
-    fn tight(points: &[[f32; 2]]) -> Rect {
-        let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
-        for p in points {
-            x0 = x0.min(p[0]);
-            y0 = y0.min(p[1]);
-            x1 = x1.max(p[0]);
-            y1 = y1.max(p[1]);
-        }
-        Rect::new(x0, y0, x1 - x0, y1 - y0)
-    }
-
     struct Det<'a> {
         truth: &'a std::cell::RefCell<Truth>,
         calls: usize,
@@ -1370,7 +1503,7 @@ mod tests {
             out.clear();
             for (p, score) in &self.truth.borrow().faces {
                 // A detector box 10 % larger than the points and a little low, like a real one.
-                let b = tight(p);
+                let b = tight_box(p);
                 out.push((
                     Rect::new(b.x - 0.05 * b.w, b.y, 1.1 * b.w, 1.1 * b.h),
                     *score,
@@ -1390,7 +1523,7 @@ mod tests {
                 .borrow()
                 .faces
                 .iter()
-                .position(|(p, _)| tight(p).iou(face) > 0.4)
+                .position(|(p, _)| tight_box(p).iou(face) > 0.4)
         }
 
         fn find(&self, face: &Rect) -> Option<[[f32; 2]; N_POINTS]> {
@@ -1615,7 +1748,7 @@ mod tests {
                     ids = now;
                     if max_faces == 1 {
                         // The higher-scoring face wins the only slot.
-                        let b = tight(&truth.borrow().faces[1].0);
+                        let b = tight_box(&truth.borrow().faces[1].0);
                         assert!(r.faces[0].rect.iou(&b) > 0.5);
                     }
                 } else {
@@ -1650,7 +1783,7 @@ mod tests {
             let mut t = mock_tracker(&truth, image_mode()).unwrap();
             let r = t.process(&shifted([0.0; 2]), 0).unwrap();
             assert_eq!(r.faces.len(), 1);
-            let b = tight(&truth.borrow().faces[want].0);
+            let b = tight_box(&truth.borrow().faces[want].0);
             assert!(r.faces[0].rect.iou(&b) > 0.5, "{scores:?} {confidence:?}");
         }
     }
