@@ -183,8 +183,8 @@ fn ultra_light_mode_tracks_without_landmark_networks() {
 /// `track_eval --roll 35 --translation 100 --period 20`). When a track breaks the face is often
 /// turned past what the upright detector finds (about 25°); the tracker then searches a window
 /// around the face's last place turned by its last roll and ±30° (`FaceTracker`'s lost-face
-/// search). Measured: a face on 351 of 360 frames and 319 correct, against 324 and 306 with the
-/// upright detector alone.
+/// search), and its level-1 points found upright there place level 2's zones. Measured: a face on
+/// 360 of 360 frames and 339 correct, against 324 and 306 with the upright detector alone.
 #[test]
 fn a_lost_tilted_face_is_found_again_turned() {
     let Some(data) = shared_data_or_skip("track_models") else {
@@ -214,11 +214,11 @@ fn a_lost_tilted_face_is_found_again_turned() {
     println!("{}", table_header());
     println!("{}", table_row("tilted, fast", &stats));
     assert!(
-        stats.with_face as f32 >= 0.95 * stats.scored as f32,
+        stats.with_face as f32 >= 0.98 * stats.scored as f32,
         "{stats:?}"
     );
     assert!(
-        stats.correct as f32 >= 0.86 * stats.scored as f32,
+        stats.correct as f32 >= 0.92 * stats.scored as f32,
         "{stats:?}"
     );
 }

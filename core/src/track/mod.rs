@@ -1003,17 +1003,16 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
     /// Looks for the lost face ([`LostFace`]) in a window around its last place, turned by this
     /// frame's turn, with the detector and the face check; what passes goes to `ranked` in image
     /// coordinates, its box from its landmarks mapped back ([`LandmarkEstimator::face_box`]).
-    /// Returns whether a face was found.
-    fn detect_turned(&mut self, image: &GrayImage) -> Result<bool> {
+    fn detect_turned(&mut self, image: &GrayImage) -> Result<()> {
         let Some(lost) = self.lost else {
-            return Ok(false);
+            return Ok(());
         };
         let step = 30f32.to_radians();
         let mut turns = [lost.roll, lost.roll + step, lost.roll - step];
         let n = turns.iter().filter(|t| t.abs() >= UPRIGHT_COVERS).count();
         turns.sort_by_key(|t| t.abs() < UPRIGHT_COVERS);
         if n == 0 {
-            return Ok(false);
+            return Ok(());
         }
         let turn = turns[lost.frames as usize % n];
         let side = (TURNED_WINDOW_FACES * TURNED_FACE_PX).round() as usize;
@@ -1059,7 +1058,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             };
         }
         self.ranked.retain(|(r, ..)| r.is_valid());
-        Ok(!self.ranked.is_empty())
+        Ok(())
     }
 
     fn process_inner(
@@ -1182,9 +1181,10 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 &mut self.checked,
                 &mut self.ranked,
             )?;
-            let mut turned_found = false;
             if video && self.ranked.is_empty() {
-                turned_found = self.detect_turned(image)?;
+                // A face found turned starts its track as any other: its level-1 points, found
+                // upright in the turned window and mapped back, place level 2's zones.
+                self.detect_turned(image)?;
             }
             for k in 0..self.ranked.len() {
                 let (rect, score, _, checked) = self.ranked[k];
@@ -1223,9 +1223,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                         {
                             s.start(self.next_id, rect, score);
                             s.landmarks = checked;
-                            // A face found turned was checked in the turned window: its
-                            // landmarks come from this frame's own region.
-                            s.level1_ready = !turned_found;
+                            s.level1_ready = true;
                             self.next_id += 1;
                             self.lost = None;
                         }
