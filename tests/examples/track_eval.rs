@@ -212,16 +212,7 @@ fn main() -> Result<(), String> {
     );
     if let Some(data) = shared_data() {
         let faces = load_validation_faces(&data, 24, 100.0)?;
-        let cfg = SeqConfig {
-            segments: 6,
-            segment_frames: 60,
-            still_frames: 20,
-            face_px: (100.0, 200.0),
-            noise_sigma: 2.0,
-            crop_margin: Some(0.5),
-            seed: 21,
-            ..Default::default()
-        };
+        let cfg = SeqConfig::eval_clips();
         let float = |name: &str, default: f32| -> Result<f32, String> {
             arg(name).map_or(Ok(default), |v| {
                 v.parse().map_err(|e| format!("{name} {v}: {e}"))

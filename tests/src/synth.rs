@@ -71,7 +71,7 @@ pub fn load_validation_faces(
         if lm.iter().any(|p| !p[0].is_finite() || !p[1].is_finite()) {
             continue;
         }
-        let b = tight_box(&lm);
+        let b = Rect::bounding(&lm);
         if b.w.max(b.h) < min_size {
             continue;
         }
@@ -89,18 +89,6 @@ pub fn load_validation_faces(
         });
     }
     Ok(out)
-}
-
-/// Tight bounding box of points.
-pub fn tight_box(points: &[[f32; 2]]) -> Rect {
-    let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
-    for p in points {
-        x0 = x0.min(p[0]);
-        y0 = y0.min(p[1]);
-        x1 = x1.max(p[0]);
-        y1 = y1.max(p[1]);
-    }
-    Rect::new(x0, y0, x1 - x0, y1 - y0)
 }
 
 /// Normalised mean error: mean point distance / distance between points 36 and 45 of the truth
@@ -210,6 +198,22 @@ impl Default for SeqConfig {
 }
 
 impl SeqConfig {
+    /// The clips `track_eval` reports (BENCHMARKS.md, "Tracking"): 6 segments of 60 frames (5
+    /// cuts), 20 still frames each, faces 100–200 px, 2 grey levels of sensor noise, the source
+    /// drawn within half a face of each face.
+    pub fn eval_clips() -> Self {
+        Self {
+            segments: 6,
+            segment_frames: 60,
+            still_frames: 20,
+            face_px: (100.0, 200.0),
+            noise_sigma: 2.0,
+            crop_margin: Some(0.5),
+            seed: 21,
+            ..Self::default()
+        }
+    }
+
     /// Total frames.
     pub fn frames(&self) -> usize {
         self.segment_frames * self.segments
@@ -294,7 +298,7 @@ impl Sequence {
             if face == last_face {
                 face = (face + 1) % faces.len();
             }
-            let src = tight_box(&faces[face].landmarks);
+            let src = Rect::bounding(&faces[face].landmarks);
             let size = rng.range(config.face_px.0, config.face_px.1);
             let scale = size / src.w.max(src.h);
             let margin = 0.5 * size * (1.0 + config.scale_amplitude) + config.translation_px;
@@ -379,7 +383,7 @@ impl Sequence {
         let seg = &self.segments[k];
         let (c, s, a) = similarity(seg, motion_time(cfg, local));
         let face = &self.faces[seg.face];
-        let src_box = tight_box(&face.landmarks);
+        let src_box = Rect::bounding(&face.landmarks);
         let qc = src_box.center();
         let (sin, cos) = a.sin_cos();
         // Forward: p = s·R·(q − qc) + c.
@@ -396,7 +400,7 @@ impl Sequence {
                 s * (sin * dx + cos * dy) + c[1],
             ];
         }
-        truth.face_box = tight_box(&truth.landmarks);
+        truth.face_box = Rect::bounding(&truth.landmarks);
 
         image.resize(cfg.width, cfg.height);
         image.data_mut().copy_from_slice(self.background.data());

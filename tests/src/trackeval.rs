@@ -7,9 +7,9 @@
 //! reported the one nearest the truth is scored. Frames without truth (a video frame where the
 //! reference found no face) are run but not scored.
 
-use crate::synth::{FaceSample, SeqConfig, Sequence, jitter, nme, tight_box};
-use monotrack_core::image::GrayImage;
+use crate::synth::{FaceSample, SeqConfig, Sequence, jitter, nme};
 use monotrack_core::image::frame::{Frame, FrameDesc, PixelFormat};
+use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::N_POINTS;
 use monotrack_core::track::{FaceTracker, LandmarkEstimator, RegionDetector};
 use std::time::Instant;
@@ -159,11 +159,11 @@ pub fn run_clip_with<D: RegionDetector, L: LandmarkEstimator>(
             continue;
         };
         s.scored += 1;
-        let tb = tight_box(truth);
+        let tb = Rect::bounding(truth);
         let best = r.faces.iter().max_by(|a, b| {
-            tight_box(&a.landmarks.points)
+            Rect::bounding(&a.landmarks.points)
                 .iou(&tb)
-                .total_cmp(&tight_box(&b.landmarks.points).iou(&tb))
+                .total_cmp(&Rect::bounding(&b.landmarks.points).iou(&tb))
         });
         let Some(face) = best else {
             continue;

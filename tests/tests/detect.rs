@@ -99,16 +99,7 @@ fn validation_split(data: &Path) -> Vec<(std::path::PathBuf, Vec<Rect>)> {
         let boxes = line
             .faces
             .iter()
-            .map(|f| {
-                let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
-                for p in &f.landmarks68 {
-                    x0 = x0.min(p[0]);
-                    y0 = y0.min(p[1]);
-                    x1 = x1.max(p[0]);
-                    y1 = y1.max(p[1]);
-                }
-                Rect::new(x0, y0, x1 - x0, y1 - y0)
-            })
+            .map(|f| Rect::bounding(&f.landmarks68))
             .collect();
         out.push((data.join("faces68").join(&line.image), boxes));
     }

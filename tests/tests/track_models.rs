@@ -196,17 +196,10 @@ fn a_lost_tilted_face_is_found_again_turned() {
     }
     let faces = load_validation_faces(&data, 24, 100.0).unwrap();
     let cfg = SeqConfig {
-        segments: 6,
-        segment_frames: 60,
-        still_frames: 20,
-        face_px: (100.0, 200.0),
-        noise_sigma: 2.0,
-        crop_margin: Some(0.5),
-        seed: 21,
         rotation_deg: 35.0,
         translation_px: 100.0,
         min_period_frames: 20.0,
-        ..Default::default()
+        ..SeqConfig::eval_clips()
     };
     let clip = synthetic_clip(cfg, faces).unwrap();
     let mut tracker = Tracker::with_default_models(TrackerConfig::default()).unwrap();

@@ -122,6 +122,18 @@ impl Rect {
         Self { x, y, w, h }
     }
 
+    /// The tight axis-aligned box of `points` (negative size for none).
+    pub fn bounding(points: &[[f32; 2]]) -> Self {
+        let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
+        for p in points {
+            x0 = x0.min(p[0]);
+            y0 = y0.min(p[1]);
+            x1 = x1.max(p[0]);
+            y1 = y1.max(p[1]);
+        }
+        Self::new(x0, y0, x1 - x0, y1 - y0)
+    }
+
     /// Centre point.
     pub fn center(&self) -> [f32; 2] {
         [self.x + 0.5 * self.w, self.y + 0.5 * self.h]

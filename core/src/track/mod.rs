@@ -683,18 +683,6 @@ const TURNED_FACE_PX: f32 = 96.0;
 /// Turns within this of upright are left to the upright detector, which covers them.
 const UPRIGHT_COVERS: f32 = 15.0 * std::f32::consts::PI / 180.0;
 
-/// The axis-aligned box of `points`.
-fn tight_box(points: &[[f32; 2]]) -> Rect {
-    let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
-    for p in points {
-        x0 = x0.min(p[0]);
-        y0 = y0.min(p[1]);
-        x1 = x1.max(p[0]);
-        y1 = y1.max(p[1]);
-    }
-    Rect::new(x0, y0, x1 - x0, y1 - y0)
-}
-
 /// The roll of `l`'s eye line (outer corners 36 and 45), radians.
 fn eye_roll(l: &FaceLandmarks) -> f32 {
     let (r, e) = (l.points[36], l.points[45]);
@@ -1054,7 +1042,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             }
             *rect = match self.estimator.face_box(landmarks) {
                 Some(b) => b,
-                None => tight_box(&landmarks.points),
+                None => Rect::bounding(&landmarks.points),
             };
         }
         self.ranked.retain(|(r, ..)| r.is_valid());
@@ -1452,14 +1440,8 @@ fn flow_region(slots: &[Slot], lk: &LkConfig) -> Option<Rect> {
 
 /// Larger side of the points' bounding box.
 fn face_size(points: &[[f32; 2]]) -> f32 {
-    let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
-    for p in points {
-        x0 = x0.min(p[0]);
-        y0 = y0.min(p[1]);
-        x1 = x1.max(p[0]);
-        y1 = y1.max(p[1]);
-    }
-    (x1 - x0).max(y1 - y0).max(0.0)
+    let b = Rect::bounding(points);
+    b.w.max(b.h).max(0.0)
 }
 
 /// Bounding box of projected points.
@@ -1501,7 +1483,7 @@ mod tests {
             out.clear();
             for (p, score) in &self.truth.borrow().faces {
                 // A detector box 10 % larger than the points and a little low, like a real one.
-                let b = tight_box(p);
+                let b = Rect::bounding(p);
                 out.push((
                     Rect::new(b.x - 0.05 * b.w, b.y, 1.1 * b.w, 1.1 * b.h),
                     *score,
@@ -1521,7 +1503,7 @@ mod tests {
                 .borrow()
                 .faces
                 .iter()
-                .position(|(p, _)| tight_box(p).iou(face) > 0.4)
+                .position(|(p, _)| Rect::bounding(p).iou(face) > 0.4)
         }
 
         fn find(&self, face: &Rect) -> Option<[[f32; 2]; N_POINTS]> {
@@ -1746,7 +1728,7 @@ mod tests {
                     ids = now;
                     if max_faces == 1 {
                         // The higher-scoring face wins the only slot.
-                        let b = tight_box(&truth.borrow().faces[1].0);
+                        let b = Rect::bounding(&truth.borrow().faces[1].0);
                         assert!(r.faces[0].rect.iou(&b) > 0.5);
                     }
                 } else {
@@ -1781,7 +1763,7 @@ mod tests {
             let mut t = mock_tracker(&truth, image_mode()).unwrap();
             let r = t.process(&shifted([0.0; 2]), 0).unwrap();
             assert_eq!(r.faces.len(), 1);
-            let b = tight_box(&truth.borrow().faces[want].0);
+            let b = Rect::bounding(&truth.borrow().faces[want].0);
             assert!(r.faces[0].rect.iou(&b) > 0.5, "{scores:?} {confidence:?}");
         }
     }

@@ -126,15 +126,7 @@ impl Scene {
 
     /// The axis-aligned box of the turned face's mean 68 points, as a detector would give it.
     fn detector_box(&self) -> Rect {
-        let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
-        for p in MEAN68 {
-            let q = self.to_image(p);
-            x0 = x0.min(q[0]);
-            y0 = y0.min(q[1]);
-            x1 = x1.max(q[0]);
-            y1 = y1.max(q[1]);
-        }
-        Rect::new(x0, y0, x1 - x0, y1 - y0)
+        Rect::bounding(&MEAN68.map(|p| self.to_image(p)))
     }
 }
 
