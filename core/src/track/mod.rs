@@ -987,7 +987,6 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         Ok(&self.result)
     }
 
-    /// `camera`: the upright image's intrinsics, `None` for the default.
     /// Looks for the lost face ([`LostFace`]) in a window around its last place, turned by this
     /// frame's turn, with the detector and the face check; what passes goes to `ranked` in image
     /// coordinates, its box from its landmarks mapped back ([`LandmarkEstimator::face_box`]).
@@ -1049,6 +1048,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         Ok(())
     }
 
+    /// `camera`: the upright image's intrinsics, `None` for the default.
     fn process_inner(
         &mut self,
         image: &GrayImage,
