@@ -126,6 +126,9 @@ pub(crate) enum Products {
     /// lane; the inputs keep as many steps as no i16 sum can saturate with ([`maddubs_levels`]);
     /// 256-bit f32 for the other layers.
     Maddubs,
+    /// f32 FMAs on 128-bit registers ([`crate::kernels::conv3x3`]): NEON on aarch64, what phones
+    /// run; on x86-64 its twin of the same width and bits, which the portable path takes.
+    F32x4,
 }
 
 /// Largest u8 step of the [`Products::Vnni`] form's inputs (`vpdpbusd` sums in i32).
@@ -170,10 +173,13 @@ impl Products {
                 Products::Bf16 => avx512 && has!("avx512vl") && has!("avx512bf16"),
                 Products::Vnni => avx512 && has!("avx512bw") && has!("avx512vnni"),
                 Products::Maddubs => crate::cpu::has_avx2_fma(),
+                // The twin needs FMA (without it the portable form's fused multiply-add is a
+                // library call per product).
+                Products::F32x4 => std::arch::is_x86_feature_detected!("fma"),
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
-        false
+        matches!(self, Products::F32x4)
     }
 
     /// Whether the products are of bf16-rounded values.
@@ -188,7 +194,7 @@ impl Products {
     #[cfg(test)]
     pub(crate) fn whole_graph_tolerance(self) -> f32 {
         match self {
-            Products::Avx2 | Products::Avx512 => 1e-4,
+            Products::Avx2 | Products::Avx512 | Products::F32x4 => 1e-4,
             Products::Bf16 => crate::stem::BF16_TOLERANCE,
             Products::Vnni => INT8_TOLERANCE,
             Products::Maddubs => INT8_7BIT_TOLERANCE,
@@ -214,10 +220,17 @@ fn chosen_products() -> Products {
                 "bf16" => Some(Products::Bf16),
                 "vnni" => Some(Products::Vnni),
                 "maddubs" => Some(Products::Maddubs),
+                "f32x4" => Some(Products::F32x4),
                 _ => None,
             });
         if let Some(p) = named.filter(|p| p.supported()) {
             return p;
+        }
+        // The phone's form: on aarch64, and on x86-64's portable path (its twin).
+        if cfg!(not(target_arch = "x86_64"))
+            || crate::cpu::kernel_path() == crate::cpu::KernelPath::Portable
+        {
+            return Products::F32x4;
         }
         #[cfg(target_arch = "x86_64")]
         let amd = crate::cpu::is_amd().unwrap_or(false);
@@ -289,6 +302,9 @@ pub(crate) struct Conv3x3 {
     pairs: Option<Pairs>,
     /// The int8 form of the layer, where it runs in int8 products ([`Products::Vnni`]).
     quads: Option<Quads>,
+    /// The form of [`crate::kernels::conv3x3`] the layer runs, where its products are
+    /// [`Products::F32x4`].
+    x4: Option<crate::kernels::conv3x3::Form>,
     /// Whether the f32 products run on 512-bit registers ([`Products::Avx512`], and
     /// [`Products::Vnni`] for the runs the int8 form does not take).
     wide: bool,
@@ -592,6 +608,7 @@ impl Conv3x3 {
             at_out,
             pairs,
             quads,
+            x4: (form == Products::F32x4).then(crate::kernels::conv3x3::Form::for_this_cpu),
             wide: matches!(form, Products::Avx512 | Products::Vnni),
             input_layout: Layout::Planar,
             output_layout: Layout::Planar,
@@ -601,8 +618,8 @@ impl Conv3x3 {
     }
 
     /// Whether the layer would read an interleaved input: the layers that quantise their input
-    /// ([`Quads`]) and those of the 256-bit f32 kernel, which broadcast each input value from
-    /// wherever it lies.
+    /// ([`Quads`]) and those of the 256-bit and 128-bit f32 kernels, which broadcast each input
+    /// value from wherever it lies.
     pub(crate) fn takes_interleaved_input(&self) -> bool {
         self.quads.is_some() || self.f32_256()
     }
@@ -619,7 +636,8 @@ impl Conv3x3 {
         }
     }
 
-    /// Whether the layer's products are the 256-bit f32 kernel's ([`Products::Avx2`]).
+    /// Whether the layer's products are the 256-bit or the 128-bit f32 kernel's
+    /// ([`Products::Avx2`], [`Products::F32x4`]).
     fn f32_256(&self) -> bool {
         !self.wide && self.pairs.is_none() && self.quads.is_none()
     }
@@ -760,8 +778,12 @@ impl Conv3x3 {
 
     /// [`Self::run`] in f32 or bf16 products, on an input in the layout [`Self::taps`] address
     /// (planes, except for a 256-bit f32 layer that reads interleaved).
-    #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
     fn run_float(&mut self, input: &[f32], out: &mut [f32]) {
+        if let Some(form) = self.x4 {
+            self.run_x4(form, input, out);
+            self.peak = None;
+            return;
+        }
         #[cfg(target_arch = "x86_64")]
         if let Some(mut pairs) = self.pairs.take() {
             // SAFETY: `pairs` exists only where the CPU has AVX2, FMA and AVX-512 BF16 + VL
@@ -790,7 +812,45 @@ impl Conv3x3 {
             self.peak = peak;
             return;
         }
-        panic!("Conv3x3::run needs AVX2 and FMA (conv::available)");
+        panic!("Conv3x3::run needs AVX2 and FMA, or F32x4 products (conv::available)");
+    }
+
+    /// [`Self::run`] through [`crate::kernels::conv3x3`] in `form`: per batch slot and block of
+    /// sixteen output channels, the output positions in groups of six.
+    fn run_x4(&self, form: crate::kernels::conv3x3::Form, input: &[f32], out: &mut [f32]) {
+        use crate::kernels::conv3x3::{Block as Block4, POSITIONS as P4};
+        let (k, blocks) = (self.taps.len(), self.cout.div_ceil(BLOCK));
+        let reach = self.taps.iter().copied().max().unwrap_or(0);
+        let per_slot = input.len() / self.batch.max(1);
+        let (width, out_slot, block_step) = match self.output_layout {
+            Layout::Planar => (0, self.cout * self.out_plane, BLOCK * self.out_plane),
+            Layout::Interleaved => {
+                let width = Self::interleaved_width(self.cout);
+                (width, width * self.out_plane, BLOCK)
+            }
+        };
+        for b in 0..self.batch {
+            let input = &input[b * per_slot..][..per_slot];
+            let out = &mut out[b * out_slot..][..out_slot];
+            for blk in 0..blocks {
+                let block = Block4 {
+                    input,
+                    weights: &self.packed[blk * k * BLOCK..][..k * BLOCK],
+                    bias: self.bias[blk * BLOCK..][..BLOCK]
+                        .try_into()
+                        .expect("a block of biases"),
+                    taps: &self.taps,
+                    reach,
+                    channels: BLOCK.min(self.cout - blk * BLOCK),
+                    plane: self.out_plane,
+                    width,
+                };
+                let out = &mut out[blk * block_step..];
+                for (ai, ao) in self.at_in.chunks(P4).zip(self.at_out.chunks(P4)) {
+                    block.run(form, ai, ao, out);
+                }
+            }
+        }
     }
 
     /// # Safety
@@ -1097,6 +1157,7 @@ pub(crate) fn product_forms() -> impl Iterator<Item = Products> + Clone {
         Products::Bf16,
         Products::Vnni,
         Products::Maddubs,
+        Products::F32x4,
     ]
     .into_iter()
     .filter(|p| p.supported())
@@ -1486,14 +1547,17 @@ fn quantize_interleaved_avx2(
     }
 }
 
-/// Whether [`Conv3x3::run`] can run on this CPU: x86-64 with AVX2 and FMA. Elsewhere tract keeps
-/// these layers (its hand-written kernels for ARM are what phones run; ours are measured on x86-64
-/// only).
+/// Whether [`Conv3x3::run`] runs on this CPU, so tract leaves these layers to it: everywhere off
+/// x86-64 ([`Products::F32x4`]: NEON on aarch64); on x86-64 with AVX2 and FMA on the native path,
+/// or with FMA on the portable path (the NEON form's twin). An x86-64 CPU without them leaves the
+/// layers to tract.
 pub(crate) fn available() -> bool {
     #[cfg(target_arch = "x86_64")]
-    return crate::cpu::has_avx2_fma();
+    return crate::cpu::has_avx2_fma()
+        || (crate::cpu::kernel_path() == crate::cpu::KernelPath::Portable
+            && Products::F32x4.supported());
     #[cfg(not(target_arch = "x86_64"))]
-    return false;
+    return true;
 }
 
 /// One block of output channels of one batch slot. `T`: f32 values, or bf16 pairs as words

@@ -15,4 +15,5 @@
 //! stages run their portable forms (which the compiler vectorises for NEON where it can), and the
 //! trunk layers run in tract's NEON kernels.
 
+pub(crate) mod conv3x3;
 pub(crate) mod plane;

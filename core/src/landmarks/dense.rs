@@ -643,7 +643,28 @@ struct Product<'a, W> {
 impl<W: Weight> Product<'_, W> {
     crate::cpu::with_avx2_copy! {
         /// `out = scale ⊙ (weights · x) + bias` (`out` the first of the columns' outputs).
-        fn run / run_avx2 (&self, out: &mut [f32]) => run_body
+        fn run_plain / run_avx2 (&self, out: &mut [f32]) => run_body
+    }
+
+    /// `out = scale ⊙ (weights · x) + bias` (`out` the first of the columns' outputs): on an
+    /// x86-64 CPU with FMA that runs the portable path, through a copy compiled for FMA — the same
+    /// fused multiply-adds as everywhere, so the same bits, where the portable build calls a
+    /// library routine for each one.
+    fn run(&self, out: &mut [f32]) {
+        #[cfg(target_arch = "x86_64")]
+        if !crate::cpu::has_avx2_fma() && std::arch::is_x86_feature_detected!("fma") {
+            #[allow(unsafe_code)]
+            // SAFETY: the CPU has FMA (and so AVX), the features the copy is compiled for.
+            return unsafe { self.run_fma(out) };
+        }
+        self.run_plain(out)
+    }
+
+    /// [`Self::run_body`] compiled for FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,fma")]
+    fn run_fma(&self, out: &mut [f32]) {
+        self.run_body(out)
     }
 
     #[inline(always)]
