@@ -1,6 +1,8 @@
 //! 3×3 convolutions with zero padding 1, stride 1 or 2, a bias and a ReLU: the layers of the M3
 //! trunks and the detector's first ones ([`crate::stem`] finds them in the graphs), computed here
-//! instead of by tract where the CPU has AVX2 and FMA.
+//! instead of by tract ([`available`]): on aarch64 in NEON ([`Products::F32x4`], the kernel in
+//! [`crate::kernels::conv3x3`]; x86-64's portable path runs its twin), on x86-64 in the forms
+//! below.
 //!
 //! Why: tract lowers each such layer to an explicit `Pad` copy of its input, a lazily gathered
 //! im2col matrix and a matrix product; `perf` on `m3_per_face` (AMD Zen 4, with tract running these layers) put the
@@ -17,7 +19,7 @@
 //! one broadcast feeds two products), converted from the f32 buffer once per run. On the
 //! development machine (AMD EPYC Zen 4) the trunk layers ran 1.45–1.65× faster (a timing of four
 //! level-1-shaped layers alone), `m3_per_face` 362 → 299–315 µs and the validation NME moved
-//! 3.979 → 3.980 % (`models/MODEL_CARD.md`). Phones keep tract's f32 kernels.
+//! 3.979 → 3.980 % (`models/MODEL_CARD.md`). Phones multiply in f32 ([`Products::F32x4`]).
 //!
 //! Where the CPU has AVX-512F but is not AMD's, the layers multiply in f32 on 512-bit registers
 //! instead: two blocks of sixteen output channels in one register each, eight output positions at
@@ -178,8 +180,12 @@ impl Products {
                 Products::F32x4 => std::arch::is_x86_feature_detected!("fma"),
             }
         }
+        // Other 32-bit ARM builds (armeabi-v7a) have no fused multiply-add in their baseline
+        // and keep tract.
         #[cfg(not(target_arch = "x86_64"))]
-        matches!(self, Products::F32x4)
+        {
+            cfg!(target_arch = "aarch64") && self == Products::F32x4
+        }
     }
 
     /// Whether the products are of bf16-rounded values.
@@ -227,7 +233,7 @@ fn chosen_products() -> Products {
             return p;
         }
         // The phone's form: on aarch64, and on x86-64's portable path (its twin).
-        if cfg!(not(target_arch = "x86_64"))
+        if cfg!(target_arch = "aarch64")
             || crate::cpu::kernel_path() == crate::cpu::KernelPath::Portable
         {
             return Products::F32x4;
@@ -1547,17 +1553,17 @@ fn quantize_interleaved_avx2(
     }
 }
 
-/// Whether [`Conv3x3::run`] runs on this CPU, so tract leaves these layers to it: everywhere off
-/// x86-64 ([`Products::F32x4`]: NEON on aarch64); on x86-64 with AVX2 and FMA on the native path,
-/// or with FMA on the portable path (the NEON form's twin). An x86-64 CPU without them leaves the
-/// layers to tract.
+/// Whether [`Conv3x3::run`] runs on this CPU, so tract leaves these layers to it: on aarch64
+/// ([`Products::F32x4`]: NEON); on x86-64 with AVX2 and FMA on the native path, or with FMA on
+/// the portable path (the NEON form's twin). Elsewhere (32-bit ARM, whose baseline has no fused
+/// multiply-add, and x86-64 CPUs without FMA) tract keeps the layers.
 pub(crate) fn available() -> bool {
     #[cfg(target_arch = "x86_64")]
     return crate::cpu::has_avx2_fma()
         || (crate::cpu::kernel_path() == crate::cpu::KernelPath::Portable
             && Products::F32x4.supported());
     #[cfg(not(target_arch = "x86_64"))]
-    return true;
+    return Products::F32x4.supported();
 }
 
 /// One block of output channels of one batch slot. `T`: f32 values, or bf16 pairs as words

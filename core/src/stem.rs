@@ -2,10 +2,10 @@
 //! `Add`, `Div` by constants), a 3×3, stride-2, zero-padded convolution and a ReLU — computed here
 //! instead of by tract: [`StemLayer`] finds the layer in the ONNX graph, takes its weights from it
 //! and cuts it out, and [`Stem`] computes it before tract runs the rest (`landmarks::net`, and
-//! `detect`). Where [`crate::conv`] runs (x86-64 with AVX2 + FMA), the layer goes through its
-//! kernel, and so do the plain 3×3 layers that follow it, cut from the graph the same way: tract
-//! then runs what comes after them (M3's fully connected heads; the detector's depthwise blocks
-//! and heads). The ONNX files stay whole: training, the Python references and `M3_IO.md` see the
+//! `detect`). Where [`crate::conv`] runs ([`crate::conv::available`]: aarch64, x86-64 with AVX2 +
+//! FMA), the layer goes through its kernel, and so do the plain 3×3 layers that follow it, cut
+//! from the graph the same way: what comes after them then runs in `landmarks::dense` (M3's fully
+//! connected heads) or in tract (the detector's depthwise blocks and heads). The ONNX files stay whole: training, the Python references and `M3_IO.md` see the
 //! same networks, and the tests hold the outputs to tract's run of the whole graph.
 //!
 //! Why: tract lowers every convolution to a matrix product over an im2col matrix; with one input
