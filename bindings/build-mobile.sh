@@ -9,7 +9,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 TARGETS=${TARGETS:-"aarch64-linux-android aarch64-apple-ios"}
-PROFILE=${PROFILE:-release}
+PROFILE=${PROFILE:-release-small}
 
 if ! command -v clang >/dev/null; then
   echo "installing clang"; (apt-get update -qq && apt-get install -y -qq clang) >/dev/null

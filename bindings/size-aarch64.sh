@@ -7,12 +7,12 @@
 # loader does not read Android's packed relocations; the tests under qemu link the usual way.)
 # Prints the stripped and gzipped sizes, the LOAD segments' alignment and the share of each crate
 # in the code and data (from the unstripped symbol sizes).
-# PROFILE (default release; release-small builds tract-core for size) picks the cargo profile;
-# extra cargo arguments pass through.
+# PROFILE (default release-small, the profile the arm64 builds ship: tract and ndarray built for
+# size; `release` for comparison) picks the cargo profile; extra cargo arguments pass through.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 T=aarch64-unknown-linux-gnu
-PROFILE=${PROFILE:-release}
+PROFILE=${PROFILE:-release-small}
 if ! command -v aarch64-linux-gnu-gcc >/dev/null; then
   echo "installing the aarch64 cross gcc"
   (apt-get update -qq && apt-get install -y -qq gcc-aarch64-linux-gnu libc6-dev-arm64-cross) >/dev/null

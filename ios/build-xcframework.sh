@@ -8,11 +8,12 @@
 #      (renamed module.modulemap, the name Clang looks for) into ios/MonotrackFFIFFI.xcframework.
 #
 # Needs macOS with Xcode (xcodebuild, the iOS SDKs) and rustup; it stops with a message otherwise.
-# Environment: PROFILE (release), IPHONEOS_DEPLOYMENT_TARGET (13.0).
+# Environment: PROFILE (release-small: both slices are aarch64, whose frames run no layer in tract,
+# so the size profile costs them nothing), IPHONEOS_DEPLOYMENT_TARGET (13.0).
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 cd "$ROOT"
-PROFILE=${PROFILE:-release}
+PROFILE=${PROFILE:-release-small}
 export IPHONEOS_DEPLOYMENT_TARGET=${IPHONEOS_DEPLOYMENT_TARGET:-13.0}
 TARGETS=(aarch64-apple-ios aarch64-apple-ios-sim)
 OUT=ios/MonotrackFFIFFI.xcframework

@@ -91,7 +91,7 @@ pub(crate) struct ConvWeights {
 }
 
 /// Output channels computed together: two AVX2 registers of f32, or one AVX-512 register.
-const BLOCK: usize = 16;
+pub(crate) const BLOCK: usize = 16;
 
 /// How the buffer between two layers holds its values (both with the zero border around each
 /// map that is the next layer's padding).
@@ -850,6 +850,7 @@ impl Conv3x3 {
                     channels: BLOCK.min(self.cout - blk * BLOCK),
                     plane: self.out_plane,
                     width,
+                    relu: true,
                 };
                 let out = &mut out[blk * block_step..];
                 for (ai, ao) in self.at_in.chunks(P4).zip(self.at_out.chunks(P4)) {
@@ -1123,7 +1124,12 @@ impl Conv3x3 {
 
 /// Weights packed for the kernel: per block of [`BLOCK`] output channels, for each of the `k`
 /// taps the block's values `weight(channel, tap)`, `zero` past `cout`.
-fn pack<T: Copy>(cout: usize, k: usize, zero: T, weight: impl Fn(usize, usize) -> T) -> Vec<T> {
+pub(crate) fn pack<T: Copy>(
+    cout: usize,
+    k: usize,
+    zero: T,
+    weight: impl Fn(usize, usize) -> T,
+) -> Vec<T> {
     let mut packed = vec![zero; cout.div_ceil(BLOCK) * k * BLOCK];
     for co in 0..cout {
         let (b, lane) = (co / BLOCK, co % BLOCK);
@@ -1177,6 +1183,13 @@ pub(crate) fn building<R>(form: Products, f: impl FnOnce() -> R) -> R {
     let r = f();
     FORCED_PRODUCTS.set(None);
     r
+}
+
+/// Whether layers built now multiply in f32 on 128-bit registers ([`Products::F32x4`]: aarch64,
+/// x86-64's portable path): the detector's tail then runs in the same kernels
+/// (`detect::tail`).
+pub(crate) fn f32x4_products() -> bool {
+    available() && products() == Products::F32x4
 }
 
 /// Whether layers built now multiply in int8 where their weights allow ([`Products::Vnni`]):

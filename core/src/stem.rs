@@ -5,7 +5,8 @@
 //! `detect`). Where [`crate::conv`] runs ([`crate::conv::available`]: aarch64, x86-64 with AVX2 +
 //! FMA), the layer goes through its kernel, and so do the plain 3×3 layers that follow it, cut
 //! from the graph the same way: what comes after them then runs in `landmarks::dense` (M3's fully
-//! connected heads) or in tract (the detector's depthwise blocks and heads). The ONNX files stay whole: training, the Python references and `M3_IO.md` see the
+//! connected heads) and, for the detector, in `detect::tail` where the layers multiply in the
+//! 128-bit form (aarch64, x86-64's portable path), else in tract. The ONNX files stay whole: training, the Python references and `M3_IO.md` see the
 //! same networks, and the tests hold the outputs to tract's run of the whole graph.
 //!
 //! Why: tract lowers every convolution to a matrix product over an im2col matrix; with one input
@@ -214,6 +215,29 @@ impl Stem {
         }
         conv.run(padded, out);
         conv.output_peak()
+    }
+
+    /// Makes the last layer write its output interleaved ([`crate::conv::Layout::Interleaved`]:
+    /// position after position, the channels rounded up to a whole block), for a reader that
+    /// takes it so (`detect::tail`); false, changing nothing, where the last layer is the lane
+    /// loop, which writes planes only.
+    pub(crate) fn interleave_output(&mut self) -> bool {
+        match (self.layers.last_mut(), &mut self.first) {
+            (Some((conv, _)), _) => conv.interleave_output(),
+            (None, First::Direct(conv, _)) => conv.interleave_output(),
+            (None, First::Lanes { .. }) => return false,
+        }
+        true
+    }
+
+    /// The length of the output [`Self::run`] writes: [`Self::output_shape`]'s, with the
+    /// channels rounded up to a whole block where [`Self::interleave_output`] was called.
+    pub(crate) fn output_len(&self) -> usize {
+        match (self.layers.last(), &self.first) {
+            (Some((conv, _)), _) => conv.output_len(),
+            (None, First::Direct(conv, _)) => conv.output_len(),
+            (None, First::Lanes { .. }) => self.output_shape().iter().product(),
+        }
     }
 
     /// How many layers after the first one run here.

@@ -12,11 +12,14 @@
 //! Boxes follow the M3 convention (`models/M3_IO.md`): the tight bounding box of the 68 landmarks,
 //! in image pixels (pixel (i, j) covers `[i, i+1)×[j, j+1)`).
 //!
-//! One optimised tract plan is built per network input shape and reused (a video has one shape);
-//! buffers are held by the detector, so after warm-up a frame allocates only tract's intermediate
-//! tensors.
+//! The network is laid out once per input shape and reused (a video has one shape), with its
+//! buffers held by the detector. Its first layers run in `crate::stem`; what follows runs in
+//! [`tail`] where those layers multiply in the 128-bit form (aarch64, x86-64's portable path), so
+//! a frame there allocates nothing after warm-up; elsewhere in an optimised tract plan, which
+//! allocates its intermediate tensors on each run.
 
 mod resample;
+mod tail;
 
 use crate::image::{GrayImage, Rect};
 use crate::stem::{Stem, StemWeights, with_f32_slice};
@@ -24,6 +27,7 @@ use crate::{Error, Result};
 use resample::AreaResampler;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
+use tail::{Tail, TailWeights};
 use tract_core::internal::*;
 
 /// The network, embedded (≈ 216 KB: float16 weight storage, float32 compute).
@@ -151,31 +155,89 @@ struct ModelDesc {
 type Plan = Arc<TypedSimplePlan>;
 type State = TypedSimpleState;
 
-/// An optimised plan for one input shape, with its reused input tensor.
+/// The network for one input shape, with its reused buffers.
 struct ShapePlan {
     h: usize,
     w: usize,
-    state: State,
-    /// The network's first layer (`crate::stem`); `input` is then its output.
+    /// The network's first layer (`crate::stem`); the body's input is then its output.
     stem: Option<Stem>,
-    input: Arc<Tensor>,
+    body: Body,
     last_used: u64,
+}
+
+/// What runs after the first layers.
+enum Body {
+    /// tract's optimised plan, its reused input tensor and the last run's outputs.
+    Tract {
+        state: Box<State>,
+        input: Arc<Tensor>,
+        outputs: TVec<TValue>,
+    },
+    /// The blocks and heads in the library's kernels ([`tail`]).
+    Tail(Box<Tail>),
 }
 
 impl ShapePlan {
     /// Runs the network on the `h × w` input `fill` writes.
-    fn run(&mut self, fill: impl FnOnce(&mut [f32])) -> Result<TVec<TValue>> {
-        match &mut self.stem {
-            Some(stem) => {
+    fn run(&mut self, fill: impl FnOnce(&mut [f32])) -> Result<()> {
+        match (&mut self.stem, &mut self.body) {
+            (Some(stem), Body::Tail(tail)) => {
                 fill(stem.input_mut());
-                with_f32_slice(&mut self.input, |buf| stem.run(buf))
+                stem.run(tail.input_mut());
+                tail.run();
+                Ok(())
             }
-            None => with_f32_slice(&mut self.input, fill),
+            (None, Body::Tail(_)) => Err(Error::Internal("detector tail without a stem".into())),
+            (
+                stem,
+                Body::Tract {
+                    state,
+                    input,
+                    outputs,
+                },
+            ) => {
+                match stem {
+                    Some(stem) => {
+                        fill(stem.input_mut());
+                        with_f32_slice(input, |buf| stem.run(buf))
+                    }
+                    None => with_f32_slice(input, fill),
+                }
+                .map_err(internal)?;
+                let run = state.run(tvec![input.clone().into_tvalue()]);
+                crate::cpu::clear_upper_vector_state();
+                *outputs = run.map_err(internal)?;
+                Ok(())
+            }
         }
-        .map_err(internal)?;
-        let outputs = self.state.run(tvec![self.input.clone().into_tvalue()]);
-        crate::cpu::clear_upper_vector_state();
-        outputs.map_err(internal)
+    }
+
+    /// Head `k` of the last run: its `HEAD_CHANNELS` planes, rows and columns.
+    fn head(&self, k: usize) -> Result<(&[f32], usize, usize)> {
+        let missing = || Error::Internal("detector: missing head output".into());
+        let (data, gh, gw) = match &self.body {
+            Body::Tail(tail) => tail.output(k).ok_or_else(missing)?,
+            Body::Tract { outputs, .. } => {
+                let t = outputs.get(k).ok_or_else(missing)?;
+                let shape = t.shape();
+                if shape.len() != 4 || shape[1] != HEAD_CHANNELS {
+                    return Err(Error::Internal(format!("detector head shape {shape:?}")));
+                }
+                let view = t.try_as_plain_ram().map_err(internal)?;
+                (
+                    view.as_slice::<f32>().map_err(internal)?,
+                    shape[2],
+                    shape[3],
+                )
+            }
+        };
+        if data.len() != HEAD_CHANNELS * gh * gw {
+            return Err(Error::Internal(format!(
+                "detector head of {} values for {gh}x{gw} cells",
+                data.len()
+            )));
+        }
+        Ok((data, gh, gw))
     }
 }
 
@@ -185,6 +247,8 @@ pub struct FaceDetector {
     /// The network without its first layer when that runs as a [`Stem`].
     model: crate::onnx::pb::ModelProto,
     stem: Option<StemWeights>,
+    /// What follows the first layers, where it has the form [`tail`] computes.
+    tail: Option<TailWeights>,
     /// Strides of the network's heads, in network pixels, in the order of its outputs.
     strides: Vec<usize>,
     /// Index of the [`WINDOW_STRIDE`] head among the outputs.
@@ -239,12 +303,17 @@ impl FaceDetector {
                 .output_shape()
                 .to_vec()
         });
+        let tail = match &stem {
+            Some(w) => TailWeights::from_proto(&proto, shape[1], w.next_pad).map_err(load)?,
+            None => None,
+        };
         crate::onnx::typed_model(&proto, &[shape]).map_err(load)?;
         let model = proto;
         Ok(Self {
             config,
             model,
             stem,
+            tail,
             strides: desc.strides,
             window_head,
             plans: Vec::with_capacity(MAX_PLANS),
@@ -276,26 +345,54 @@ impl FaceDetector {
             self.plans[i].last_used = self.tick;
             return Ok(i);
         }
-        let stem = self
+        let mut stem = self
             .stem
             .as_ref()
             .map(|weights| Stem::new(1, h, w, weights));
         let shape = stem.as_ref().map_or([1, 1, h, w], Stem::output_shape);
-        let typed = crate::onnx::typed_model(&self.model, &[shape.to_vec()])
-            .and_then(|m| m.into_optimized())
-            .map_err(|e| Error::ModelLoad(format!("detector plan {w}x{h}: {e}")))?;
-        let plan: Plan = typed
-            .into_runnable()
-            .map_err(|e| Error::ModelLoad(format!("detector plan {w}x{h}: {e}")))?;
-        let state = plan.spawn().map_err(internal)?;
-        // Zeros: with a stem, the border is the second layer's padding and stays zero.
-        let input = Arc::new(Tensor::zero::<f32>(&shape).map_err(internal)?);
+        // The tail in the library's kernels where the first layers run in the same form.
+        let tail = match (&mut stem, &self.tail) {
+            (Some(stem), Some(weights)) if crate::conv::f32x4_products() => {
+                if !stem.interleave_output() {
+                    return Err(Error::Internal(
+                        "detector tail after a first layer that writes planes only".into(),
+                    ));
+                }
+                let tail = Tail::new(weights, shape[2] - 2, shape[3] - 2);
+                if tail.input_len() != stem.output_len() {
+                    return Err(Error::Internal(format!(
+                        "detector tail input {} for a stem output of {}",
+                        tail.input_len(),
+                        stem.output_len()
+                    )));
+                }
+                Some(tail)
+            }
+            _ => None,
+        };
+        let body = match tail {
+            Some(tail) => Body::Tail(Box::new(tail)),
+            None => {
+                let typed = crate::onnx::typed_model(&self.model, &[shape.to_vec()])
+                    .and_then(|m| m.into_optimized())
+                    .map_err(|e| Error::ModelLoad(format!("detector plan {w}x{h}: {e}")))?;
+                let plan: Plan = typed
+                    .into_runnable()
+                    .map_err(|e| Error::ModelLoad(format!("detector plan {w}x{h}: {e}")))?;
+                Body::Tract {
+                    state: Box::new(plan.spawn().map_err(internal)?),
+                    // Zeros: with a stem, the border is the second layer's padding and stays
+                    // zero.
+                    input: Arc::new(Tensor::zero::<f32>(&shape).map_err(internal)?),
+                    outputs: tvec![],
+                }
+            }
+        };
         let entry = ShapePlan {
             h,
             w,
-            state,
             stem,
-            input,
+            body,
             last_used: self.tick,
         };
         if self.plans.len() >= MAX_PLANS {
@@ -356,19 +453,10 @@ impl FaceDetector {
         self.resampler.ys.build(h, 0.0, ry, ch);
         let idx = self.plan_for(ch, cw)?;
         let resampler = &mut self.resampler;
-        let outputs = self.plans[idx].run(|buf| resampler.run(image, buf, cw, ch, cw))?;
+        self.plans[idx].run(|buf| resampler.run(image, buf, cw, ch, cw))?;
         let logit_thr = logit(self.config.score_threshold);
         for (k, &stride) in self.strides.iter().enumerate() {
-            let t = outputs
-                .get(k)
-                .ok_or_else(|| Error::Internal("detector: missing head output".into()))?;
-            let shape = t.shape();
-            if shape.len() != 4 || shape[1] != HEAD_CHANNELS {
-                return Err(Error::Internal(format!("detector head shape {shape:?}")));
-            }
-            let (gh, gw) = (shape[2], shape[3]);
-            let view = t.try_as_plain_ram().map_err(internal)?;
-            let data = view.as_slice::<f32>().map_err(internal)?;
+            let (data, gh, gw) = self.plans[idx].head(k)?;
             decode_head(
                 data,
                 gh,
@@ -413,18 +501,12 @@ impl FaceDetector {
         self.resampler.ys.build(h, cy - half, ratio, n);
         let idx = self.plan_for(n, n)?;
         let resampler = &mut self.resampler;
-        let outputs = self.plans[idx].run(|buf| resampler.run(image, buf, n, n, n))?;
+        self.plans[idx].run(|buf| resampler.run(image, buf, n, n, n))?;
         // Stride-16 head: the patch centre (32, 32) lies between cells 1 and 2 on each axis.
-        let t = outputs
-            .get(self.window_head)
-            .ok_or_else(|| Error::Internal("detector: missing head output".into()))?;
-        let shape = t.shape();
-        if shape.len() != 4 || shape[1] != HEAD_CHANNELS || shape[2] < 3 || shape[3] < 3 {
-            return Err(Error::Internal(format!("detector head shape {shape:?}")));
+        let (data, gh, gw) = self.plans[idx].head(self.window_head)?;
+        if gh < 3 || gw < 3 {
+            return Err(Error::Internal(format!("detector head of {gh}x{gw} cells")));
         }
-        let (gh, gw) = (shape[2], shape[3]);
-        let view = t.try_as_plain_ram().map_err(internal)?;
-        let data = view.as_slice::<f32>().map_err(internal)?;
         let mut best = f32::NEG_INFINITY;
         for y in 1..3 {
             for x in 1..3 {
@@ -697,7 +779,13 @@ mod tests {
             // depthwise and stays in tract).
             let after_first = det.plans[idx].stem.as_ref().unwrap().layers_after_first();
             assert_eq!(after_first, if crate::conv::available() { 3 } else { 0 });
-            let ours = det.plans[idx]
+            // In the 128-bit form the blocks and heads run outside tract too.
+            assert_eq!(
+                matches!(det.plans[idx].body, Body::Tail(_)),
+                form == crate::conv::Products::F32x4,
+                "{form:?}"
+            );
+            det.plans[idx]
                 .run(|buf| buf.copy_from_slice(&input))
                 .unwrap();
             let plan = whole
@@ -708,13 +796,13 @@ mod tests {
                 .unwrap();
             let t = Tensor::from_shape(&[1, 1, h, w], &input).unwrap();
             let theirs = plan.run(tvec![t.into_tvalue()]).unwrap();
-            assert_eq!(ours.len(), theirs.len());
-            for (a, b) in ours.iter().zip(&theirs) {
-                assert_eq!(a.shape(), b.shape());
-                let a = a.try_as_plain_ram().unwrap();
+            assert!(det.plans[idx].head(theirs.len()).is_err(), "an extra head");
+            for (k, b) in theirs.iter().enumerate() {
+                let (a, gh, gw) = det.plans[idx].head(k).unwrap();
+                assert_eq!([1, HEAD_CHANNELS, gh, gw], b.shape(), "head {k}");
                 let b = b.try_as_plain_ram().unwrap();
-                let (a, b) = (a.as_slice::<f32>().unwrap(), b.as_slice::<f32>().unwrap());
-                crate::stem::assert_close_to_whole_graph(&format!("{h}x{w}"), a, b, form);
+                let b = b.as_slice::<f32>().unwrap();
+                crate::stem::assert_close_to_whole_graph(&format!("{h}x{w} {form:?}"), a, b, form);
             }
         }
     }

@@ -1,6 +1,6 @@
 //! NEON form of the 3×3 convolution block: `fmla` on four-lane vectors, `ld1r` broadcasts.
 
-use super::{Block, Lanes};
+use super::{Block, Depthwise, Lanes};
 use std::arch::aarch64::{
     float32x4_t, vdupq_n_f32, vfmaq_f32, vld1q_dup_f32, vld1q_f32, vmaxnmq_f32, vst1q_f32,
 };
@@ -61,4 +61,20 @@ pub(super) unsafe fn run<const P: usize>(
 ) {
     // SAFETY: the caller's contract; NEON is baseline on aarch64.
     unsafe { block.body::<float32x4_t, P>(at_in, at_out, out) }
+}
+
+/// [`Depthwise::body`] in NEON registers.
+///
+/// # Safety
+/// As [`Depthwise::body`].
+#[target_feature(enable = "neon")]
+#[allow(unsafe_code)]
+pub(super) unsafe fn run_depthwise<const P: usize>(
+    dw: &Depthwise<'_>,
+    at_in: &[usize; P],
+    at_out: &[usize; P],
+    out: &mut [f32],
+) {
+    // SAFETY: the caller's contract; NEON is baseline on aarch64.
+    unsafe { dw.body::<float32x4_t, P>(at_in, at_out, out) }
 }

@@ -1,7 +1,9 @@
-//! A 3×3 convolution's block of sixteen output channels for up to six output positions — bias,
-//! the products of every tap and a ReLU — in f32 fused multiply-adds on four-lane (128-bit)
-//! vectors: the layers of the M3 trunks and the detector's first ones as an aarch64 phone
-//! computes them ([`crate::conv`] lays the layers out and calls this per block).
+//! A convolution's block of sixteen output channels for up to six output positions — bias, the
+//! products of every tap and a ReLU — in f32 fused multiply-adds on four-lane (128-bit) vectors,
+//! as an aarch64 phone computes the networks: [`Block`] for a full convolution (any list of taps:
+//! the 3×3 layers of the M3 trunks and of the detector, the detector's 1×1 layers; its heads
+//! without the ReLU), [`Depthwise`] for one 3×3 kernel per channel (the detector's blocks).
+//! [`crate::conv`] and `detect::tail` lay the layers out and call these per block.
 //!
 //! Why here and not in tract: tract lowers each such layer to an explicit `Pad` copy, a lazily
 //! gathered im2col matrix and a matrix product, gives each run's every output a new tensor (583
@@ -12,7 +14,8 @@
 //!
 //! Shape: sixteen output channels are four vectors, six positions twenty-four accumulators; with
 //! the tap's four weight vectors and a broadcast input value that is 29 of NEON's 32 registers.
-//! Per tap: four weight loads, six broadcasts, twenty-four FMAs.
+//! Per tap: four weight loads, six broadcasts, twenty-four FMAs. [`Depthwise`] loads each tap's
+//! sixteen input values as they lie (positions interleaved) instead of broadcasting one.
 //!
 //! | form | where it runs |
 //! |---|---|
@@ -160,6 +163,8 @@ pub(crate) struct Block<'a> {
     pub(crate) plane: usize,
     /// Channels per position of an interleaved output; 0 for planes.
     pub(crate) width: usize,
+    /// Whether a ReLU follows (the detector's heads have none).
+    pub(crate) relu: bool,
 }
 
 impl Block<'_> {
@@ -257,17 +262,147 @@ impl Block<'_> {
                     }
                 }
             }
+            let relu = self.relu;
+            let act = move |a: V| if relu { a.relu() } else { a }.to_array();
             for (acc, &o) in acc.iter().zip(at_out) {
                 if self.width > 0 {
                     let dst = &mut out[o * self.width..][..BLOCK];
-                    for (d, a) in dst.chunks_exact_mut(4).zip(acc) {
-                        d.copy_from_slice(&a.relu().to_array());
+                    for (d, &a) in dst.chunks_exact_mut(4).zip(acc) {
+                        d.copy_from_slice(&act(a));
                     }
                 } else {
-                    let lanes: [f32; BLOCK] =
-                        std::array::from_fn(|c| acc[c / 4].relu().to_array()[c % 4]);
+                    let lanes: [f32; BLOCK] = std::array::from_fn(|c| act(acc[c / 4])[c % 4]);
                     for (c, &v) in lanes[..self.channels].iter().enumerate() {
                         out[c * self.plane + o] = v;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A depthwise 3×3 convolution (one kernel per channel) with a bias and a ReLU, over interleaved
+/// positions of `width` channels in and out (the detector's blocks after its first layers):
+/// sixteen channels at a time, each tap's input loaded as it lies, so every lane runs the same
+/// chain of fused multiply-adds as [`Block`]'s.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Depthwise<'a> {
+    /// Interleaved input: positions of `width` channels.
+    pub(crate) input: &'a [f32],
+    /// Per tap (row, column) `width` weights, channel by channel (zero past the channels).
+    pub(crate) weights: &'a [f32],
+    /// `width` biases (zero past the channels).
+    pub(crate) bias: &'a [f32],
+    /// Offset of each of the nine taps from a window's top-left position, in positions.
+    pub(crate) taps: &'a [usize; 9],
+    /// Channels per position of the input and the output: a whole number of [`BLOCK`]s.
+    pub(crate) width: usize,
+}
+
+impl Depthwise<'_> {
+    /// Computes the output positions `at_out` (in positions of `out`) whose windows start at the
+    /// input positions `at_in`, at most [`POSITIONS`] of them, every channel.
+    ///
+    /// # Panics
+    /// Where a window, a store, the weights or the biases do not fit their buffers, the width is
+    /// not a whole number of blocks or more than [`POSITIONS`] positions are given.
+    pub(crate) fn run(&self, form: Form, at_in: &[usize], at_out: &[usize], out: &mut [f32]) {
+        let width = self.width;
+        assert!(width.is_multiple_of(BLOCK), "width {width}");
+        assert_eq!(at_in.len(), at_out.len(), "positions");
+        assert!(
+            self.weights.len() >= 9 * width && self.bias.len() >= width,
+            "weights"
+        );
+        let reach = self.taps.iter().copied().max().unwrap_or(0);
+        for &at in at_in {
+            assert!(
+                (at + reach + 1) * width <= self.input.len(),
+                "window outside the input"
+            );
+        }
+        for &o in at_out {
+            assert!((o + 1) * width <= out.len(), "store outside the output");
+        }
+        match at_in.len() {
+            0 => {}
+            1 => self.run_n::<1>(form, at_in, at_out, out),
+            2 => self.run_n::<2>(form, at_in, at_out, out),
+            3 => self.run_n::<3>(form, at_in, at_out, out),
+            4 => self.run_n::<4>(form, at_in, at_out, out),
+            5 => self.run_n::<5>(form, at_in, at_out, out),
+            6 => self.run_n::<6>(form, at_in, at_out, out),
+            n => panic!("{n} positions in one group"),
+        }
+    }
+
+    fn run_n<const P: usize>(
+        &self,
+        form: Form,
+        at_in: &[usize],
+        at_out: &[usize],
+        out: &mut [f32],
+    ) {
+        let at_in: &[usize; P] = at_in.try_into().expect("P offsets");
+        let at_out: &[usize; P] = at_out.try_into().expect("P offsets");
+        #[allow(unsafe_code)]
+        // SAFETY: `run` checked every offset against its buffer; each form's CPU features are
+        // those `Form` was chosen for (`for_this_cpu`, `all`).
+        unsafe {
+            match form {
+                Form::Portable => self.body::<[f32; 4], P>(at_in, at_out, out),
+                #[cfg(target_arch = "aarch64")]
+                Form::Neon => arm64::run_depthwise(self, at_in, at_out, out),
+                #[cfg(target_arch = "x86_64")]
+                Form::Fma128 { wide_file: false } => {
+                    x86_64::run_depthwise(self, at_in, at_out, out)
+                }
+                #[cfg(target_arch = "x86_64")]
+                Form::Fma128 { wide_file: true } => {
+                    x86_64::run_depthwise_wide_file(self, at_in, at_out, out)
+                }
+            }
+        }
+    }
+
+    /// The kernel in lanes `V`.
+    ///
+    /// # Safety
+    /// What [`Depthwise::run`] checks holds; `V`'s operations run on this CPU.
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    pub(crate) unsafe fn body<V: Lanes, const P: usize>(
+        &self,
+        at_in: &[usize; P],
+        at_out: &[usize; P],
+        out: &mut [f32],
+    ) {
+        let width = self.width;
+        let (x, w, b) = (
+            self.input.as_ptr(),
+            self.weights.as_ptr(),
+            self.bias.as_ptr(),
+        );
+        for blk in (0..width).step_by(BLOCK) {
+            // SAFETY: the checks of `run`: every tap's block of values, the weights' and the
+            // biases' lie inside their buffers.
+            unsafe {
+                let bias: [V; 4] = std::array::from_fn(|h| V::load(b.add(blk + 4 * h)));
+                let mut acc = [bias; P];
+                for (t, &tap) in self.taps.iter().enumerate() {
+                    let wt: [V; 4] =
+                        std::array::from_fn(|h| V::load(w.add(t * width + blk + 4 * h)));
+                    for (acc, &at) in acc.iter_mut().zip(at_in) {
+                        let src = x.add((at + tap) * width + blk);
+                        for (h, (a, &wt)) in acc.iter_mut().zip(&wt).enumerate() {
+                            *a = a.mul_add(wt, V::load(src.add(4 * h)));
+                        }
+                    }
+                }
+                for (acc, &o) in acc.iter().zip(at_out) {
+                    let dst = &mut out[o * width + blk..][..BLOCK];
+                    for (d, &a) in dst.chunks_exact_mut(4).zip(acc) {
+                        d.copy_from_slice(&a.relu().to_array());
                     }
                 }
             }
@@ -322,6 +457,7 @@ mod tests {
                     channels,
                     plane: 40,
                     width,
+                    relu: true,
                 };
                 for n in 1..=POSITIONS {
                     let at_in: Vec<usize> = (0..n).map(|j| (j % 3) * 2 + (j / 3) * cols).collect();
@@ -374,6 +510,7 @@ mod tests {
                 channels: BLOCK,
                 plane: 0,
                 width: BLOCK,
+                relu: true,
             };
             let mut out = [9.0f32; 2 * BLOCK];
             block.run(form, &[0, 1], &[0, 1], &mut out);
@@ -394,7 +531,69 @@ mod tests {
             channels: BLOCK,
             plane: 1,
             width: 0,
+            relu: true,
         };
         block.run(Form::Portable, &[4], &[0], &mut [0.0; BLOCK]);
+    }
+
+    #[test]
+    fn every_depthwise_form_gives_the_definitions_bits() {
+        // A 5×6 grid of positions, 32 channels, taps of a 3×3 window on it.
+        let (cols, width) = (6, 32);
+        let taps: [usize; 9] = std::array::from_fn(|t| (t / 3) * cols + t % 3);
+        let input = values(5 * cols * width, 4);
+        let weights = values(9 * width, 5);
+        let bias = values(width, 6);
+        let dw = Depthwise {
+            input: &input,
+            weights: &weights,
+            bias: &bias,
+            taps: &taps,
+            width,
+        };
+        for n in 1..=POSITIONS {
+            let at_in: Vec<usize> = (0..n).map(|j| (j % 4) + (j / 4) * 2 * cols).collect();
+            let at_out: Vec<usize> = (0..n).map(|j| 2 * j + 1).collect();
+            let mut want = vec![7.0f32; 16 * width];
+            for (&a, &o) in at_in.iter().zip(&at_out) {
+                for c in 0..width {
+                    let mut s = bias[c];
+                    for (t, &tap) in taps.iter().enumerate() {
+                        s = weights[t * width + c].mul_add(input[(a + tap) * width + c], s);
+                    }
+                    want[o * width + c] = if s > 0.0 { s } else { 0.0 };
+                }
+            }
+            for form in Form::all() {
+                let mut got = vec![7.0f32; 16 * width];
+                dw.run(form, &at_in, &at_out, &mut got);
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&got), bits(&want), "{form:?}, {n} positions");
+            }
+        }
+    }
+
+    #[test]
+    fn a_block_without_relu_keeps_negative_sums() {
+        let (input, taps) = ([2.0f32], [0]);
+        let mut weights = [0.0f32; BLOCK];
+        weights[0] = -1.5;
+        let bias = [0.25f32; BLOCK];
+        for form in Form::all() {
+            let block = Block {
+                input: &input,
+                weights: &weights,
+                bias: &bias,
+                taps: &taps,
+                reach: 0,
+                channels: 2,
+                plane: 1,
+                width: 0,
+                relu: false,
+            };
+            let mut out = [9.0f32; 2];
+            block.run(form, &[0], &[0], &mut out);
+            assert_eq!(out, [-2.75, 0.25], "{form:?}");
+        }
     }
 }

@@ -2,7 +2,7 @@
 //! (128-bit `vfmadd231ps`, `vbroadcastss`), so x86-64's portable path does the phone's work with
 //! the phone's vector width, and gives its bits.
 
-use super::{Block, Lanes};
+use super::{Block, Depthwise, Lanes};
 use std::arch::x86_64::{
     __m128, _mm_broadcast_ss, _mm_fmadd_ps, _mm_loadu_ps, _mm_max_ps, _mm_setzero_ps, _mm_storeu_ps,
 };
@@ -78,4 +78,36 @@ pub(super) unsafe fn run_wide_file<const P: usize>(
 ) {
     // SAFETY: the caller's contract.
     unsafe { block.body::<__m128, P>(at_in, at_out, out) }
+}
+
+/// [`Depthwise::body`] on 128-bit registers with FMA.
+///
+/// # Safety
+/// As [`Depthwise::body`]; the CPU has AVX and FMA.
+#[target_feature(enable = "avx,fma")]
+#[allow(unsafe_code)]
+pub(super) unsafe fn run_depthwise<const P: usize>(
+    dw: &Depthwise<'_>,
+    at_in: &[usize; P],
+    at_out: &[usize; P],
+    out: &mut [f32],
+) {
+    // SAFETY: the caller's contract.
+    unsafe { dw.body::<__m128, P>(at_in, at_out, out) }
+}
+
+/// [`run_depthwise`] with AVX-512VL's thirty-two vector registers.
+///
+/// # Safety
+/// As [`Depthwise::body`]; the CPU has AVX, FMA, AVX-512F and AVX-512VL.
+#[target_feature(enable = "avx,fma,avx512f,avx512vl")]
+#[allow(unsafe_code)]
+pub(super) unsafe fn run_depthwise_wide_file<const P: usize>(
+    dw: &Depthwise<'_>,
+    at_in: &[usize; P],
+    at_out: &[usize; P],
+    out: &mut [f32],
+) {
+    // SAFETY: the caller's contract.
+    unsafe { dw.body::<__m128, P>(at_in, at_out, out) }
 }
