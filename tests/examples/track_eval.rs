@@ -7,13 +7,14 @@
 //! cargo run --profile bench -p monotrack-tests --example track_eval -- \
 //!     [--video ../shared/data/video/obama_3ddfa_demo.mp4 --reference REF.jsonl] [--mirror-average]
 //!     [--only ROW] [--passes N] [--camera-frames] [--ultra-light]
-//!     [--scale A] [--roll DEG] [--translation PX] [--period FRAMES]
+//!     [--scale A] [--roll DEG] [--roll-offset DEG] [--translation PX] [--period FRAMES]
 //! ```
 //! `--ultra-light` runs the ultra-light mode's rows instead (`TrackerConfig::ultra_light`,
 //! tracking and re-detect every frame). The synthetic motion's relative scale amplitude
 //! (`--scale`, default 0.12), roll amplitude (`--roll`, default 12°), translation amplitude
 //! (`--translation`, default 50 px) and shortest period (`--period`, default 60 frames; the
-//! top speed is 2π·amplitude / period per frame) can be set.
+//! top speed is 2π·amplitude / period per frame) can be set, and `--roll-offset` holds each
+//! segment's head tilted by that much, alternately either way (default 0°).
 //! The clip's luma images go to `process` (every frame a buffer no earlier step read);
 //! `--camera-frames` passes them as `Gray8` camera frames instead (`process_frame`, which copies
 //! each into the tracker's luma buffer: the `image` column, counted in the frame's total).
@@ -221,6 +222,7 @@ fn main() -> Result<(), String> {
         let cfg = SeqConfig {
             scale_amplitude: float("--scale", cfg.scale_amplitude)?,
             rotation_deg: float("--roll", cfg.rotation_deg)?,
+            roll_offset_deg: float("--roll-offset", cfg.roll_offset_deg)?,
             translation_px: float("--translation", cfg.translation_px)?,
             min_period_frames: float("--period", cfg.min_period_frames)?,
             ..cfg

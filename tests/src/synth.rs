@@ -162,6 +162,9 @@ pub struct SeqConfig {
     pub scale_amplitude: f32,
     /// Rotation amplitude, degrees.
     pub rotation_deg: f32,
+    /// Each segment's face turned in roll by this much before its motion, one way in even
+    /// segments and the other in odd ones (a head held tilted), degrees.
+    pub roll_offset_deg: f32,
     /// Shortest motion period, frames (sets the top speed: 2π·amplitude / period per frame).
     pub min_period_frames: f32,
     /// Seed.
@@ -189,6 +192,7 @@ impl Default for SeqConfig {
             translation_px: 50.0,
             scale_amplitude: 0.12,
             rotation_deg: 12.0,
+            roll_offset_deg: 0.0,
             min_period_frames: 60.0,
             seed: 7,
             noise_sigma: 0.0,
@@ -332,7 +336,12 @@ impl Sequence {
                 wave(config.scale_amplitude),
                 wave(config.rotation_deg.to_radians()),
             ];
-            let angle = rng.range(-0.15, 0.15);
+            let sign = if segments.len().is_multiple_of(2) {
+                1.0
+            } else {
+                -1.0
+            };
+            let angle = rng.range(-0.15, 0.15) + sign * config.roll_offset_deg.to_radians();
             let seg = Segment {
                 face,
                 center,

@@ -683,6 +683,17 @@ const TURNED_FACE_PX: f32 = 96.0;
 /// Turns within this of upright are left to the upright detector, which covers them.
 const UPRIGHT_COVERS: f32 = 15.0 * std::f32::consts::PI / 180.0;
 
+/// Turns of the whole frame searched while no face is tracked or lost (app start, a face gone
+/// for good), one per frame: the upright detector finds faces to about 25° of roll, and each turn
+/// covers about as much either side of it, so with these a head held at up to about 55° either way
+/// is found within two frames.
+const WHOLE_FRAME_TURNS_DEG: [f32; 2] = [30.0, -30.0];
+
+/// Side of the square window the whole frame is turned into, pixels: the frame's longer side
+/// shrinks to it, so the search costs about half an upright detector pass over a VGA frame, and
+/// faces under 1.7 × the detector's minimum size (at VGA) are left out of it.
+const WHOLE_FRAME_WINDOW: usize = 384;
+
 /// The roll of `l`'s eye line (outer corners 36 and 45), radians.
 fn eye_roll(l: &FaceLandmarks) -> f32 {
     let (r, e) = (l.points[36], l.points[45]);
@@ -711,7 +722,9 @@ pub struct FaceTracker<D: RegionDetector, L: LandmarkEstimator> {
     /// The face whose track was lost last, while the tracker looks for it turned (see
     /// [`LostFace`]).
     lost: Option<LostFace>,
-    /// The turned window searched for a lost face, and its detections.
+    /// Frames the whole frame was searched turned (it picks the turn, [`WHOLE_FRAME_TURNS_DEG`]).
+    whole_frame_turns: u32,
+    /// The turned window searched for a lost face or over the whole frame, and its detections.
     turned: GrayImage,
     turned_buf: Vec<u8>,
     turned_detections: Vec<(Rect, f32)>,
@@ -803,6 +816,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             ranked: Vec::with_capacity(64),
             checked: FaceLandmarks::default(),
             lost: None,
+            whole_frame_turns: 0,
             turned: GrayImage::default(),
             turned_buf: Vec::new(),
             turned_detections: Vec::with_capacity(64),
@@ -987,26 +1001,42 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         Ok(&self.result)
     }
 
-    /// Looks for the lost face ([`LostFace`]) in a window around its last place, turned by this
-    /// frame's turn, with the detector and the face check; what passes goes to `ranked` in image
-    /// coordinates, its box from its landmarks mapped back ([`LandmarkEstimator::face_box`]).
-    fn detect_turned(&mut self, image: &GrayImage) -> Result<()> {
-        let Some(lost) = self.lost else {
+    /// Looks for a face turned in roll, with the detector and the face check, where the upright
+    /// detector found none: the lost face ([`LostFace`]) in a window around its last place,
+    /// turned by this frame's turn; or, where no face is tracked or lost (`nothing_tracked`), the
+    /// whole frame turned by one of [`WHOLE_FRAME_TURNS_DEG`]. What passes goes to `ranked` in
+    /// image coordinates, its box from its landmarks mapped back
+    /// ([`LandmarkEstimator::face_box`]).
+    fn detect_turned(&mut self, image: &GrayImage, nothing_tracked: bool) -> Result<()> {
+        let (turn, centre, k, side) = if let Some(lost) = self.lost {
+            let step = 30f32.to_radians();
+            let mut turns = [lost.roll, lost.roll + step, lost.roll - step];
+            let n = turns.iter().filter(|t| t.abs() >= UPRIGHT_COVERS).count();
+            turns.sort_by_key(|t| t.abs() < UPRIGHT_COVERS);
+            if n == 0 {
+                return Ok(());
+            }
+            let side = (TURNED_WINDOW_FACES * TURNED_FACE_PX).round() as usize;
+            (
+                turns[lost.frames as usize % n],
+                lost.centre,
+                lost.size / TURNED_FACE_PX,
+                side,
+            )
+        } else if nothing_tracked {
+            let turns = WHOLE_FRAME_TURNS_DEG;
+            let turn = turns[self.whole_frame_turns as usize % turns.len()].to_radians();
+            self.whole_frame_turns = self.whole_frame_turns.wrapping_add(1);
+            let (w, h) = (image.width() as f32, image.height() as f32);
+            let side = WHOLE_FRAME_WINDOW;
+            (turn, [0.5 * w, 0.5 * h], w.max(h) / side as f32, side)
+        } else {
             return Ok(());
         };
-        let step = 30f32.to_radians();
-        let mut turns = [lost.roll, lost.roll + step, lost.roll - step];
-        let n = turns.iter().filter(|t| t.abs() >= UPRIGHT_COVERS).count();
-        turns.sort_by_key(|t| t.abs() < UPRIGHT_COVERS);
-        if n == 0 {
-            return Ok(());
-        }
-        let turn = turns[lost.frames as usize % n];
-        let side = (TURNED_WINDOW_FACES * TURNED_FACE_PX).round() as usize;
-        let k = f64::from(lost.size / TURNED_FACE_PX);
+        let k = f64::from(k);
         let (c, s) = (f64::from(turn.cos()), f64::from(turn.sin()));
         let half = side as f64 / 2.0;
-        let [cx, cy] = lost.centre.map(f64::from);
+        let [cx, cy] = centre.map(f64::from);
         // Window pixel → image pixel: scaled by k, turned by the roll, centred on the face.
         let map = Affine {
             m: [
@@ -1172,7 +1202,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             if video && self.ranked.is_empty() {
                 // A face found turned starts its track as any other: its level-1 points, found
                 // upright in the turned window and mapped back, place level 2's zones.
-                self.detect_turned(image)?;
+                self.detect_turned(image, n_active == 0)?;
             }
             for k in 0..self.ranked.len() {
                 let (rect, score, _, checked) = self.ranked[k];
