@@ -821,6 +821,18 @@ impl Conv3x3 {
         panic!("Conv3x3::run needs AVX2 and FMA, or F32x4 products (conv::available)");
     }
 
+    /// How the output is walked: the channels per position where it is interleaved (0 for
+    /// planes), the values per batch slot, and the offset from one block of channels to the next.
+    fn output_steps(&self) -> (usize, usize, usize) {
+        match self.output_layout {
+            Layout::Planar => (0, self.cout * self.out_plane, BLOCK * self.out_plane),
+            Layout::Interleaved => {
+                let width = Self::interleaved_width(self.cout);
+                (width, width * self.out_plane, BLOCK)
+            }
+        }
+    }
+
     /// [`Self::run`] through [`crate::kernels::conv3x3`] in `form`: per batch slot and block of
     /// sixteen output channels, the output positions in groups of six.
     fn run_x4(&self, form: crate::kernels::conv3x3::Form, input: &[f32], out: &mut [f32]) {
@@ -828,13 +840,7 @@ impl Conv3x3 {
         let (k, blocks) = (self.taps.len(), self.cout.div_ceil(BLOCK));
         let reach = self.taps.iter().copied().max().unwrap_or(0);
         let per_slot = input.len() / self.batch.max(1);
-        let (width, out_slot, block_step) = match self.output_layout {
-            Layout::Planar => (0, self.cout * self.out_plane, BLOCK * self.out_plane),
-            Layout::Interleaved => {
-                let width = Self::interleaved_width(self.cout);
-                (width, width * self.out_plane, BLOCK)
-            }
-        };
+        let (width, out_slot, block_step) = self.output_steps();
         for b in 0..self.batch {
             let input = &input[b * per_slot..][..per_slot];
             let out = &mut out[b * out_slot..][..out_slot];
@@ -923,14 +929,7 @@ impl Conv3x3 {
     ) -> Option<f32> {
         let (k, blocks) = (taps.len(), self.cout.div_ceil(BLOCK));
         let per_slot = input.len() / self.batch.max(1);
-        // Per batch slot, and from one block of channels to the next.
-        let (width, out_slot, block_step) = match self.output_layout {
-            Layout::Planar => (0, self.cout * self.out_plane, BLOCK * self.out_plane),
-            Layout::Interleaved => {
-                let width = Self::interleaved_width(self.cout);
-                (width, width * self.out_plane, BLOCK)
-            }
-        };
+        let (width, out_slot, block_step) = self.output_steps();
         let mut peak = 0u32;
         for b in 0..self.batch {
             let input = &input[b * per_slot..][..per_slot];

@@ -187,25 +187,17 @@ fn ultra_light_mode_tracks_without_landmark_networks() {
 /// 360 of 360 frames and 339 correct, against 324 and 306 with the upright detector alone.
 #[test]
 fn a_lost_tilted_face_is_found_again_turned() {
-    let Some(data) = shared_data_or_skip("track_models") else {
+    let Some(stats) = tilted_clip_stats(
+        "tilted, fast",
+        SeqConfig {
+            rotation_deg: 35.0,
+            translation_px: 100.0,
+            min_period_frames: 20.0,
+            ..SeqConfig::eval_clips()
+        },
+    ) else {
         return;
     };
-    if std::env::var_os("MONOTRACK_EMULATED").is_some() {
-        println!("skipped under emulation: 360 frames of tracking");
-        return;
-    }
-    let faces = load_validation_faces(&data, 24, 100.0).unwrap();
-    let cfg = SeqConfig {
-        rotation_deg: 35.0,
-        translation_px: 100.0,
-        min_period_frames: 20.0,
-        ..SeqConfig::eval_clips()
-    };
-    let clip = synthetic_clip(cfg, faces).unwrap();
-    let mut tracker = Tracker::with_default_models(TrackerConfig::default()).unwrap();
-    let stats = run_clip(&mut tracker, &clip, CORRECT_NME).unwrap();
-    println!("{}", table_header());
-    println!("{}", table_row("tilted, fast", &stats));
     assert!(
         stats.with_face as f32 >= 0.98 * stats.scored as f32,
         "{stats:?}"
@@ -222,24 +214,16 @@ fn a_lost_tilted_face_is_found_again_turned() {
 /// detector alone.
 #[test]
 fn a_head_tilted_from_the_start_is_found_turned() {
-    let Some(data) = shared_data_or_skip("track_models") else {
+    let Some(stats) = tilted_clip_stats(
+        "tilted 40° from the start",
+        SeqConfig {
+            roll_offset_deg: 40.0,
+            rotation_deg: 5.0,
+            ..SeqConfig::eval_clips()
+        },
+    ) else {
         return;
     };
-    if std::env::var_os("MONOTRACK_EMULATED").is_some() {
-        println!("skipped under emulation: 360 frames of tracking");
-        return;
-    }
-    let faces = load_validation_faces(&data, 24, 100.0).unwrap();
-    let cfg = SeqConfig {
-        roll_offset_deg: 40.0,
-        rotation_deg: 5.0,
-        ..SeqConfig::eval_clips()
-    };
-    let clip = synthetic_clip(cfg, faces).unwrap();
-    let mut tracker = Tracker::with_default_models(TrackerConfig::default()).unwrap();
-    let stats = run_clip(&mut tracker, &clip, CORRECT_NME).unwrap();
-    println!("{}", table_header());
-    println!("{}", table_row("tilted 40° from the start", &stats));
     assert!(
         stats.with_face as f32 >= 0.6 * stats.scored as f32,
         "{stats:?}"
@@ -248,4 +232,22 @@ fn a_head_tilted_from_the_start_is_found_turned() {
         stats.correct as f32 >= 0.55 * stats.scored as f32,
         "{stats:?}"
     );
+}
+
+/// The default tracker's row on the synthetic clip of `cfg` (360 frames from faces68 validation
+/// faces), printed as `what`; `None` (with the reason printed) without the shared data or under
+/// emulation.
+fn tilted_clip_stats(what: &str, cfg: SeqConfig) -> Option<ClipStats> {
+    let data = shared_data_or_skip("track_models")?;
+    if std::env::var_os("MONOTRACK_EMULATED").is_some() {
+        println!("skipped under emulation: 360 frames of tracking");
+        return None;
+    }
+    let faces = load_validation_faces(&data, 24, 100.0).unwrap();
+    let clip = synthetic_clip(cfg, faces).unwrap();
+    let mut tracker = Tracker::with_default_models(TrackerConfig::default()).unwrap();
+    let stats = run_clip(&mut tracker, &clip, CORRECT_NME).unwrap();
+    println!("{}", table_header());
+    println!("{}", table_row(what, &stats));
+    Some(stats)
 }
