@@ -836,33 +836,24 @@ impl Conv3x3 {
     /// [`Self::run`] through [`crate::kernels::conv3x3`] in `form`: per batch slot and block of
     /// sixteen output channels, the output positions in groups of six.
     fn run_x4(&self, form: crate::kernels::conv3x3::Form, input: &[f32], out: &mut [f32]) {
-        use crate::kernels::conv3x3::{Block as Block4, POSITIONS as P4};
-        let (k, blocks) = (self.taps.len(), self.cout.div_ceil(BLOCK));
         let reach = self.taps.iter().copied().max().unwrap_or(0);
         let per_slot = input.len() / self.batch.max(1);
-        let (width, out_slot, block_step) = self.output_steps();
+        let (width, out_slot, _) = self.output_steps();
         for b in 0..self.batch {
-            let input = &input[b * per_slot..][..per_slot];
-            let out = &mut out[b * out_slot..][..out_slot];
-            for blk in 0..blocks {
-                let block = Block4 {
-                    input,
-                    weights: &self.packed[blk * k * BLOCK..][..k * BLOCK],
-                    bias: self.bias[blk * BLOCK..][..BLOCK]
-                        .try_into()
-                        .expect("a block of biases"),
-                    taps: &self.taps,
-                    reach,
-                    channels: BLOCK.min(self.cout - blk * BLOCK),
-                    plane: self.out_plane,
-                    width,
-                    relu: true,
-                };
-                let out = &mut out[blk * block_step..];
-                for (ai, ao) in self.at_in.chunks(P4).zip(self.at_out.chunks(P4)) {
-                    block.run(form, ai, ao, out);
-                }
+            crate::kernels::conv3x3::FullLayer {
+                input: &input[b * per_slot..][..per_slot],
+                packed: &self.packed,
+                bias: &self.bias,
+                taps: &self.taps,
+                reach,
+                cout: self.cout,
+                plane: self.out_plane,
+                width,
+                relu: true,
+                at_in: &self.at_in,
+                at_out: &self.at_out,
             }
+            .run(form, &mut out[b * out_slot..][..out_slot]);
         }
     }
 

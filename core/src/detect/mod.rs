@@ -247,8 +247,10 @@ pub struct FaceDetector {
     /// The network without its first layer when that runs as a [`Stem`].
     model: crate::onnx::pb::ModelProto,
     stem: Option<StemWeights>,
-    /// What follows the first layers, where it has the form [`tail`] computes.
-    tail: Option<TailWeights>,
+    /// What follows the first layers, where it has the form [`tail`] computes: read from the
+    /// graph by the first plan that runs it (`None` until then; `Some(None)` where the graph has
+    /// another form), so CPUs whose plans keep these layers in tract never read it.
+    tail: Option<Option<TailWeights>>,
     /// Strides of the network's heads, in network pixels, in the order of its outputs.
     strides: Vec<usize>,
     /// Index of the [`WINDOW_STRIDE`] head among the outputs.
@@ -303,17 +305,13 @@ impl FaceDetector {
                 .output_shape()
                 .to_vec()
         });
-        let tail = match &stem {
-            Some(w) => TailWeights::from_proto(&proto, shape[1], w.next_pad).map_err(load)?,
-            None => None,
-        };
         crate::onnx::typed_model(&proto, &[shape]).map_err(load)?;
         let model = proto;
         Ok(Self {
             config,
             model,
             stem,
-            tail,
+            tail: None,
             strides: desc.strides,
             window_head,
             plans: Vec::with_capacity(MAX_PLANS),
@@ -351,8 +349,16 @@ impl FaceDetector {
             .map(|weights| Stem::new(1, h, w, weights));
         let shape = stem.as_ref().map_or([1, 1, h, w], Stem::output_shape);
         // The tail in the library's kernels where the first layers run in the same form.
-        let tail = match (&mut stem, &self.tail) {
-            (Some(stem), Some(weights)) if crate::conv::f32x4_products() => {
+        let in_kernels = crate::conv::f32x4_products();
+        if in_kernels && self.tail.is_none() {
+            self.tail = Some(match &self.stem {
+                Some(weights) => TailWeights::from_proto(&self.model, shape[1], weights.next_pad)
+                    .map_err(|e| Error::ModelLoad(format!("detector.onnx: {e:#}")))?,
+                None => None,
+            });
+        }
+        let tail = match (&mut stem, self.tail.as_ref().and_then(Option::as_ref)) {
+            (Some(stem), Some(weights)) if in_kernels => {
                 if !stem.interleave_output() {
                     return Err(Error::Internal(
                         "detector tail after a first layer that writes planes only".into(),

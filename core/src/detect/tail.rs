@@ -21,7 +21,7 @@
 //! are planes without a border, as tract gives them (`1 × channels × rows × columns`).
 
 use crate::conv::{BLOCK, pack};
-use crate::kernels::conv3x3::{Block, Depthwise, Form, POSITIONS};
+use crate::kernels::conv3x3::{Depthwise, Form, FullLayer, POSITIONS};
 use crate::onnx::pb::{ModelProto, NodeProto};
 use crate::stem::{attr, is_relu, values_by_name};
 use tract_core::internal::*;
@@ -397,7 +397,6 @@ impl Tail {
         for l in &self.layers {
             let mut out = std::mem::take(&mut self.values[l.dst]);
             let input = &self.values[l.src];
-            let groups = || l.at_in.chunks(POSITIONS).zip(l.at_out.chunks(POSITIONS));
             match l.kind {
                 Kind::Depthwise => {
                     let dw = Depthwise {
@@ -407,37 +406,24 @@ impl Tail {
                         taps: &l.dw_taps,
                         width: l.bias.len(),
                     };
-                    for (ai, ao) in groups() {
+                    for (ai, ao) in l.at_in.chunks(POSITIONS).zip(l.at_out.chunks(POSITIONS)) {
                         dw.run(self.form, ai, ao, &mut out);
                     }
                 }
-                Kind::Pointwise | Kind::Full => {
-                    let k = l.taps.len();
-                    for blk in 0..l.cout.div_ceil(BLOCK) {
-                        let block = Block {
-                            input,
-                            weights: &l.packed[blk * k * BLOCK..][..k * BLOCK],
-                            bias: l.bias[blk * BLOCK..][..BLOCK]
-                                .try_into()
-                                .expect("a block of biases"),
-                            taps: &l.taps,
-                            reach: l.reach,
-                            channels: BLOCK.min(l.cout - blk * BLOCK),
-                            plane: l.plane,
-                            width: l.out_width,
-                            relu: l.relu,
-                        };
-                        let at = if l.out_width > 0 {
-                            blk * BLOCK
-                        } else {
-                            blk * BLOCK * l.plane
-                        };
-                        let out = &mut out[at..];
-                        for (ai, ao) in groups() {
-                            block.run(self.form, ai, ao, out);
-                        }
-                    }
+                Kind::Pointwise | Kind::Full => FullLayer {
+                    input,
+                    packed: &l.packed,
+                    bias: &l.bias,
+                    taps: &l.taps,
+                    reach: l.reach,
+                    cout: l.cout,
+                    plane: l.plane,
+                    width: l.out_width,
+                    relu: l.relu,
+                    at_in: &l.at_in,
+                    at_out: &l.at_out,
                 }
+                .run(self.form, &mut out),
             }
             self.values[l.dst] = out;
         }

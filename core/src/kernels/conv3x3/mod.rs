@@ -142,6 +142,23 @@ impl Form {
     }
 }
 
+/// `$s.$m::<P>(args)` with `P` the number of positions `$n` (1 to [`POSITIONS`]; 0 does
+/// nothing): the kernels are compiled per group size so the accumulators stay in registers.
+macro_rules! by_positions {
+    ($n:expr, $s:ident . $m:ident ($($arg:expr),*)) => {
+        match $n {
+            0 => {}
+            1 => $s.$m::<1>($($arg),*),
+            2 => $s.$m::<2>($($arg),*),
+            3 => $s.$m::<3>($($arg),*),
+            4 => $s.$m::<4>($($arg),*),
+            5 => $s.$m::<5>($($arg),*),
+            6 => $s.$m::<6>($($arg),*),
+            n => panic!("{n} positions in one group"),
+        }
+    };
+}
+
 /// One block of output channels of one layer (one batch slot).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Block<'a> {
@@ -193,16 +210,7 @@ impl Block<'_> {
             };
             assert!(end <= out.len(), "store outside the output");
         }
-        match at_in.len() {
-            0 => {}
-            1 => self.run_n::<1>(form, at_in, at_out, out),
-            2 => self.run_n::<2>(form, at_in, at_out, out),
-            3 => self.run_n::<3>(form, at_in, at_out, out),
-            4 => self.run_n::<4>(form, at_in, at_out, out),
-            5 => self.run_n::<5>(form, at_in, at_out, out),
-            6 => self.run_n::<6>(form, at_in, at_out, out),
-            n => panic!("{n} positions in one group"),
-        }
+        by_positions!(at_in.len(), self.run_n(form, at_in, at_out, out))
     }
 
     fn run_n<const P: usize>(
@@ -281,6 +289,70 @@ impl Block<'_> {
     }
 }
 
+/// A full convolution's every block of sixteen output channels over all its output positions, in
+/// groups of [`POSITIONS`]: the walk `conv` and `detect::tail` share.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct FullLayer<'a> {
+    /// As [`Block::input`].
+    pub(crate) input: &'a [f32],
+    /// Per block of output channels, `taps.len() × BLOCK` weights (as [`Block::weights`]).
+    pub(crate) packed: &'a [f32],
+    /// The biases, a whole number of blocks (zero past `cout`).
+    pub(crate) bias: &'a [f32],
+    /// As [`Block::taps`] and [`Block::reach`].
+    pub(crate) taps: &'a [usize],
+    pub(crate) reach: usize,
+    /// Output channels.
+    pub(crate) cout: usize,
+    /// As [`Block::plane`], [`Block::width`] and [`Block::relu`].
+    pub(crate) plane: usize,
+    pub(crate) width: usize,
+    pub(crate) relu: bool,
+    /// Each output position's window in the input and place in the output (as [`Block::run`]).
+    pub(crate) at_in: &'a [usize],
+    pub(crate) at_out: &'a [usize],
+}
+
+impl FullLayer<'_> {
+    /// Computes the layer into `out` (channel planes, or interleaved positions of `width`).
+    ///
+    /// # Panics
+    /// As [`Block::run`]; where `packed` or `bias` hold fewer blocks than `cout` needs.
+    pub(crate) fn run(&self, form: Form, out: &mut [f32]) {
+        let k = self.taps.len();
+        for blk in 0..self.cout.div_ceil(BLOCK) {
+            let block = Block {
+                input: self.input,
+                weights: &self.packed[blk * k * BLOCK..][..k * BLOCK],
+                bias: self.bias[blk * BLOCK..][..BLOCK]
+                    .try_into()
+                    .expect("a block of biases"),
+                taps: self.taps,
+                reach: self.reach,
+                channels: BLOCK.min(self.cout - blk * BLOCK),
+                plane: self.plane,
+                width: self.width,
+                relu: self.relu,
+            };
+            // From one block of channels to the next: sixteen channels of each position, or
+            // sixteen planes.
+            let at = if self.width > 0 {
+                blk * BLOCK
+            } else {
+                blk * BLOCK * self.plane
+            };
+            let out = &mut out[at..];
+            for (ai, ao) in self
+                .at_in
+                .chunks(POSITIONS)
+                .zip(self.at_out.chunks(POSITIONS))
+            {
+                block.run(form, ai, ao, out);
+            }
+        }
+    }
+}
+
 /// A depthwise 3×3 convolution (one kernel per channel) with a bias and a ReLU, over interleaved
 /// positions of `width` channels in and out (the detector's blocks after its first layers):
 /// sixteen channels at a time, each tap's input loaded as it lies, so every lane runs the same
@@ -324,16 +396,7 @@ impl Depthwise<'_> {
         for &o in at_out {
             assert!((o + 1) * width <= out.len(), "store outside the output");
         }
-        match at_in.len() {
-            0 => {}
-            1 => self.run_n::<1>(form, at_in, at_out, out),
-            2 => self.run_n::<2>(form, at_in, at_out, out),
-            3 => self.run_n::<3>(form, at_in, at_out, out),
-            4 => self.run_n::<4>(form, at_in, at_out, out),
-            5 => self.run_n::<5>(form, at_in, at_out, out),
-            6 => self.run_n::<6>(form, at_in, at_out, out),
-            n => panic!("{n} positions in one group"),
-        }
+        by_positions!(at_in.len(), self.run_n(form, at_in, at_out, out))
     }
 
     fn run_n<const P: usize>(
