@@ -60,6 +60,10 @@ pub struct ClipStats {
     pub correct: usize,
     /// Mean NME over scored frames with a reported face.
     pub mean_nme: f32,
+    /// Mean intersection over union of the reported face's region with the truth's box (the
+    /// tight box of its 68 points, the detector's convention) over scored frames with a face:
+    /// how well the region follows the face's place and size, whatever the landmarks do.
+    pub mean_iou: f32,
     /// Frames on which the detector ran.
     pub detector_runs: usize,
     /// Mean `process` wall time.
@@ -130,6 +134,7 @@ pub fn run_clip_with<D: RegionDetector, L: LandmarkEstimator>(
     tracker.reset();
     let mut s = ClipStats::default();
     let mut nme_sum = 0.0f64;
+    let mut iou_sum = 0.0f64;
     let mut runs: Vec<Vec<[[f32; 2]; N_POINTS]>> = Vec::new();
     let mut iods: Vec<f32> = Vec::new();
     for (i, f) in clip.iter().enumerate() {
@@ -171,6 +176,7 @@ pub fn run_clip_with<D: RegionDetector, L: LandmarkEstimator>(
         s.with_face += 1;
         let e = nme(&face.landmarks.points, truth);
         nme_sum += f64::from(e);
+        iou_sum += f64::from(face.rect.iou(&tb));
         if e < correct_nme {
             s.correct += 1;
         }
@@ -199,6 +205,7 @@ pub fn run_clip_with<D: RegionDetector, L: LandmarkEstimator>(
         *v /= n;
     }
     s.mean_nme = (nme_sum / s.with_face.max(1) as f64) as f32;
+    s.mean_iou = (iou_sum / s.with_face.max(1) as f64) as f32;
     let runs: Vec<_> = runs.iter().filter(|r| r.len() >= 2).collect();
     s.jitter_px = runs.iter().map(|r| jitter(r)).sum::<f32>() / runs.len().max(1) as f32;
     s.jitter_iod_px = iods.iter().sum::<f32>() / iods.len().max(1) as f32;
@@ -207,20 +214,21 @@ pub fn run_clip_with<D: RegionDetector, L: LandmarkEstimator>(
 
 /// Markdown table header matching [`table_row`].
 pub fn table_header() -> String {
-    "| run | frames | correct | mean NME | detector runs | per frame (ms) | image | region | of which detect | landmarks | flow | fit | still jitter (px) |\n\
-     |---|---|---|---|---|---|---|---|---|---|---|---|---|"
+    "| run | frames | correct | mean NME | box IoU | detector runs | per frame (ms) | image | region | of which detect | landmarks | flow | fit | still jitter (px) |\n\
+     |---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
         .to_string()
 }
 
 /// One markdown table row of `s`.
 pub fn table_row(name: &str, s: &ClipStats) -> String {
     format!(
-        "| {name} | {} | {:.1} % ({}/{}) | {:.2} % | {} | {:.3} | {:.3} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
+        "| {name} | {} | {:.1} % ({}/{}) | {:.2} % | {:.3} | {} | {:.3} | {:.3} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
         s.frames,
         100.0 * s.correct_rate(),
         s.correct,
         s.scored,
         100.0 * s.mean_nme,
+        s.mean_iou,
         s.detector_runs,
         s.total_us / 1e3,
         s.image_us / 1e3,
