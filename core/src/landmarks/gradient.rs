@@ -571,7 +571,8 @@ pub struct GradientDetector {
     stack: Vec<usize>,
     /// A band of the patch sampled alone (the eye search's rows).
     band: Vec<u8>,
-    /// The eyes' centres (dark centroids) found last, patch pixels: right, left.
+    /// The eyes' centres found last, patch pixels: right, left (by means of gradients in the
+    /// final frame, by darkness centroids while the roll settles).
     eye_centres: [[f32; 2]; 2],
     /// Where each point is expected given the eyes found (patch pixels): the searches after the
     /// eyes' are centred here.
