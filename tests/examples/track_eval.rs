@@ -8,6 +8,7 @@
 //!     [--video ../shared/data/video/obama_3ddfa_demo.mp4 --reference REF.jsonl] [--mirror-average]
 //!     [--only ROW] [--passes N] [--camera-frames] [--ultra-light]
 //!     [--scale A] [--roll DEG] [--roll-offset DEG] [--translation PX] [--period FRAMES]
+//!     [--segments N]
 //! ```
 //! `--ultra-light` runs the ultra-light mode's rows instead (`TrackerConfig::ultra_light`:
 //! tracking, tracking with the flow filter off, and re-detect every frame). Each row's `box IoU`
@@ -16,7 +17,9 @@
 //! (`--scale`, default 0.12), roll amplitude (`--roll`, default 12°), translation amplitude
 //! (`--translation`, default 50 px) and shortest period (`--period`, default 60 frames; the
 //! top speed is 2π·amplitude / period per frame) can be set, and `--roll-offset` holds each
-//! segment's head tilted by that much, alternately either way (default 0°).
+//! segment's head tilted by that much, alternately either way (default 0°). `--segments N` makes
+//! the clip N segments of 60 frames long (default 6), each on one of 24 validation faces drawn at
+//! random: more segments, a steadier figure.
 //! The clip's luma images go to `process` (every frame a buffer no earlier step read);
 //! `--camera-frames` passes them as `Gray8` camera frames instead (`process_frame`, which copies
 //! each into the tracker's luma buffer: the `image` column, counted in the frame's total).
@@ -234,6 +237,7 @@ fn main() -> Result<(), String> {
             roll_offset_deg: float("--roll-offset", cfg.roll_offset_deg)?,
             translation_px: float("--translation", cfg.translation_px)?,
             min_period_frames: float("--period", cfg.min_period_frames)?,
+            segments: number("--segments")?.unwrap_or(cfg.segments),
             ..cfg
         };
         let clip = synthetic_clip(cfg, faces)?;

@@ -280,6 +280,12 @@ pub struct TrackerConfig {
     /// In video mode with fewer faces than `max_faces`, run the detector every this many frames to
     /// pick up new faces (0 = only when no face is tracked).
     pub new_face_interval: u32,
+    /// In video mode, run the detector every this many frames while faces are tracked and hand
+    /// each track the box of the detection on it, ending a track no detection overlaps when the
+    /// detector found a face elsewhere (0 = never). For face checks too weak to end a track that
+    /// has drifted off its face, and templates that keep their size: the ultra-light mode's
+    /// ([`TrackerConfig::ultra_light`]).
+    pub verify_interval: u32,
     /// Re-detect in the same frame when tracking fails (`false`: in the next frame, as the thesis
     /// does because its detector cost 500 ms). Default `true`: our detector costs about 3 ms on a
     /// 640×480 frame (2.8–3.0 ms in `track_eval` on an Intel Xeon), and re-detecting at once keeps the
@@ -306,6 +312,7 @@ impl TrackerConfig {
             landmarks: LandmarkMode::Gradient,
             min_detection_confidence: 0.0,
             min_face_confidence: 0.3,
+            verify_interval: ULTRA_LIGHT_VERIFY_INTERVAL,
             ..Self::default()
         }
     }
@@ -331,6 +338,7 @@ impl Default for TrackerConfig {
             msbp: MsbpConfig::default(),
             match_iou: 0.3,
             new_face_interval: 15,
+            verify_interval: 0,
             redetect_immediately: true,
             landmarks: LandmarkMode::M3,
             gaze: true,
@@ -653,6 +661,15 @@ impl Slot {
         self.gaze_dir = None;
     }
 }
+
+/// [`TrackerConfig::verify_interval`] in the ultra-light mode. Its tracked windows are checked by
+/// the gradient points' mean confidence, which passes windows off the face, and its template
+/// keeps its size. On `track_eval --ultra-light --segments 30` (1,800 frames, three scale
+/// amplitudes) every tenth frame came within a few correct frames of re-detecting every frame at
+/// a fifth of its time; every fifth was no better at 1.5× the time, every twentieth lost a
+/// quarter of the correct frames at ±35 % scale (BENCHMARKS, "Ultra-light mode on the same
+/// clips").
+pub const ULTRA_LIGHT_VERIFY_INTERVAL: u32 = 10;
 
 /// A face whose track ended on a loss, kept for [`LOST_FRAMES`] frames: the upright detector
 /// misses faces turned in roll beyond about 25°, which a fast head often is when its track
@@ -1168,7 +1185,12 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         // face yet) unless the loss happened just now and re-detection waits for the next frame,
         // when a loss asked for it, or periodically while some faces are tracked and there is room
         // for more.
+        let verify = video
+            && n_active > 0
+            && self.config.verify_interval > 0
+            && self.frames_since_detect + 1 >= self.config.verify_interval;
         let run_detector = !video
+            || verify
             || (n_active == 0 && !lost_now)
             || (lost_now && self.config.redetect_immediately)
             || self.redetect_next
@@ -1204,6 +1226,21 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 // upright in the turned window and mapped back, place level 2's zones.
                 self.detect_turned(image, n_active == 0)?;
             }
+            if verify && !self.ranked.is_empty() {
+                // A track no detection overlaps, while the detector found a face, has drifted
+                // off its face (its check was too weak to end it): it ends, and the face found
+                // starts a new one below. Where the detector finds nothing the tracks stay, since
+                // it misses faces the template still follows.
+                for s in &mut self.slots {
+                    let overlapped = self
+                        .ranked
+                        .iter()
+                        .any(|(r, ..)| s.rect.iou(r) > self.config.match_iou);
+                    if s.active && !overlapped {
+                        s.end();
+                    }
+                }
+            }
             for k in 0..self.ranked.len() {
                 let (rect, score, _, checked) = self.ranked[k];
                 // The track this detection belongs to, by overlap with its region this frame
@@ -1219,6 +1256,11 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                     }
                 }
                 match best {
+                    Some((i, _)) if video && verify => {
+                        // The detector's box re-anchors the track's place and size; the template
+                        // is taken from it at the end of this frame.
+                        self.slots[i].rect = rect;
+                    }
                     Some((i, _)) => {
                         let s = &mut self.slots[i];
                         if !video && !s.seen {
