@@ -1209,6 +1209,25 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             self.detections.retain(|(r, s)| {
                 r.is_valid() && s.is_finite() && *s >= self.config.min_detection_score
             });
+            if verify {
+                // A check that finds its tracks needs only the detections on them, whose face
+                // check is one search from the track's roll; the others, each checked from
+                // several starting rolls, would cost most of the frame. Where none is on a
+                // track, all are checked: the track has drifted and a new one starts.
+                let on_track = |r: &Rect, slots: &[Slot]| {
+                    slots
+                        .iter()
+                        .any(|s| s.active && s.rect.iou(r) > self.config.match_iou)
+                };
+                if self
+                    .detections
+                    .iter()
+                    .any(|(r, _)| on_track(r, &self.slots))
+                {
+                    let slots = &self.slots;
+                    self.detections.retain(|(r, _)| on_track(r, slots));
+                }
+            }
             // Every detection must pass the classifier tracked windows are checked with (M3's
             // face confidence), on the face's own box; ranked by detector score × confidence
             // (subtitle characters at 20 px pass at 0.99-1.0 while the real face scores 0.95 /
