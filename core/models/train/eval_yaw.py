@@ -1,0 +1,113 @@
+#!/usr/bin/env python3
+"""NME by head-yaw bin and the yaw classes' confusion, for the shipped M3 through `monotrack
+landmarks`, with the peers on the same faces and bins (`--peers`).
+
+    python3 core/models/train/eval_yaw.py --monotrack target/release/monotrack [--peers]
+
+- Faces and boxes: as eval_m3.py (faces68 validation split, landmark boxes with its seeded
+  detector-like jitter); the CLI in its single-pass mode (the video tracker's) and its default
+  mirror-average mode.
+- Yaw of each face: the MediaPipe teacher's where it found the face, else the PnP fit of our mean
+  face (m3data.load_faces68); bins are M3's five yaw classes (-60: under -60°, -30: -60..-30°,
+  0: -30..30°, 30: 30..60°, 60: over 60°).
+- Peers (--peers): ../shared/tools/peer_landmarks.py on the same manifest: PFLD on these boxes, and
+  dlib on boxes mapped into its HOG detector's convention (eval_m3.dlib_box_calibration).
+- Confusion: rows the label's class, columns M3's `yaw_class_deg`; recall per class.
+Writes core/models/m3/yaw_metrics.json and prints the tables.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import eval_m3 as E  # noqa: E402
+import m3data as D  # noqa: E402
+
+CLASSES = [-60, -30, 0, 30, 60]
+
+
+def bins_of(faces, errs):
+    out = {}
+    for c in range(5):
+        e = [err for f, err in zip(faces, errs) if f["yaw_class"] == c]
+        out[str(CLASSES[c])] = {"faces": len(e), "nme": float(np.mean(e)) if e else None}
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--monotrack", required=True)
+    ap.add_argument("--peers", action="store_true")
+    a = ap.parse_args()
+    paths, faces = D.load_faces68("val")
+    boxes = E.jittered_boxes(faces)
+    tmp = tempfile.mkdtemp()
+    manifest = os.path.join(tmp, "val.jsonl")
+    with open(manifest, "w") as fh:
+        for f, b in zip(faces, boxes):
+            fh.write(json.dumps({"image": paths[f["image"]], "faces": [{
+                "box": [float(v) for v in b], "landmarks68": f["pts"].tolist()}]}) + "\n")
+    metrics = {"split": "faces68 val", "faces": len(faces),
+               "yaw_source": "MediaPipe teacher, else PnP of the mean face",
+               "boxes": "landmark boxes, centre ±5 %, side ±10 % jitter (eval_m3.py, seed 7)"}
+    confusion = np.zeros((5, 5), int)
+    for extra, name in ((["--single-pass"], "m3_single_pass"), ([], "m3_mirror_average")):
+        out = manifest + f".{name}.jsonl"
+        subprocess.run([a.monotrack, "landmarks", manifest, "--out", out] + extra, check=True)
+        errs = []
+        for f, line in zip(faces, open(out)):
+            o = json.loads(line)["faces"][0]
+            errs.append(E.nme_parts(np.array(o["landmarks68"]), f["pts"])["all"])
+            if name == "m3_single_pass":
+                confusion[f["yaw_class"], CLASSES.index(o["yaw_class_deg"])] += 1
+        metrics[name] = bins_of(faces, errs)
+    metrics["yaw_confusion"] = {"rows_label_cols_predicted": CLASSES, "counts": confusion.tolist(),
+                                "recall": {str(c): (float(confusion[i, i] / confusion[i].sum())
+                                                    if confusion[i].sum() else None)
+                                           for i, c in enumerate(CLASSES)}}
+    if a.peers:
+        tool = os.path.join(D.DATA, "..", "tools", "peer_landmarks.py")
+        cal = E.dlib_box_calibration()
+        cal_manifest = manifest + ".dlibcal.jsonl"
+        with open(cal_manifest, "w") as fh:
+            for f, b in zip(faces, boxes):
+                x, y, w, h = b
+                s = max(w, h)
+                cx, cy = x + w / 2 + cal["dx"] * s, y + h / 2 + cal["dy"] * s
+                side = cal["scale"] * s
+                fh.write(json.dumps({"image": paths[f["image"]], "faces": [{
+                    "box": [cx - side / 2, cy - side / 2, side, side],
+                    "landmarks68": f["pts"].tolist()}]}) + "\n")
+        for extra, man, keep in ((["--peers", "pfld"], manifest, "pfld"),
+                                 (["--peers", "dlib"], cal_manifest, "dlib")):
+            out = man + f".{keep}.jsonl"
+            subprocess.run([sys.executable, tool, man, "--out", out] + extra, check=True,
+                           capture_output=True)
+            errs = []
+            for f, line in zip(faces, open(out)):
+                pts = json.loads(line)["faces"][0][keep]
+                errs.append(E.nme_parts(np.array(pts), f["pts"])["all"])
+            metrics[keep] = bins_of(faces, errs)
+    path = os.path.join(D.REPO, "core", "models", "m3", "yaw_metrics.json")
+    with open(path, "w") as fh:
+        json.dump(metrics, fh, indent=1)
+    runs = [k for k in ("m3_single_pass", "m3_mirror_average", "pfld", "dlib") if k in metrics]
+    print("| yaw class | faces | " + " | ".join(runs) + " |")
+    for c in CLASSES:
+        row = metrics["m3_single_pass"][str(c)]
+        cells = [f"{100 * metrics[r][str(c)]['nme']:.2f} %" if metrics[r][str(c)]["nme"] is not None
+                 else "–" for r in runs]
+        print(f"| {c} | {row['faces']} | " + " | ".join(cells) + " |")
+    print("confusion (rows label, cols predicted):", CLASSES)
+    for c, r in zip(CLASSES, confusion):
+        print(c, r.tolist(), "recall", metrics["yaw_confusion"]["recall"][str(c)])
+    print("wrote", path)
+
+
+if __name__ == "__main__":
+    main()
