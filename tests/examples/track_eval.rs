@@ -8,7 +8,7 @@
 //!     [--video ../shared/data/video/obama_3ddfa_demo.mp4 --reference REF.jsonl] [--mirror-average]
 //!     [--only ROW] [--passes N] [--camera-frames] [--ultra-light]
 //!     [--scale A] [--roll DEG] [--roll-offset DEG] [--translation PX] [--period FRAMES]
-//!     [--segments N]
+//!     [--segments N] [--brightness A] [--blur]
 //! ```
 //! `--ultra-light` runs the ultra-light mode's rows instead (`TrackerConfig::ultra_light`:
 //! tracking, tracking with the flow filter off, and re-detect every frame). Each row's `box IoU`
@@ -19,7 +19,9 @@
 //! top speed is 2π·amplitude / period per frame) can be set, and `--roll-offset` holds each
 //! segment's head tilted by that much, alternately either way (default 0°). `--segments N` makes
 //! the clip N segments of 60 frames long (default 6), each on one of 24 validation faces drawn at
-//! random: more segments, a steadier figure.
+//! random: more segments, a steadier figure. `--brightness A` swings each frame's brightness by
+//! ±A over 90 frames and `--blur` box-blurs fast frames (radius a quarter of the face's motion
+//! since the last frame, up to 4 px), as the unseen-face clips of the robustness issue did.
 //! The clip's luma images go to `process` (every frame a buffer no earlier step read);
 //! `--camera-frames` passes them as `Gray8` camera frames instead (`process_frame`, which copies
 //! each into the tracker's luma buffer: the `image` column, counted in the frame's total).
@@ -238,6 +240,8 @@ fn main() -> Result<(), String> {
             translation_px: float("--translation", cfg.translation_px)?,
             min_period_frames: float("--period", cfg.min_period_frames)?,
             segments: number("--segments")?.unwrap_or(cfg.segments),
+            brightness_amplitude: float("--brightness", cfg.brightness_amplitude)?,
+            motion_blur: args.iter().any(|a| a == "--blur"),
             ..cfg
         };
         let clip = synthetic_clip(cfg, faces)?;

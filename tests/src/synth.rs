@@ -178,6 +178,13 @@ pub struct SeqConfig {
     /// images may show other, unannotated people, whom a detector rightly finds but the truth does
     /// not know.
     pub crop_margin: Option<f32>,
+    /// Brightness swing: each frame's pixels scaled by `1 + A·sin(2π·t / 90)` (t the frame), as a
+    /// camera's exposure follows a moving face (0 = none; the unseen clips used 0.3).
+    pub brightness_amplitude: f32,
+    /// Blur fast frames: a box blur whose radius is a quarter of the face centre's motion since
+    /// the last frame, up to 4 px (a phone's exposure smears a fast face); none under 4 px of
+    /// motion.
+    pub motion_blur: bool,
 }
 
 impl Default for SeqConfig {
@@ -197,6 +204,8 @@ impl Default for SeqConfig {
             seed: 7,
             noise_sigma: 0.0,
             crop_margin: None,
+            brightness_amplitude: 0.0,
+            motion_blur: false,
         }
     }
 }
@@ -455,6 +464,20 @@ impl Sequence {
                 out[y * cfg.width + x] = (v + 0.5) as u8;
             }
         }
+        if cfg.brightness_amplitude > 0.0 {
+            let g = 1.0
+                + cfg.brightness_amplitude * (2.0 * std::f32::consts::PI * i as f32 / 90.0).sin();
+            for v in out.iter_mut() {
+                *v = (f32::from(*v) * g).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        if cfg.motion_blur && local > 0 {
+            let (c0, ..) = similarity(seg, motion_time(cfg, local - 1));
+            let moved = (c[0] - c0[0]).hypot(c[1] - c0[1]);
+            if moved >= 4.0 {
+                box_blur(out, cfg.width, cfg.height, ((moved / 4.0) as usize).min(4));
+            }
+        }
         if cfg.noise_sigma > 0.0 {
             let mut rng = SplitMix::new(cfg.seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
             for v in out.iter_mut() {
@@ -463,6 +486,34 @@ impl Sequence {
             }
         }
         truth
+    }
+}
+
+/// A separable box blur of radius `r` in place (rows, then columns; edges clamped).
+fn box_blur(img: &mut [u8], w: usize, h: usize, r: usize) {
+    let mut line = vec![0u32; w.max(h)];
+    let n = (2 * r + 1) as u32;
+    for y in 0..h {
+        for x in 0..w {
+            line[x] = u32::from(img[y * w + x]);
+        }
+        for x in 0..w {
+            let s: u32 = (0..=2 * r)
+                .map(|k| line[(x + k).saturating_sub(r).min(w - 1)])
+                .sum();
+            img[y * w + x] = (s / n) as u8;
+        }
+    }
+    for x in 0..w {
+        for y in 0..h {
+            line[y] = u32::from(img[y * w + x]);
+        }
+        for y in 0..h {
+            let s: u32 = (0..=2 * r)
+                .map(|k| line[(y + k).saturating_sub(r).min(h - 1)])
+                .sum();
+            img[y * w + x] = (s / n) as u8;
+        }
     }
 }
 
