@@ -492,28 +492,25 @@ impl Sequence {
 /// A separable box blur of radius `r` in place (rows, then columns; edges clamped).
 fn box_blur(img: &mut [u8], w: usize, h: usize, r: usize) {
     let mut line = vec![0u32; w.max(h)];
-    let n = (2 * r + 1) as u32;
     for y in 0..h {
-        for x in 0..w {
-            line[x] = u32::from(img[y * w + x]);
-        }
-        for x in 0..w {
-            let s: u32 = (0..=2 * r)
-                .map(|k| line[(x + k).saturating_sub(r).min(w - 1)])
-                .sum();
-            img[y * w + x] = (s / n) as u8;
-        }
+        blur_line(img, y * w, 1, w, r, &mut line);
     }
     for x in 0..w {
-        for y in 0..h {
-            line[y] = u32::from(img[y * w + x]);
-        }
-        for y in 0..h {
-            let s: u32 = (0..=2 * r)
-                .map(|k| line[(y + k).saturating_sub(r).min(h - 1)])
-                .sum();
-            img[y * w + x] = (s / n) as u8;
-        }
+        blur_line(img, x, w, h, r, &mut line);
+    }
+}
+
+/// The box blur of radius `r` along the `n` pixels of `img` from `start`, `step` apart.
+fn blur_line(img: &mut [u8], start: usize, step: usize, n: usize, r: usize, line: &mut [u32]) {
+    for (i, v) in line[..n].iter_mut().enumerate() {
+        *v = u32::from(img[start + i * step]);
+    }
+    let width = (2 * r + 1) as u32;
+    for i in 0..n {
+        let s: u32 = (0..=2 * r)
+            .map(|k| line[(i + k).saturating_sub(r).min(n - 1)])
+            .sum();
+        img[start + i * step] = (s / width) as u8;
     }
 }
 

@@ -84,6 +84,19 @@ def dlib_box_calibration():
     return {"dx": float(np.median(dx)), "dy": float(np.median(dy)), "scale": float(np.median(sc)), "n": len(dx)}
 
 
+def write_dlib_manifest(path, cal, paths, faces, boxes):
+    """A peer manifest of `faces` whose landmark-convention `boxes` are mapped into dlib's HOG
+    convention by `cal` (dlib_box_calibration)."""
+    with open(path, "w") as fh:
+        for f, b in zip(faces, boxes):
+            x, y, w, h = b
+            s = max(w, h)
+            cx, cy = x + w / 2 + cal["dx"] * s, y + h / 2 + cal["dy"] * s
+            side = cal["scale"] * s
+            fh.write(json.dumps({"image": paths[f["image"]], "faces": [{
+                "box": [cx - side / 2, cy - side / 2, side, side], "landmarks68": f["pts"].tolist()}]}) + "\n")
+
+
 def f1_macro(y, p, n):
     f1s = []
     for c in range(n):
@@ -180,14 +193,7 @@ def main():
         cal_manifest = manifest + ".dlibcal.jsonl"
         cal = dlib_box_calibration()
         metrics["dlib_box_calibration"] = cal
-        with open(cal_manifest, "w") as fh:
-            for f, b in zip(faces, boxes):
-                x, y, w, h = b
-                s = max(w, h)
-                cx, cy = x + w / 2 + cal["dx"] * s, y + h / 2 + cal["dy"] * s
-                side = cal["scale"] * s
-                fh.write(json.dumps({"image": paths[f["image"]], "faces": [{
-                    "box": [cx - side / 2, cy - side / 2, side, side], "landmarks68": f["pts"].tolist()}]}) + "\n")
+        write_dlib_manifest(cal_manifest, cal, paths, faces, boxes)
         runs = (([], "", manifest), (["--peers", "dlib"], "_calibrated_box", cal_manifest),
                 (["--peers", "dlib", "--dlib-own-detector"], "_own_detector", manifest))
         for extra, tag, man in runs:

@@ -74,15 +74,7 @@ def main():
         tool = os.path.join(D.DATA, "..", "tools", "peer_landmarks.py")
         cal = E.dlib_box_calibration()
         cal_manifest = manifest + ".dlibcal.jsonl"
-        with open(cal_manifest, "w") as fh:
-            for f, b in zip(faces, boxes):
-                x, y, w, h = b
-                s = max(w, h)
-                cx, cy = x + w / 2 + cal["dx"] * s, y + h / 2 + cal["dy"] * s
-                side = cal["scale"] * s
-                fh.write(json.dumps({"image": paths[f["image"]], "faces": [{
-                    "box": [cx - side / 2, cy - side / 2, side, side],
-                    "landmarks68": f["pts"].tolist()}]}) + "\n")
+        E.write_dlib_manifest(cal_manifest, cal, paths, faces, boxes)
         for extra, man, keep in ((["--peers", "pfld"], manifest, "pfld"),
                                  (["--peers", "dlib"], cal_manifest, "dlib")):
             out = man + f".{keep}.jsonl"
