@@ -665,10 +665,10 @@ impl Slot {
 /// [`TrackerConfig::verify_interval`] in the ultra-light mode. Its tracked windows are checked by
 /// the gradient points' mean confidence, which passes windows off the face, and its template
 /// keeps its size. On `track_eval --ultra-light --segments 30` (1,800 frames, three scale
-/// amplitudes) every tenth frame came within a few correct frames of re-detecting every frame at
-/// a fifth of its time; every fifth was no better at 1.5× the time, every twentieth lost a
-/// quarter of the correct frames at ±35 % scale (BENCHMARKS, "Ultra-light mode on the same
-/// clips").
+/// amplitudes) every tenth frame matched re-detecting every frame at scale 0 and ±12 % (and
+/// stayed 5 % of the frames behind at ±35 %) at a fifth of its time; every fifth was no better at
+/// 1.5× the time, every twentieth lost a sixth of the correct frames at ±35 % scale (BENCHMARKS,
+/// "Ultra-light mode on the same clips").
 pub const ULTRA_LIGHT_VERIFY_INTERVAL: u32 = 10;
 
 /// A face whose track ended on a loss, kept for [`LOST_FRAMES`] frames: the upright detector
@@ -1276,9 +1276,13 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 }
                 match best {
                     Some((i, _)) if video && verify => {
-                        // The detector's box re-anchors the track's place and size; the template
-                        // is taken from it at the end of this frame.
-                        self.slots[i].rect = rect;
+                        // The detector's box re-anchors the track's place and size, with the
+                        // check's landmarks on it; the template is taken from it at the end of
+                        // this frame.
+                        let s = &mut self.slots[i];
+                        s.rect = rect;
+                        s.landmarks = checked;
+                        s.level1_ready = true;
                     }
                     Some((i, _)) => {
                         let s = &mut self.slots[i];
