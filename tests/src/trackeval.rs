@@ -214,19 +214,20 @@ pub fn run_clip_with<D: RegionDetector, L: LandmarkEstimator>(
 
 /// Markdown table header matching [`table_row`].
 pub fn table_header() -> String {
-    "| run | frames | correct | mean NME | box IoU | detector runs | per frame (ms) | image | region | of which detect | landmarks | flow | fit | still jitter (px) |\n\
-     |---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+    "| run | frames | correct | no face | mean NME | box IoU | detector runs | per frame (ms) | image | region | of which detect | landmarks | flow | fit | still jitter (px) |\n\
+     |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
         .to_string()
 }
 
 /// One markdown table row of `s`.
 pub fn table_row(name: &str, s: &ClipStats) -> String {
     format!(
-        "| {name} | {} | {:.1} % ({}/{}) | {:.2} % | {:.3} | {} | {:.3} | {:.3} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
+        "| {name} | {} | {:.1} % ({}/{}) | {} | {:.2} % | {:.3} | {} | {:.3} | {:.3} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} |",
         s.frames,
         100.0 * s.correct_rate(),
         s.correct,
         s.scored,
+        s.scored - s.with_face,
         100.0 * s.mean_nme,
         s.mean_iou,
         s.detector_runs,
