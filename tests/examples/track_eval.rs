@@ -21,7 +21,7 @@
 //! the clip N segments of 60 frames long (default 6), each on one of 24 validation faces drawn at
 //! random: more segments, a steadier figure. `--brightness A` swings each frame's brightness by
 //! ±A over 90 frames and `--blur` box-blurs fast frames (radius a quarter of the face's motion
-//! since the last frame, up to 4 px), as the unseen-face clips of the robustness issue did.
+//! since the last frame, up to 4 px): a phone camera's exposure and smear on a moving face.
 //! The clip's luma images go to `process` (every frame a buffer no earlier step read);
 //! `--camera-frames` passes them as `Gray8` camera frames instead (`process_frame`, which copies
 //! each into the tracker's luma buffer: the `image` column, counted in the frame's total).

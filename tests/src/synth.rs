@@ -179,7 +179,7 @@ pub struct SeqConfig {
     /// not know.
     pub crop_margin: Option<f32>,
     /// Brightness swing: each frame's pixels scaled by `1 + A·sin(2π·t / 90)` (t the frame), as a
-    /// camera's exposure follows a moving face (0 = none; the unseen clips used 0.3).
+    /// camera's exposure follows a moving face (0 = none; 0.3 is a strong swing).
     pub brightness_amplitude: f32,
     /// Blur fast frames: a box blur whose radius is a quarter of the face centre's motion since
     /// the last frame, up to 4 px (a phone's exposure smears a fast face); none under 4 px of
