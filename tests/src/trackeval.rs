@@ -137,6 +137,12 @@ pub fn run_clip_with<D: RegionDetector, L: LandmarkEstimator>(
     let mut iou_sum = 0.0f64;
     let mut runs: Vec<Vec<[[f32; 2]; N_POINTS]>> = Vec::new();
     let mut iods: Vec<f32> = Vec::new();
+    // `TRACK_EVAL_TRACE=FILE`: one line per frame with truth (frame, roll°, motion px, eye
+    // distance px, reported, NME, detector ran), for finding where a clip loses its frames.
+    let mut trace = std::env::var_os("TRACK_EVAL_TRACE")
+        .and_then(|p| std::fs::File::create(p).ok())
+        .map(std::io::BufWriter::new);
+    let mut last_centre: Option<[f32; 2]> = None;
     for (i, f) in clip.iter().enumerate() {
         let ts = i as i64 * 33_333_333;
         let t = Instant::now();
@@ -165,16 +171,32 @@ pub fn run_clip_with<D: RegionDetector, L: LandmarkEstimator>(
         };
         s.scored += 1;
         let tb = Rect::bounding(truth);
+        let centre = [tb.x + tb.w / 2.0, tb.y + tb.h / 2.0];
+        let motion = last_centre.map_or(0.0, |c| (centre[0] - c[0]).hypot(centre[1] - c[1]));
+        last_centre = Some(centre);
         let best = r.faces.iter().max_by(|a, b| {
             Rect::bounding(&a.landmarks.points)
                 .iou(&tb)
                 .total_cmp(&Rect::bounding(&b.landmarks.points).iou(&tb))
         });
-        let Some(face) = best else {
+        let e = best.map(|face| nme(&face.landmarks.points, truth));
+        if let Some(t) = &mut trace {
+            use std::io::Write;
+            let roll = (truth[45][1] - truth[36][1]).atan2(truth[45][0] - truth[36][0]);
+            let iod = (truth[45][1] - truth[36][1]).hypot(truth[45][0] - truth[36][0]);
+            let _ = writeln!(
+                t,
+                "{i} {:.1} {motion:.1} {iod:.1} {} {:.4} {}",
+                roll.to_degrees(),
+                u8::from(best.is_some()),
+                e.unwrap_or(f32::NAN),
+                u8::from(r.detector_ran)
+            );
+        }
+        let (Some(face), Some(e)) = (best, e) else {
             continue;
         };
         s.with_face += 1;
-        let e = nme(&face.landmarks.points, truth);
         nme_sum += f64::from(e);
         iou_sum += f64::from(face.rect.iou(&tb));
         if e < correct_nme {

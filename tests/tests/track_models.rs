@@ -204,8 +204,10 @@ fn ultra_light_mode_tracks_without_landmark_networks() {
 /// `track_eval --roll 35 --translation 100 --period 20`). When a track breaks the face is often
 /// turned past what the upright detector finds (about 25°); the tracker then searches a window
 /// around the face's last place turned by its last roll and ±30° (`FaceTracker`'s lost-face
-/// search), and its level-1 points found upright there place level 2's zones. Measured: a face on
-/// 360 of 360 frames and 339 correct, against 324 and 306 with the upright detector alone.
+/// search), and its level-1 points found upright there place level 2's zones. While tracked, a face
+/// turned past 15° is checked and read by level 1 on a crop turned by its last roll. Measured: a
+/// face on 360 of 360 frames and 360 correct (339 with upright checks of tracked faces; 306 with
+/// the upright detector alone).
 #[test]
 fn a_lost_tilted_face_is_found_again_turned() {
     let Some(stats) = tilted_clip_stats(
@@ -224,15 +226,47 @@ fn a_lost_tilted_face_is_found_again_turned() {
         "{stats:?}"
     );
     assert!(
-        stats.correct as f32 >= 0.92 * stats.scored as f32,
+        stats.correct as f32 >= 0.98 * stats.scored as f32,
+        "{stats:?}"
+    );
+}
+
+/// The same fast, tilted heads with the issue-style phone degradations: scale ±35 %, brightness
+/// swinging ±30 % and fast frames box-blurred by their motion (`track_eval --roll 35 --scale 0.35
+/// --brightness 0.3 --blur --translation 100 --period 20`). Measured: a face on 334 of 360 frames
+/// and 333 correct (333 and 328 with upright checks of tracked faces); the frames without one are
+/// a single small face (20–28 px between the eye corners) lost while blurred.
+#[test]
+fn a_fast_tilted_head_stays_tracked_through_blur_and_light() {
+    let Some(stats) = tilted_clip_stats(
+        "tilted, fast, blur and light",
+        SeqConfig {
+            rotation_deg: 35.0,
+            scale_amplitude: 0.35,
+            translation_px: 100.0,
+            min_period_frames: 20.0,
+            brightness_amplitude: 0.3,
+            motion_blur: true,
+            ..SeqConfig::eval_clips()
+        },
+    ) else {
+        return;
+    };
+    assert!(
+        stats.with_face as f32 >= 0.9 * stats.scored as f32,
+        "{stats:?}"
+    );
+    assert!(
+        stats.correct as f32 >= 0.9 * stats.scored as f32,
         "{stats:?}"
     );
 }
 
 /// A head held tilted past what the upright detector finds (40°, alternately either way per
-/// segment), with no track to have lost: the whole frame is searched turned. Measured on this
-/// clip: a face on 258 of 360 frames and 238 correct, against 127 and 120 with the upright
-/// detector alone.
+/// segment), with no track to have lost: the whole frame is searched turned, and the faces found
+/// are tracked with level 1 reading them turned by their roll. Measured on this clip: a face on 265
+/// of 360 frames and 254 correct (258 and 238 with upright checks of tracked faces; 127 and 120
+/// with the upright detector alone).
 #[test]
 fn a_head_tilted_from_the_start_is_found_turned() {
     let Some(stats) = tilted_clip_stats(
@@ -250,7 +284,7 @@ fn a_head_tilted_from_the_start_is_found_turned() {
         "{stats:?}"
     );
     assert!(
-        stats.correct as f32 >= 0.55 * stats.scored as f32,
+        stats.correct as f32 >= 0.68 * stats.scored as f32,
         "{stats:?}"
     );
 }

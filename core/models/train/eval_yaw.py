@@ -13,6 +13,12 @@ landmarks`, with the peers on the same faces and bins (`--peers`).
 - Peers (--peers): ../shared/tools/peer_landmarks.py on the same manifest: PFLD on these boxes, and
   dlib on boxes mapped into its HOG detector's convention (eval_m3.dlib_box_calibration).
 - Confusion: rows the label's class, columns M3's `yaw_class_deg`; recall per class.
+- Turned faces (`--turned`): the validation faces turned in yaw by the face model
+  (rotate_faces.py, built when absent: 254 faces, 32–97 per turned class), same box jitter. They
+  are synthetic: they say whether the yaw classes and the zones follow a turned head, not what a
+  photo of a turned head scores.
+- `--reference DIR [DIR …]`: the Python reference (m3_reference.py) on each model directory instead
+  of the CLI, for comparing trained nets before they ship (single-pass mode; writes nothing).
 Writes core/models/m3/yaw_metrics.json and prints the tables.
 """
 import argparse
@@ -27,6 +33,8 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import eval_m3 as E  # noqa: E402
 import m3data as D  # noqa: E402
+import m3_reference as R  # noqa: E402
+import rotate_faces  # noqa: E402
 
 CLASSES = [-60, -30, 0, 30, 60]
 
@@ -39,11 +47,60 @@ def bins_of(faces, errs):
     return out
 
 
+def turned_val():
+    """(image paths, faces) of the turned validation faces (rotate_faces.py)."""
+    index = os.path.join(rotate_faces.default_dir(), "val.jsonl")
+    if not os.path.exists(index):
+        rotate_faces.build(os.path.dirname(index), "val")
+    base = os.path.dirname(index)
+    _, faces = rotate_faces.load(index)
+    return [os.path.join(base, f["path"]) for f in faces], faces
+
+
+def confusion_of(faces, classes):
+    c = np.zeros((5, 5), int)
+    for f, k in zip(faces, classes):
+        c[f["yaw_class"], k] += 1
+    return c
+
+
+def reference(dirs):
+    """Single-pass Python reference of each model directory on the real and the turned validation
+    faces: mean NME, NME per yaw class, recall per yaw class."""
+    sets = {"real": D.load_faces68("val"), "turned": turned_val()}
+    for name, (paths, faces) in sets.items():
+        boxes = E.jittered_boxes(faces)
+        grays = {}
+        for d in dirs:
+            m3 = R.M3(d)
+            errs, pred = [], []
+            for f, b in zip(faces, boxes):
+                p = paths[f["image"]]
+                if p not in grays:
+                    grays[p] = D.load_gray(p)
+                r = m3.run(grays[p], np.array(b))
+                errs.append(E.nme_parts(r["landmarks68"], f["pts"])["all"])
+                pred.append(int(np.argmax(r["yaw_probs"])))
+            bins = bins_of(faces, errs)
+            conf = confusion_of(faces, pred)
+            rec = ["%d/%d" % (conf[i, i], conf[i].sum()) for i in range(5)]
+            print(f"{name:6s} {d}: NME {100 * np.mean(errs):.2f} % | by class " +
+                  " ".join(f"{c}:{100 * bins[str(c)]['nme']:.2f}" if bins[str(c)]["nme"] is not None else f"{c}:-"
+                           for c in CLASSES) + " | recall " + " ".join(rec), flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--monotrack", required=True)
+    ap.add_argument("--monotrack")
     ap.add_argument("--peers", action="store_true")
+    ap.add_argument("--turned", action="store_true")
+    ap.add_argument("--reference", nargs="+")
     a = ap.parse_args()
+    if a.reference:
+        reference(a.reference)
+        return
+    if not a.monotrack:
+        ap.error("--monotrack or --reference")
     paths, faces = D.load_faces68("val")
     boxes = E.jittered_boxes(faces)
     tmp = tempfile.mkdtemp()

@@ -31,6 +31,7 @@ import onnx_q8  # noqa: E402
 import onnx_tract  # noqa: E402
 import calibrate_m3  # noqa: E402
 import pseudo_genki  # noqa: E402
+import rotate_faces  # noqa: E402
 
 OUT = os.environ.get("MONOTRACK_M3_OUT", os.path.join(D.REPO, "core", "models", "m3"))
 SEED = 20261122
@@ -55,6 +56,15 @@ BATCH = 64
 # 7.70 % (the 64x64 zone, before the level-1 blend; MODEL_CARD.md).
 PSEUDO_NETS = ("face",)
 PSEUDO_SHARE = 0.4
+# Nets that also learn from faces turned in yaw by the face model (rotate_faces.py: two per training
+# face, one into the ±30° yaw class, one past 60°), and their share of those nets' batches. None by
+# default: the shipped nets do not. Level 1 with them at a share of 0.1 predicts the turned classes
+# on turned validation faces (past 60°: 25 of 39 and 23 of 32, against none) at the same NME on the
+# real ones (3.98 %), but it put 8 of the 9 real validation faces the teacher sees at 30–60° into
+# the frontal class (the shipped level 1: 3); share 0.2 and the face zone with them at 0.25 cost
+# real-face NME (4.02 and 4.09 %). MODEL_CARD.md, "Turned faces".
+TURNED_NETS = ()
+TURNED_SHARE = 0.1
 # Trunks (m3nets.trunk spec strings) of the shipped models; --level1-trunk / --zone-trunk override
 # them for experiments.
 LEVEL1_TRUNK = "16s-32s-48s-48c-64s"
@@ -78,12 +88,15 @@ EMA_DECAYS = ()
 
 
 class Data:
-    """faces68 training images (and their mirror images), faces with labels in both."""
+    """faces68 training images (and their mirror images), faces with labels in both; then the
+    teacher-labelled faces (`pseudo`) and the turned faces (`turned`, rotate_faces.py) when given.
+    Each group is a contiguous run of `faces`: annotated, pseudo, turned."""
 
-    def __init__(self, split, pseudo=None):
+    def __init__(self, split, pseudo=None, turned=None):
         paths, faces = D.load_faces68(split)
         self.imgs = [D.load_gray(p) for p in paths]
         self.paths, self.labelled = list(paths), list(faces)
+        groups = [("annotated", len(faces))]
         if pseudo:
             # Teacher-labelled faces (pseudo_genki.py): 68 points, no other label; only the nets in
             # PSEUDO_NETS sample them (PSEUDO_SHARE of their batches).
@@ -96,6 +109,15 @@ class Data:
                               "yaw_class": D.yaw_class(yaw), "mouth": -1, "brows": -1, "gaze": None,
                               "pseudo": True})
                 self.imgs.append(img)
+            groups.append(("pseudo", len(faces) - sum(n for _, n in groups)))
+        if turned:
+            # Turned faces (rotate_faces.py): the nets in TURNED_NETS sample them (TURNED_SHARE).
+            imgs, tfaces = rotate_faces.load(turned)
+            for f in tfaces:
+                f["image"] += len(self.imgs)
+            self.imgs += imgs
+            faces += tfaces
+            groups.append(("turned", len(tfaces)))
         self.faces = []
         for f in faces:
             self.faces.append(dict(f, mirror=False))
@@ -112,22 +134,44 @@ class Data:
                 m["gaze"] = (l * [-1, 1, 1], r * [-1, 1, 1])
             self.faces.append(m)
         self.mirrored = [np.ascontiguousarray(im[:, ::-1]) for im in self.imgs]
-        # The teacher-labelled faces come after the annotated ones (mirrors included).
-        self.n_annotated = 2 * len(self.labelled)
+        # group name -> (start, end) in self.faces (mirrors included).
+        self.groups, start = {}, 0
+        for name, n in groups:
+            self.groups[name] = (start, start + 2 * n)
+            start += 2 * n
+        self.n_annotated = self.groups["annotated"][1]
         self.hard = []  # (image index, box) of detector false positives, by mine_hard_negatives
 
+    def groups_for(self, net):
+        """The groups `net` samples: the annotated faces, plus the teacher-labelled ones for
+        PSEUDO_NETS and the turned ones for TURNED_NETS. A net that samples only the annotated
+        faces draws the same batches as without the other groups."""
+        out = ["annotated"]
+        if net in PSEUDO_NETS and "pseudo" in self.groups:
+            out.append("pseudo")
+        if net in TURNED_NETS and "turned" in self.groups:
+            out.append("turned")
+        return out
+
     def faces_for(self, net):
-        """The faces `net` samples: with the teacher-labelled ones for PSEUDO_NETS. Other nets see
-        exactly the annotated faces (and so draw the same batches as without teacher data)."""
-        return self.faces if net in PSEUDO_NETS else self.faces[:self.n_annotated]
+        """The faces `net` samples (groups_for), in order."""
+        return [f for g in self.groups_for(net) for f in self.faces[slice(*self.groups[g])]]
 
     def mix(self, weights, net):
-        """Sampling weights over faces_for(net): the teacher-labelled faces get PSEUDO_SHARE."""
-        if net not in PSEUDO_NETS or len(weights) == self.n_annotated:
+        """Sampling weights over faces_for(net): the teacher-labelled faces get PSEUDO_SHARE, the
+        turned ones TURNED_SHARE, the annotated ones the rest."""
+        groups = self.groups_for(net)
+        if len(groups) == 1:
             return weights
-        n = self.n_annotated
-        return np.concatenate([weights[:n] * (1 - PSEUDO_SHARE) / weights[:n].sum(),
-                               weights[n:] * PSEUDO_SHARE / weights[n:].sum()])
+        share = {"pseudo": PSEUDO_SHARE, "turned": TURNED_SHARE}
+        share["annotated"] = 1.0 - sum(share[g] for g in groups[1:])
+        out, i = [], 0
+        for g in groups:
+            a, b = self.groups[g]
+            w = weights[i:i + b - a]
+            out.append(w * share[g] / w.sum())
+            i += b - a
+        return np.concatenate(out)
 
     def mine_hard_negatives(self):
         self.hard = D.detector_false_positives(self.paths, self.labelled)
@@ -172,7 +216,7 @@ def balanced_weights(labels, n):
     return w / w.sum()
 
 
-def level1_batch(data, rng, weights):
+def level1_batch(data, faces, rng, weights):
     S, cs = D.LEVEL1["input_size"], D.LEVEL1["crop_scale"]
     X = np.zeros((BATCH, 1, S, S), np.float32)
     Y = np.zeros((BATCH, 64), np.float32)
@@ -180,7 +224,7 @@ def level1_batch(data, rng, weights):
     face = np.zeros(BATCH, np.float32)
     idx = rng.choice(len(weights), BATCH, p=weights)
     for k, i in enumerate(idx):
-        f = data.faces[i]
+        f = faces[i]
         img = data.image(f)
         c, s = D.square_of_box(D.box_of(f["pts"]))
         s *= np.exp(rng.uniform(-0.15, 0.15))
@@ -270,7 +314,7 @@ def zone_sample(zone, img, pts, rng, ref_noise=0.045, aug=True, shape_warp=0.0):
     return patch, tgt / [W, H], A
 
 
-def zone_batch(name, data, rng, weights, genki=None):
+def zone_batch(name, data, faces, rng, weights, genki=None):
     zone = D.ZONES[name]
     W, H = zone["width"], zone["height"]
     n = len(zone["indices68"])
@@ -293,7 +337,7 @@ def zone_batch(name, data, rng, weights, genki=None):
             SM[k] = g_label
             YAW[k] = soft_yaw(2, rng)
             continue
-        f = data.faces[i]
+        f = faces[i]
         patch, tgt, A = zone_sample(zone, data.image(f), f["pts"], rng,
                                     ref_noise=REF_NOISE.get(name, REF_NOISE["default"]),
                                     shape_warp=SHAPE_WARP.get(name, 0.0))
@@ -334,13 +378,14 @@ def train_level1(data, steps, fh):
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=WEIGHT_DECAY)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=3e-3, total_steps=steps, pct_start=0.1)
     rng = np.random.default_rng(SEED + 1)
-    weights = data.mix(balanced_weights([f["yaw_class"] for f in data.faces_for("level1")], 5), "level1")
+    faces = data.faces_for("level1")
+    weights = data.mix(balanced_weights([f["yaw_class"] for f in faces], 5), "level1")
     yaw_w = torch.ones(5, device=DEVICE)
     emas = ema_models(model)
     t0, acc = time.time(), np.zeros(3)
     model.train()
     for step in range(steps):
-        X, Y, yaw, face = (t.to(DEVICE) for t in level1_batch(data, rng, weights))
+        X, Y, yaw, face = (t.to(DEVICE) for t in level1_batch(data, faces, rng, weights))
         lm, yl, fl = model(X)
         pos = face > 0.5
         l_lm = point_loss(lm[pos], Y[pos]).mean() if pos.any() else lm.sum() * 0
@@ -373,15 +418,16 @@ def train_zone(name, data, steps, fh, genki=None):
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=WEIGHT_DECAY)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=3e-3, total_steps=steps, pct_start=0.1)
     rng = np.random.default_rng(SEED + ZONE_SEED[name])
+    faces = data.faces_for(name)
     if gest:
-        labels = [f[name] for f in data.faces_for(name)]
+        labels = [f[name] for f in faces]
         weights = balanced_weights(labels, gest)
         counts = np.bincount([x for x in labels if x >= 0], minlength=gest).astype(np.float32)
         # Sampling balances by the square root; the loss weight does the other square root.
         cw = torch.from_numpy((counts.sum() / np.maximum(counts, 1)) ** 0.5)
         cw = (cw / cw.mean()).to(DEVICE)
     else:
-        n = len(data.faces_for(name))
+        n = len(faces)
         weights = np.full(n, 1.0 / n)
         cw = None
     weights = data.mix(weights, name)
@@ -389,7 +435,7 @@ def train_zone(name, data, steps, fh, genki=None):
     t0, acc = time.time(), np.zeros(3)
     model.train()
     for step in range(steps):
-        X, Y, YAW, G, GZ, GZM, SM, LM = (t.to(DEVICE) for t in zone_batch(name, data, rng, weights, genki))
+        X, Y, YAW, G, GZ, GZM, SM, LM = (t.to(DEVICE) for t in zone_batch(name, data, faces, rng, weights, genki))
         out = model(X, YAW)
         lm, extra = out[0], out[-1]
         l_lm = (point_loss(lm, Y) * LM).sum() / LM.sum().clamp(min=1)
@@ -483,6 +529,9 @@ def main():
     # Nets that learn from the teacher-labelled GENKI-4K faces too (default PSEUDO_NETS), e.g. face,mouth
     ap.add_argument("--pseudo-nets", default=None)
     ap.add_argument("--pseudo-share", type=float, default=None)
+    # Nets that learn from the turned faces too (default TURNED_NETS; empty for none), e.g. level1,face
+    ap.add_argument("--turned-nets", default=None)
+    ap.add_argument("--turned-share", type=float, default=None)
     # e.g. --ref-noise face=0.025,nose=0.025 (default REF_NOISE)
     ap.add_argument("--ref-noise", default=None)
     # e.g. --shape-warp face=0.5 (default SHAPE_WARP: none)
@@ -499,7 +548,11 @@ def main():
     # Set for the zone processes run_zones_in_processes starts: their parent calibrates at the end.
     ap.add_argument("--no-calibrate", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
-    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE, SEED, EMA_DECAYS
+    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE, SEED, EMA_DECAYS, TURNED_NETS, TURNED_SHARE
+    if a.turned_nets is not None:
+        TURNED_NETS = tuple(n for n in a.turned_nets.split(",") if n)
+    if a.turned_share is not None:
+        TURNED_SHARE = a.turned_share
     if a.ema:
         EMA_DECAYS = tuple(float(d) for d in a.ema.split(","))
     if a.seed is not None:
@@ -538,14 +591,20 @@ def main():
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
-            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} ref_noise={REF_NOISE}"
+            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} turned={TURNED_NETS}@{TURNED_SHARE} ref_noise={REF_NOISE}"
             f"{f' shape_warp={SHAPE_WARP}' if SHAPE_WARP else ''} device={DEVICE}")
     pseudo = None
     if any(n in only for n in PSEUDO_NETS):
         pseudo = os.environ.get("MONOTRACK_PSEUDO") or pseudo_genki.default_path()
         if not os.path.exists(pseudo):
             pseudo_genki.main(pseudo)
-    data = Data("train", pseudo)
+    turned = None
+    if any(n in only for n in TURNED_NETS):
+        turned = os.environ.get("MONOTRACK_TURNED") or os.path.join(rotate_faces.default_dir(), "train.jsonl")
+        if not os.path.exists(turned):
+            turned, n = rotate_faces.build(os.path.dirname(turned), "train")
+            log(fh, f"turned faces: {n} made by rotate_faces.py -> {turned}")
+    data = Data("train", pseudo, turned)
     log(fh, f"train faces (with mirrors): {len(data.faces)} from {len(data.imgs)} images")
     steps = {k: int(v * a.steps_scale) for k, v in STEPS.items()}
     if "level1" in only:
@@ -579,6 +638,7 @@ def run_zones_in_processes(zones, a, fh):
     if a.zone_size:
         base += ["--zone-size", a.zone_size]
     base += ["--pseudo-nets", ",".join(PSEUDO_NETS), "--pseudo-share", str(PSEUDO_SHARE), "--seed", str(SEED),
+             "--turned-nets", ",".join(TURNED_NETS), "--turned-share", str(TURNED_SHARE),
              "--ref-noise", ",".join(f"{k}={v}" for k, v in REF_NOISE.items())]
     if SHAPE_WARP:
         base += ["--shape-warp", ",".join(f"{k}={v}" for k, v in SHAPE_WARP.items())]

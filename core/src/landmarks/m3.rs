@@ -890,13 +890,35 @@ impl M3 {
     /// Runs level 1 on the crop of `face` and, with `points`, writes its points into `self.pts`
     /// (under `mirror_average` averaged with the mirrored crop's run, which the face probability
     /// alone does not need).
-    fn run_level1(&mut self, image: &GrayImage, face: &Rect, points: bool) -> Result<Level1Out> {
+    ///
+    /// `roll` (radians, image y down) turns the crop so that a face turned by it stands upright.
+    /// The crop keeps the box's side: the tight box of a face's points grows little as the face
+    /// turns (the outline is round), and shrinking the crop by the `|cos| + |sin|` a turned square
+    /// grows by cost level 1 more than it saved (the astronaut at ±40°: level-1 NME 0.06–0.07
+    /// shrunk against 0.024–0.027 not, and 0.029 upright).
+    fn run_level1(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        roll: f32,
+        points: bool,
+    ) -> Result<Level1Out> {
         Self::check_input(image, face)?;
+        if !roll.is_finite() {
+            return Err(Error::InvalidInput(format!(
+                "roll must be finite, got {roll}"
+            )));
+        }
         let l1 = &self.cfg.level1;
         let s = l1.input_size;
         let c = face.center();
         let side = f64::from(face.w.max(face.h));
-        let map = Affine::square_crop([f64::from(c[0]), f64::from(c[1])], l1.crop_scale * side, s);
+        let map = Affine::turned_square_crop(
+            [f64::from(c[0]), f64::from(c[1])],
+            l1.crop_scale * side,
+            s,
+            f64::from(roll),
+        );
         sample(image, &map, s, s, &mut self.crop)?;
         let crop = &self.crop;
         self.level1.fill_input(0, |x| to_unit(crop, x))?;
@@ -930,7 +952,7 @@ impl M3 {
     /// [`Error::InvalidInput`] for an empty image or a non-finite / empty box;
     /// [`Error::Internal`] if the network fails to run.
     pub fn face_confidence(&mut self, image: &GrayImage, face: &Rect) -> Result<f32> {
-        Ok(self.run_level1(image, face, false)?.face_prob)
+        Ok(self.run_level1(image, face, 0.0, false)?.face_prob)
     }
 
     /// Level 1 alone on `face`: writes its points (at their 68-point indices), the yaw
@@ -946,7 +968,24 @@ impl M3 {
         face: &Rect,
         out: &mut FaceLandmarks,
     ) -> Result<f32> {
-        let l1 = self.run_level1(image, face, true)?;
+        self.level1_turned(image, face, 0.0, out)
+    }
+
+    /// [`M3::level1`] on a crop turned by `roll` (radians, image y down; the eye line's angle of
+    /// the face expected in `face`): level 1 was trained on faces within about ±25° of upright, so
+    /// a tracker that knows its face's roll reads the face upright at any roll. The points come
+    /// back in image coordinates; `roll = 0` is [`M3::level1`].
+    ///
+    /// # Errors
+    /// As [`M3::face_confidence`], and [`Error::InvalidInput`] for a non-finite `roll`.
+    pub fn level1_turned(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        roll: f32,
+        out: &mut FaceLandmarks,
+    ) -> Result<f32> {
+        let l1 = self.run_level1(image, face, roll, true)?;
         for &i in &self.cfg.level1.indices68 {
             out.points[i] = [self.pts[i][0] as f32, self.pts[i][1] as f32];
         }

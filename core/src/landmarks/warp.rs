@@ -35,6 +35,28 @@ impl Affine {
         }
     }
 
+    /// [`Self::square_crop`] turned by `roll` (radians, image y down) about `center`: the crop's x
+    /// axis runs along the image direction (cos roll, sin roll), so a face whose eye line is
+    /// turned by `roll` stands upright in the crop. `roll = 0` is [`Self::square_crop`] exactly.
+    pub fn turned_square_crop(center: [f64; 2], side: f64, size: usize, roll: f64) -> Self {
+        if roll == 0.0 {
+            return Self::square_crop(center, side, size);
+        }
+        let k = side / size as f64;
+        let half = 0.5 * size as f64;
+        let (c, s) = (roll.cos(), roll.sin());
+        Self {
+            m: [
+                k * c,
+                -k * s,
+                center[0] - k * (c - s) * half,
+                k * s,
+                k * c,
+                center[1] - k * (s + c) * half,
+            ],
+        }
+    }
+
     /// The similarity (rotation + uniform scale + translation, no reflection) that sends patch
     /// points `q0`, `q1` to image points `p0`, `p1`. `None` when `q0 == q1` or any input is not
     /// finite (the map is then undefined); `p0 == p1` gives a degenerate (zero-scale) map, which

@@ -111,6 +111,22 @@ pub trait LandmarkEstimator {
         out: &mut FaceLandmarks,
     ) -> Result<f32>;
 
+    /// [`Self::face_confidence`] for a face expected turned in roll by `roll` (radians, image y
+    /// down: the eye line's angle), as a tracked face is. The default ignores `roll`.
+    ///
+    /// # Errors
+    /// Whatever the estimator reports.
+    fn face_confidence_turned(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        roll: f32,
+        out: &mut FaceLandmarks,
+    ) -> Result<f32> {
+        let _ = roll;
+        self.face_confidence(image, face, out)
+    }
+
     /// Finishes `out` for the same `image` and `face` that [`Self::face_confidence`] just filled
     /// it for, reusing that work (M3: level 2 only). The default runs [`Self::estimate`].
     ///
@@ -697,6 +713,13 @@ const TURNED_WINDOW_FACES: f32 = 3.0;
 /// frame's detector work for the window.
 const TURNED_FACE_PX: f32 = 96.0;
 
+/// A tracked face turned in roll by at least this (its last frame's eye line) is checked, and its
+/// level-1 points read, on a crop turned by that roll ([`LandmarkEstimator::face_confidence_turned`]):
+/// level 1 reads faces within about ±25° of upright, and its face check fails first on fast, blurred
+/// frames of tilted heads, which ends their tracks. Below it the crop stays upright, as a
+/// detection's is.
+const TURNED_CHECK_FROM: f32 = 15.0 * std::f32::consts::PI / 180.0;
+
 /// Turns within this of upright are left to the upright detector, which covers them.
 const UPRIGHT_COVERS: f32 = 15.0 * std::f32::consts::PI / 180.0;
 
@@ -1160,9 +1183,37 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                     continue;
                 }
                 let region = s.calib.apply(&hit.rect);
-                let conf = self
-                    .estimator
-                    .face_confidence(image, &region, &mut s.landmarks)?;
+                // The gradient detector keeps its own roll from frame to frame.
+                let m3 = self.config.landmarks != LandmarkMode::Gradient;
+                let turned = m3 && lost.roll.abs() >= TURNED_CHECK_FROM;
+                let mut conf = if turned {
+                    self.estimator.face_confidence_turned(
+                        image,
+                        &region,
+                        lost.roll,
+                        &mut s.landmarks,
+                    )?
+                } else {
+                    self.estimator
+                        .face_confidence(image, &region, &mut s.landmarks)?
+                };
+                if conf < self.config.min_face_confidence && turned {
+                    // The last roll may be off (a wrong last frame): upright, as below it, and
+                    // the better of the two.
+                    let upright =
+                        self.estimator
+                            .face_confidence(image, &region, &mut s.landmarks)?;
+                    if upright >= conf {
+                        conf = upright;
+                    } else {
+                        conf = self.estimator.face_confidence_turned(
+                            image,
+                            &region,
+                            lost.roll,
+                            &mut s.landmarks,
+                        )?;
+                    }
+                }
                 if conf < self.config.min_face_confidence {
                     s.end();
                     lost_now = true;

@@ -22,6 +22,16 @@ impl LandmarkEstimator for M3 {
         M3::level1(self, image, face, out)
     }
 
+    fn face_confidence_turned(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        roll: f32,
+        out: &mut FaceLandmarks,
+    ) -> Result<f32> {
+        M3::level1_turned(self, image, face, roll, out)
+    }
+
     fn complete(&mut self, image: &GrayImage, _face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
         M3::refine(self, image, out)
     }
@@ -129,6 +139,21 @@ impl LandmarkEstimator for Landmarker {
         match self {
             Self::M3(m) => LandmarkEstimator::face_confidence(m.as_mut(), image, face, out),
             Self::Gradient(g) => g.face_confidence(image, face, out),
+        }
+    }
+
+    fn face_confidence_turned(
+        &mut self,
+        image: &GrayImage,
+        face: &Rect,
+        roll: f32,
+        out: &mut FaceLandmarks,
+    ) -> Result<f32> {
+        match self {
+            Self::M3(m) => {
+                LandmarkEstimator::face_confidence_turned(m.as_mut(), image, face, roll, out)
+            }
+            Self::Gradient(g) => g.face_confidence_turned(image, face, roll, out),
         }
     }
 
