@@ -126,8 +126,9 @@ fn report(title: &str, clip: &[ClipFrame], opt: &Options) -> Result<(), String> 
         }
         println!("{}", table_row(name, &s));
         eprintln!(
-            "{name}: a face reported on {} of {} scored frames",
-            s.with_face, s.scored
+            "{name}: a face reported on {} of {} scored frames; {} frames without one where the \
+             face is wholly in the frame",
+            s.with_face, s.scored, s.no_face_visible
         );
     }
     Ok(())

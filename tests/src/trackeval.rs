@@ -58,6 +58,8 @@ pub struct ClipStats {
     pub with_face: usize,
     /// Scored frames with a correct face.
     pub correct: usize,
+    /// Scored frames where no face was reported although all 68 truth points lie in the frame.
+    pub no_face_visible: usize,
     /// Mean NME over scored frames with a reported face.
     pub mean_nme: f32,
     /// Mean intersection over union of the reported face's region with the truth's box (the
@@ -138,7 +140,8 @@ pub fn run_clip_with<D: RegionDetector, L: LandmarkEstimator>(
     let mut runs: Vec<Vec<[[f32; 2]; N_POINTS]>> = Vec::new();
     let mut iods: Vec<f32> = Vec::new();
     // `TRACK_EVAL_TRACE=FILE`: one line per frame with truth (frame, roll°, motion px, eye
-    // distance px, reported, NME, detector ran), for finding where a clip loses its frames.
+    // distance px, reported, NME, detector ran, fully in the frame), for finding where a clip
+    // loses its frames.
     let mut trace = std::env::var_os("TRACK_EVAL_TRACE")
         .and_then(|p| std::fs::File::create(p).ok())
         .map(std::io::BufWriter::new);
@@ -180,17 +183,25 @@ pub fn run_clip_with<D: RegionDetector, L: LandmarkEstimator>(
                 .total_cmp(&Rect::bounding(&b.landmarks.points).iou(&tb))
         });
         let e = best.map(|face| nme(&face.landmarks.points, truth));
+        let (fw, fh) = (f.image.width() as f32, f.image.height() as f32);
+        let visible = truth
+            .iter()
+            .all(|p| p[0] >= 0.0 && p[1] >= 0.0 && p[0] < fw && p[1] < fh);
+        if best.is_none() && visible {
+            s.no_face_visible += 1;
+        }
         if let Some(t) = &mut trace {
             use std::io::Write;
             let roll = (truth[45][1] - truth[36][1]).atan2(truth[45][0] - truth[36][0]);
             let iod = (truth[45][1] - truth[36][1]).hypot(truth[45][0] - truth[36][0]);
             let _ = writeln!(
                 t,
-                "{i} {:.1} {motion:.1} {iod:.1} {} {:.4} {}",
+                "{i} {:.1} {motion:.1} {iod:.1} {} {:.4} {} {}",
                 roll.to_degrees(),
                 u8::from(best.is_some()),
                 e.unwrap_or(f32::NAN),
-                u8::from(r.detector_ran)
+                u8::from(r.detector_ran),
+                u8::from(visible)
             );
         }
         let (Some(face), Some(e)) = (best, e) else {
