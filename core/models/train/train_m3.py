@@ -65,6 +65,10 @@ PSEUDO_SHARE = 0.4
 # real-face NME (4.02 and 4.09 %). MODEL_CARD.md, "Turned faces".
 TURNED_NETS = ()
 TURNED_SHARE = 0.1
+# Share of training patches smeared by a motion blur (motion_blur) whose length is drawn up to
+# 2 × MOTION_BLUR_MAX_PX image pixels: a phone frame of a fast face. 0 in the shipped nets.
+MOTION_BLUR_P = 0.0
+MOTION_BLUR_MAX_PX = 4.0
 # Trunks (m3nets.trunk spec strings) of the shipped models; --level1-trunk / --zone-trunk override
 # them for experiments.
 LEVEL1_TRUNK = "16s-32s-48s-48c-64s"
@@ -181,8 +185,27 @@ class Data:
         return self.mirrored[f["image"]] if f["mirror"] else self.imgs[f["image"]]
 
 
-def photometric(p, rng, occlude=True):
+def motion_blur(p, rng, k):
+    """A box blur along a random direction, `k` patch pixels long (k ≥ 2): a moving face's smear
+    in a phone frame, as `track_eval --blur` makes it."""
+    n = int(np.ceil(k)) | 1
+    kern = np.zeros((n, n), np.float32)
+    a = rng.uniform(0, np.pi)
+    c = (n - 1) / 2
+    for t in np.linspace(-k / 2, k / 2, 4 * n):
+        x, y = int(round(c + t * np.cos(a))), int(round(c + t * np.sin(a)))
+        kern[y, x] = 1.0
+    return cv2.filter2D(p, -1, kern / kern.sum(), borderType=cv2.BORDER_REPLICATE)
+
+
+def photometric(p, rng, occlude=True, scale=1.0):
+    """Illumination, blur, noise and occlusion on a patch; `scale`: image pixels per patch pixel
+    (the motion blur's length is drawn in image pixels)."""
     p = p.astype(np.float32)
+    if MOTION_BLUR_P > 0 and rng.random() < MOTION_BLUR_P:
+        k = rng.uniform(2.0, 2.0 * MOTION_BLUR_MAX_PX) / scale
+        if k >= 1.5:
+            p = motion_blur(p, rng, k)
     # illumination: contrast, brightness, gamma, a linear gradient
     p = p * rng.uniform(0.6, 1.4) + rng.uniform(-40, 40)
     if rng.random() < 0.3:
@@ -243,7 +266,7 @@ def level1_batch(data, faces, rng, weights):
         elif not positive:
             c, s = D.level1_negative(c, s, img.shape, rng)
         A = D.level1_map(c, s, S, cs, angle)
-        patch = photometric(D.sample(img, A, S, S), rng)
+        patch = photometric(D.sample(img, A, S, S), rng, scale=float(np.hypot(A[0, 0], A[1, 0])))
         X[k, 0] = patch / 255.0
         pts = D.apply(D.invert(A), f["pts"][D.LEVEL1_INDICES]) / S
         Y[k] = pts.reshape(-1)
@@ -309,7 +332,7 @@ def zone_sample(zone, img, pts, rng, ref_noise=0.045, aug=True, shape_warp=0.0):
     else:
         patch = D.sample(img, A, W, H)
     if aug:
-        patch = photometric(patch, rng, occlude=False)
+        patch = photometric(patch, rng, occlude=False, scale=float(np.hypot(A[0, 0], A[1, 0])))
     patch = D.zone_filter(zone, patch)
     return patch, tgt / [W, H], A
 
@@ -532,6 +555,8 @@ def main():
     # Nets that learn from the turned faces too (default TURNED_NETS; empty for none), e.g. level1,face
     ap.add_argument("--turned-nets", default=None)
     ap.add_argument("--turned-share", type=float, default=None)
+    # Share of patches with motion blur (default MOTION_BLUR_P)
+    ap.add_argument("--motion-blur", type=float, default=None)
     # e.g. --ref-noise face=0.025,nose=0.025 (default REF_NOISE)
     ap.add_argument("--ref-noise", default=None)
     # e.g. --shape-warp face=0.5 (default SHAPE_WARP: none)
@@ -549,6 +574,9 @@ def main():
     ap.add_argument("--no-calibrate", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
     global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE, SEED, EMA_DECAYS, TURNED_NETS, TURNED_SHARE
+    global MOTION_BLUR_P
+    if a.motion_blur is not None:
+        MOTION_BLUR_P = a.motion_blur
     if a.turned_nets is not None:
         TURNED_NETS = tuple(n for n in a.turned_nets.split(",") if n)
     if a.turned_share is not None:
@@ -591,7 +619,7 @@ def main():
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
-            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} turned={TURNED_NETS}@{TURNED_SHARE} ref_noise={REF_NOISE}"
+            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} turned={TURNED_NETS}@{TURNED_SHARE} motion_blur={MOTION_BLUR_P} ref_noise={REF_NOISE}"
             f"{f' shape_warp={SHAPE_WARP}' if SHAPE_WARP else ''} device={DEVICE}")
     pseudo = None
     if any(n in only for n in PSEUDO_NETS):
@@ -639,6 +667,7 @@ def run_zones_in_processes(zones, a, fh):
         base += ["--zone-size", a.zone_size]
     base += ["--pseudo-nets", ",".join(PSEUDO_NETS), "--pseudo-share", str(PSEUDO_SHARE), "--seed", str(SEED),
              "--turned-nets", ",".join(TURNED_NETS), "--turned-share", str(TURNED_SHARE),
+             "--motion-blur", str(MOTION_BLUR_P),
              "--ref-noise", ",".join(f"{k}={v}" for k, v in REF_NOISE.items())]
     if SHAPE_WARP:
         base += ["--shape-warp", ",".join(f"{k}={v}" for k, v in SHAPE_WARP.items())]
