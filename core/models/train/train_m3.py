@@ -66,7 +66,9 @@ PSEUDO_SHARE = 0.4
 TURNED_NETS = ()
 TURNED_SHARE = 0.1
 # Share of training patches smeared by a motion blur (motion_blur) whose length is drawn up to
-# 2 × MOTION_BLUR_MAX_PX image pixels: a phone frame of a fast face. 0 in the shipped nets.
+# 2 × MOTION_BLUR_MAX_PX image pixels: a phone frame of a fast face. 0 in the shipped nets: at 0.3
+# fewer blurred faces were lost in tracking but sharp faces' NME rose (MODEL_CARD.md, "Measured
+# and not adopted").
 MOTION_BLUR_P = 0.0
 MOTION_BLUR_MAX_PX = 4.0
 # Trunks (m3nets.trunk spec strings) of the shipped models; --level1-trunk / --zone-trunk override
