@@ -231,7 +231,7 @@ fn a_lost_tilted_face_is_found_again_turned() {
     );
 }
 
-/// The same fast, tilted heads with the issue-style phone degradations: scale ±35 %, brightness
+/// The same fast, tilted heads with a phone camera's degradations: scale ±35 %, brightness
 /// swinging ±30 % and fast frames box-blurred by their motion (`track_eval --roll 35 --scale 0.35
 /// --brightness 0.3 --blur --translation 100 --period 20`). Measured: a face on 334 of 360 frames
 /// and 333 correct (333 and 328 with upright checks of tracked faces); the frames without one are
