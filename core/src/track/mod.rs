@@ -1200,18 +1200,14 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 if conf < self.config.min_face_confidence && turned {
                     // The last roll may be off (a wrong last frame): upright, as below it, and
                     // the better of the two.
+                    let turned_out = s.landmarks;
                     let upright =
                         self.estimator
                             .face_confidence(image, &region, &mut s.landmarks)?;
                     if upright >= conf {
                         conf = upright;
                     } else {
-                        conf = self.estimator.face_confidence_turned(
-                            image,
-                            &region,
-                            lost.roll,
-                            &mut s.landmarks,
-                        )?;
+                        s.landmarks = turned_out;
                     }
                 }
                 if conf < self.config.min_face_confidence {
