@@ -264,9 +264,10 @@ fn a_fast_tilted_head_stays_tracked_through_blur_and_light() {
 
 /// A head held tilted past what the upright detector finds (40°, alternately either way per
 /// segment), with no track to have lost: the whole frame is searched turned, and the faces found
-/// are tracked with level 1 reading them turned by their roll. Measured on this clip: a face on 265
-/// of 360 frames and 254 correct (258 and 238 with upright checks of tracked faces; 127 and 120
-/// with the upright detector alone).
+/// are tracked with level 1 reading them turned by their roll. Measured on this clip: a face on 257
+/// of 360 frames and 249 correct (portable path 266 and 257; 258 and 238 with upright checks of
+/// tracked faces; 127 and 120 with the upright detector alone). The clip moves by a few frames
+/// with the last bits of the arithmetic, hence the margin.
 #[test]
 fn a_head_tilted_from_the_start_is_found_turned() {
     let Some(stats) = tilted_clip_stats(
@@ -284,7 +285,7 @@ fn a_head_tilted_from_the_start_is_found_turned() {
         "{stats:?}"
     );
     assert!(
-        stats.correct as f32 >= 0.68 * stats.scored as f32,
+        stats.correct as f32 >= 0.65 * stats.scored as f32,
         "{stats:?}"
     );
 }

@@ -720,6 +720,12 @@ const TURNED_FACE_PX: f32 = 96.0;
 /// detection's is.
 const TURNED_CHECK_FROM: f32 = 15.0 * std::f32::consts::PI / 180.0;
 
+/// Past this the last roll is taken for a misread (a face read upside down, whose turned crop
+/// would read it upside down again frame after frame) and the check stays upright: on the
+/// portable path a track started on such a reading held it, 1.25 eye distances off, for 55
+/// frames of the 40° clip.
+const TURNED_CHECK_TO: f32 = 75.0 * std::f32::consts::PI / 180.0;
+
 /// Turns within this of upright are left to the upright detector, which covers them.
 const UPRIGHT_COVERS: f32 = 15.0 * std::f32::consts::PI / 180.0;
 
@@ -1185,7 +1191,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 let region = s.calib.apply(&hit.rect);
                 // The gradient detector keeps its own roll from frame to frame.
                 let m3 = self.config.landmarks != LandmarkMode::Gradient;
-                let turned = m3 && lost.roll.abs() >= TURNED_CHECK_FROM;
+                let turned = m3 && (TURNED_CHECK_FROM..=TURNED_CHECK_TO).contains(&lost.roll.abs());
                 let mut conf = if turned {
                     self.estimator.face_confidence_turned(
                         image,
