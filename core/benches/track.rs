@@ -113,9 +113,9 @@ fn bench(c: &mut Criterion) {
             p1.build(black_box(&next), 3);
             pts.copy_from_slice(&from);
             filter.reset();
-            filter.apply(&p0, &p0, &mut pts, 5.0).unwrap();
+            filter.apply(&p0, &p0, &mut pts, 5.0, 0.1).unwrap();
             pts.copy_from_slice(&moved);
-            filter.apply(&p0, &p1, &mut pts, 5.0).unwrap()
+            filter.apply(&p0, &p1, &mut pts, 5.0, 0.1).unwrap()
         })
     });
     // The same with the default levels (the bench above keeps 3, its figures' history).
@@ -127,9 +127,9 @@ fn bench(c: &mut Criterion) {
             q1.build(black_box(&next), levels);
             pts.copy_from_slice(&from);
             filter.reset();
-            filter.apply(&q0, &q0, &mut pts, 5.0).unwrap();
+            filter.apply(&q0, &q0, &mut pts, 5.0, 0.1).unwrap();
             pts.copy_from_slice(&moved);
-            filter.apply(&q0, &q1, &mut pts, 5.0).unwrap()
+            filter.apply(&q0, &q1, &mut pts, 5.0, 0.1).unwrap()
         })
     });
 }

@@ -8,7 +8,7 @@
 //!     [--video ../shared/data/video/obama_3ddfa_demo.mp4 --reference REF.jsonl] [--mirror-average]
 //!     [--only ROW] [--passes N] [--camera-frames] [--ultra-light]
 //!     [--scale A] [--roll DEG] [--roll-offset DEG] [--translation PX] [--period FRAMES]
-//!     [--segments N] [--brightness A] [--blur]
+//!     [--segments N] [--brightness A] [--blur] [--flow-pull P]
 //! ```
 //! `--ultra-light` runs the ultra-light mode's rows instead (`TrackerConfig::ultra_light`:
 //! tracking, tracking with the flow filter off, and re-detect every frame). Each row's `box IoU`
@@ -26,6 +26,7 @@
 //! `--camera-frames` passes them as `Gray8` camera frames instead (`process_frame`, which copies
 //! each into the tracker's luma buffer: the `image` column, counted in the frame's total).
 //! `--mirror-average` runs M3 in its mirror-average mode (`core/models/M3_IO.md`).
+//! `--flow-pull P` sets the tracking rows' `TrackerConfig::flow_pull` (0: the thesis' filter).
 //! `--only ROW` runs only the table's row ROW (0 = tracking, 3 = re-detect every frame) and
 //! `--passes N` repeats each measured pass N times (the row shows the last), for `perf record`.
 //! `REF.jsonl` comes from `tests/scripts/video_reference.py VIDEO REF.jsonl` (dlib's 68 points as
@@ -46,9 +47,13 @@ use std::process::{Command, Stdio};
 /// NME below which a frame counts as correct (see `tests/tests/track_models.rs`).
 const CORRECT_NME: f32 = 0.10;
 
-fn configs(ultra_light: bool) -> Vec<(&'static str, TrackerConfig)> {
+fn configs(ultra_light: bool, flow_pull: Option<f32>) -> Vec<(&'static str, TrackerConfig)> {
     if ultra_light {
-        let video = TrackerConfig::ultra_light();
+        let defaults = TrackerConfig::ultra_light();
+        let video = TrackerConfig {
+            flow_pull: flow_pull.unwrap_or(defaults.flow_pull),
+            ..defaults
+        };
         return vec![
             ("ultra-light tracking", video),
             (
@@ -67,7 +72,11 @@ fn configs(ultra_light: bool) -> Vec<(&'static str, TrackerConfig)> {
             ),
         ];
     }
-    let video = TrackerConfig::default();
+    let defaults = TrackerConfig::default();
+    let video = TrackerConfig {
+        flow_pull: flow_pull.unwrap_or(defaults.flow_pull),
+        ..defaults
+    };
     vec![
         (
             "tracking (default: re-detect in the frame of a loss)",
@@ -104,11 +113,15 @@ struct Options {
     only: Option<usize>,
     passes: usize,
     input: Input,
+    flow_pull: Option<f32>,
 }
 
 fn report(title: &str, clip: &[ClipFrame], opt: &Options) -> Result<(), String> {
     println!("\n### {title}\n\n{}", table_header());
-    for (row, (name, cfg)) in configs(opt.ultra_light).into_iter().enumerate() {
+    for (row, (name, cfg)) in configs(opt.ultra_light, opt.flow_pull)
+        .into_iter()
+        .enumerate()
+    {
         if opt.only.is_some_and(|only| only != row) {
             continue;
         }
@@ -217,6 +230,9 @@ fn main() -> Result<(), String> {
         } else {
             Input::Luma
         },
+        flow_pull: arg("--flow-pull")
+            .map(|v| v.parse().map_err(|e| format!("--flow-pull {v}: {e}")))
+            .transpose()?,
     };
     println!(
         "correct frame: NME (inter-ocular) < {CORRECT_NME}; M3 mirror average {}; input {:?}; \

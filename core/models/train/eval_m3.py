@@ -109,6 +109,17 @@ def f1_macro(y, p, n):
     return float(np.mean(f1s)) if f1s else float("nan")
 
 
+def f1_per_class(y, p, n):
+    """F1 of each class (None where the class has no example)."""
+    out = []
+    for c in range(n):
+        tp = np.sum((p == c) & (y == c))
+        fp = np.sum((p == c) & (y != c))
+        fn = np.sum((p != c) & (y == c))
+        out.append(None if tp + fn == 0 else float(2 * tp / max(2 * tp + fp + fn, 1)))
+    return out
+
+
 def summarize(errs):
     return {k: float(np.mean([e[k] for e in errs])) for k in errs[0]}
 
@@ -137,26 +148,47 @@ def measure(m3, faces, boxes, grays, genki):
         "yaw_class_accuracy": float(np.mean(yaw_ok)),
         "mouth_gesture": {"accuracy": float(np.mean(mouth[:, 0] == mouth[:, 1])),
                           "macro_f1": f1_macro(mouth[:, 0], mouth[:, 1], 4), "n": len(mouth),
+                          "per_class_f1": f1_per_class(mouth[:, 0], mouth[:, 1], 4),
                           "label_counts": np.bincount(mouth[:, 0], minlength=4).tolist()},
         "brow_gesture": {"accuracy": float(np.mean(brows[:, 0] == brows[:, 1])),
                          "macro_f1": f1_macro(brows[:, 0], brows[:, 1], 3), "n": len(brows),
+                         "per_class_f1": f1_per_class(brows[:, 0], brows[:, 1], 3),
                          "label_counts": np.bincount(brows[:, 0], minlength=3).tolist()},
         "python_onnxruntime_ms_per_face": 1e3 * float(np.median(times)),
     }
     # GENKI-4K held-out smile split: level 1 on the whole crop, then again on the box of its points.
-    ys, ps = [], []
-    for img, label, _ in genki:
+    teacher = genki_teacher()
+    ys, ps, t_mouth, t_brows = [], [], [], []
+    for img, label, name in genki:
         box = np.array([6.0, 8.0, 52.0, 52.0])
         for _ in range(2):
             r = m3.run(img, box)
             box = D.box_of(r["landmarks68"])
         ys.append(label)
         ps.append(r["mouth"]["smile"] > 0.5)
+        if name in teacher:
+            t_mouth.append((teacher[name][0], int(np.argmax(list(r["mouth"].values())))))
+            t_brows.append((teacher[name][1], int(np.argmax(list(r["brows"].values())))))
     ys, ps = np.array(ys), np.array(ps).astype(int)
     tp, fp, fn = np.sum(ps & ys), np.sum(ps & (1 - ys)), np.sum((1 - ps) & ys)
     metrics["genki_smile"] = {"n": len(ys), "accuracy": float(np.mean(ps == ys)),
                               "f1": float(2 * tp / max(2 * tp + fp + fn, 1))}
+    if teacher:
+        for key, pairs, n in (("genki_mouth_gesture", t_mouth, 4), ("genki_brow_gesture", t_brows, 3)):
+            pairs = np.array(pairs)
+            metrics[key] = {"accuracy": float(np.mean(pairs[:, 0] == pairs[:, 1])),
+                            "macro_f1": f1_macro(pairs[:, 0], pairs[:, 1], n),
+                            "per_class_f1": f1_per_class(pairs[:, 0], pairs[:, 1], n), "n": len(pairs),
+                            "label_counts": np.bincount(pairs[:, 0], minlength=n).tolist()}
     return metrics
+
+
+def genki_teacher():
+    """The MediaPipe teacher's gesture classes of the held-out GENKI-4K crops (teacher_genki.py), or
+    {} when its file has not been made."""
+    import teacher_genki
+    path = os.environ.get("MONOTRACK_GENKI_TEACHER") or teacher_genki.default_path()
+    return teacher_genki.load(path, "test") if os.path.exists(path) else {}
 
 
 def main():

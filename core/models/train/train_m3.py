@@ -32,6 +32,7 @@ import onnx_tract  # noqa: E402
 import calibrate_m3  # noqa: E402
 import pseudo_genki  # noqa: E402
 import rotate_faces  # noqa: E402
+import teacher_genki  # noqa: E402
 
 OUT = os.environ.get("MONOTRACK_M3_OUT", os.path.join(D.REPO, "core", "models", "m3"))
 SEED = 20261122
@@ -65,6 +66,13 @@ PSEUDO_SHARE = 0.4
 # real-face NME (4.02 and 4.09 %). MODEL_CARD.md, "Turned faces".
 TURNED_NETS = ()
 TURNED_SHARE = 0.1
+# Gesture nets that also learn from GENKI-4K crops labelled by the MediaPipe teacher
+# (teacher_genki.py, the thresholds of faces68's labels): gesture loss only, the crops carry no
+# landmark truth. The mouth's crops keep the teacher's class only where it agrees with GENKI's own
+# smile label (smile against not-smile). None by default: the brow net gained gesture F1 with them
+# on two seeds but the tracker with it lost correct frames, the mouth gained nothing consistent
+# (MODEL_CARD.md, "Measured and not adopted").
+GENKI_GESTURE_NETS = ()
 # Share of training patches smeared by a motion blur (motion_blur) whose length is drawn up to
 # 2 × MOTION_BLUR_MAX_PX image pixels: a phone frame of a fast face. 0 in the shipped nets: at 0.3
 # fewer blurred faces were lost in tracking but sharp faces' NME rose (MODEL_CARD.md, "Measured
@@ -355,11 +363,15 @@ def zone_batch(name, data, faces, rng, weights, genki=None):
     n_genki = BATCH // 4 if genki is not None else 0
     for k, i in enumerate(idx):
         if k < n_genki:
-            g_img, g_pts, g_label = genki[rng.integers(len(genki))]
+            g_img, g_pts, g_label, g_mouth, g_brows = genki[rng.integers(len(genki))]
             patch, _, _ = zone_sample(zone, g_img, g_pts, rng, ref_noise=0.02)
             X[k, 0] = patch / 255.0
             LM[k] = 0.0  # predicted refs only: no landmark truth on GENKI
-            SM[k] = g_label
+            if name == "mouth":
+                SM[k] = g_label
+                G[k] = g_mouth
+            else:
+                G[k] = g_brows
             YAW[k] = soft_yaw(2, rng)
             continue
         f = faces[i]
@@ -521,13 +533,23 @@ def export(model, path, names_in, shapes_in, names_out):
     onnx_tract.fusable_relu(path)
 
 
-def genki_with_refs(level1_path, split):
-    """GENKI-4K crops with the mouth references (33, 8) predicted by our level 1 (the crops carry no
-    landmarks). Level 1 runs twice: on the whole crop, then on the box of its own points."""
+def genki_with_refs(level1_path, split, teacher=None, only_found=False):
+    """GENKI-4K crops with the zone references (33, 8, 36, 45) predicted by our level 1 (the crops
+    carry no landmarks). Level 1 runs twice: on the whole crop, then on the box of its own points.
+    Items: (image, 68 points with the references set, smile 0/1, mouth class, brow class); the
+    classes are the MediaPipe teacher's (`teacher`: teacher_genki.load's dict), -1 where there is
+    none, and the mouth class is -1 where the teacher's smile disagrees with GENKI's label.
+    `only_found` keeps only the crops the teacher labelled."""
     import m3_reference as R
     l1 = R.Level1Runner(level1_path)
+    teacher = teacher or {}
     out = []
-    for img, label, _ in D.load_genki(split):
+    for img, label, name in D.load_genki(split):
+        mouth, brows = teacher.get(name, (-1, -1))
+        if mouth >= 0 and (mouth == 0) != (label == 1):
+            mouth = -1
+        if only_found and name not in teacher:
+            continue
         box = np.array([6.0, 8.0, 52.0, 52.0])
         pts = None
         for _ in range(2):
@@ -536,7 +558,7 @@ def genki_with_refs(level1_path, split):
         full = np.zeros((68, 2), np.float32)
         full[D.LEVEL1_INDICES] = pts
         full[36], full[45] = pts[D.LEVEL1_INDICES.index(36)], pts[D.LEVEL1_INDICES.index(45)]
-        out.append((img, full, float(label)))
+        out.append((img, full, float(label), mouth, brows))
     return out
 
 
@@ -556,6 +578,8 @@ def main():
     ap.add_argument("--pseudo-share", type=float, default=None)
     # Nets that learn from the turned faces too (default TURNED_NETS; empty for none), e.g. level1,face
     ap.add_argument("--turned-nets", default=None)
+    # e.g. --genki-gesture-nets mouth,brows (default GENKI_GESTURE_NETS)
+    ap.add_argument("--genki-gesture-nets", default=None)
     ap.add_argument("--turned-share", type=float, default=None)
     # Share of patches with motion blur (default MOTION_BLUR_P)
     ap.add_argument("--motion-blur", type=float, default=None)
@@ -576,7 +600,9 @@ def main():
     ap.add_argument("--no-calibrate", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
     global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE, SEED, EMA_DECAYS, TURNED_NETS, TURNED_SHARE
-    global MOTION_BLUR_P
+    global MOTION_BLUR_P, GENKI_GESTURE_NETS
+    if a.genki_gesture_nets is not None:
+        GENKI_GESTURE_NETS = tuple(n for n in a.genki_gesture_nets.split(",") if n)
     if a.motion_blur is not None:
         MOTION_BLUR_P = a.motion_blur
     if a.turned_nets is not None:
@@ -621,7 +647,7 @@ def main():
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
-            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} turned={TURNED_NETS}@{TURNED_SHARE} motion_blur={MOTION_BLUR_P} ref_noise={REF_NOISE}"
+            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} turned={TURNED_NETS}@{TURNED_SHARE} genki_gestures={GENKI_GESTURE_NETS} motion_blur={MOTION_BLUR_P} ref_noise={REF_NOISE}"
             f"{f' shape_warp={SHAPE_WARP}' if SHAPE_WARP else ''} device={DEVICE}")
     pseudo = None
     if any(n in only for n in PSEUDO_NETS):
@@ -647,9 +673,17 @@ def main():
         zones = []
     for name in zones:
         z = D.ZONES[name]
-        genki = genki_with_refs(os.path.join(OUT, "level1.onnx"), "train") if name == "mouth" else None
-        if genki is not None:
-            log(fh, f"GENKI-4K train crops for the mouth smile head: {len(genki)}")
+        teacher = None
+        if name in GENKI_GESTURE_NETS:
+            path = os.environ.get("MONOTRACK_GENKI_TEACHER") or teacher_genki.default_path()
+            if not os.path.exists(path):
+                raise SystemExit(f"{path} is missing: run teacher_genki.py (it needs mediapipe==0.10.14)")
+            teacher = teacher_genki.load(path, "train")
+        genki = None
+        if name == "mouth" or teacher is not None:
+            genki = genki_with_refs(os.path.join(OUT, "level1.onnx"), "train", teacher, only_found=name != "mouth")
+            log(fh, f"GENKI-4K train crops for the {name} gesture head: {len(genki)}"
+                    f"{f', teacher-labelled: {len(teacher)}' if teacher is not None else ''}")
         outs = ["landmarks"] + (["gaze"] if z.get("gaze") else ["gesture_logits"] if z.get("gestures") else [])
         for tag, m in zip(export_tags(), train_zone(name, data, steps[name], fh, genki)):
             export(m, os.path.join(OUT, f"{name}{tag}.onnx"), ["patch", "yaw"], [(1, 1, z["height"], z["width"]), (1, 5)], outs)
@@ -669,7 +703,7 @@ def run_zones_in_processes(zones, a, fh):
         base += ["--zone-size", a.zone_size]
     base += ["--pseudo-nets", ",".join(PSEUDO_NETS), "--pseudo-share", str(PSEUDO_SHARE), "--seed", str(SEED),
              "--turned-nets", ",".join(TURNED_NETS), "--turned-share", str(TURNED_SHARE),
-             "--motion-blur", str(MOTION_BLUR_P),
+             "--motion-blur", str(MOTION_BLUR_P), "--genki-gesture-nets", ",".join(GENKI_GESTURE_NETS),
              "--ref-noise", ",".join(f"{k}={v}" for k, v in REF_NOISE.items())]
     if SHAPE_WARP:
         base += ["--shape-warp", ",".join(f"{k}={v}" for k, v in SHAPE_WARP.items())]

@@ -19,10 +19,11 @@
 //!   narrower set.
 //!   [`PyramidalLk::track_guided`] starts each point at a guess (OpenCV's initial flow), so the
 //!   levels need only cover the guess's error.
-//! - [`FlowFilter`]: per landmark, keeps the flow estimate from the previous frame's (filtered)
-//!   landmarks when it lies within a threshold of the new detection, else takes the detection. The
-//!   flow follows real motion, so this removes detection jitter without adding lag; a landmark that
-//!   moved farther than the threshold snaps to the detection at once. The flow starts at the
+//! - [`FlowFilter`]: per landmark, takes the flow estimate from the previous frame's (filtered)
+//!   landmarks when it lies within a threshold of the new detection, moved a little towards the
+//!   detection (more the farther it is), else takes the detection. The flow follows real motion,
+//!   so this removes detection jitter without adding lag; a landmark that moved farther than the
+//!   threshold snaps to the detection at once, and an error the flow carries fades within frames. The flow starts at the
 //!   detection: only a match near it is kept, so two levels serve whatever the face's motion.
 //!
 //! Coordinates follow [`crate::camera`]: pixel (i, j) covers [i, i+1)×[j, j+1). With 2×2 box
@@ -1454,25 +1455,38 @@ impl FlowFilter {
         self.has_prev
     }
 
-    /// Filters `points` (the new detection, in `next`'s pixels) in place: each point becomes the
-    /// flow of the previous output from `prev` to `next` when that was tracked and lies within
-    /// `threshold_px` of the detection, else stays the detection. The result is remembered for the
-    /// next frame. Returns how many points came from the flow (0 on the first frame of a track or
-    /// when the number of points changed, which restarts the filter).
+    /// Filters `points` (the new detection, in `next`'s pixels) in place. Where the flow of the
+    /// previous output from `prev` to `next` was tracked and lies within `threshold_px` of the
+    /// detection, the point becomes that flow moved towards the detection by the fraction
+    /// max(`pull`, (distance / threshold)²), or stays the flow when `pull` is 0; elsewhere it
+    /// stays the detection. The result is remembered for the next frame. Returns how many points came from the flow (0 on the first
+    /// frame of a track or when the number of points changed, which restarts the filter).
+    ///
+    /// `pull = 0` is the thesis' rule (Alg. 8: the flow kept whole). Why a pull: a
+    /// point held wholly on the flow keeps any error it once had for as long as it stays within
+    /// the threshold (a blurred frame's reading, or the drift of the flow itself when the light
+    /// changes), so on sharp still frames after motion, or under a phone's changing exposure, the
+    /// filter was less accurate and less steady than no filter at all (`TrackerConfig::flow_pull`).
     ///
     /// # Errors
     /// [`Error::InvalidInput`] when the pyramids differ in size or depth (the caller must reset on
-    /// a change of frame size) or a threshold that is not finite and ≥ 0.
+    /// a change of frame size), a threshold that is not finite and ≥ 0, or a pull outside 0..=1.
     pub fn apply(
         &mut self,
         prev: &Pyramid,
         next: &Pyramid,
         points: &mut [[f32; 2]],
         threshold_px: f32,
+        pull: f32,
     ) -> Result<usize> {
         if !(threshold_px.is_finite() && threshold_px >= 0.0) {
             return Err(Error::InvalidInput(format!(
                 "flow filter threshold must be finite and >= 0, got {threshold_px}"
+            )));
+        }
+        if !(0.0..=1.0).contains(&pull) {
+            return Err(Error::InvalidInput(format!(
+                "flow filter pull must be in 0..=1, got {pull}"
             )));
         }
         let mut used = 0;
@@ -1493,8 +1507,11 @@ impl FlowFilter {
             )?;
             let t2 = threshold_px * threshold_px;
             for ((p, f), &ok) in points.iter_mut().zip(&self.flow).zip(&self.status) {
-                if ok && (f[0] - p[0]).powi(2) + (f[1] - p[1]).powi(2) <= t2 {
-                    *p = *f;
+                let d2 = (f[0] - p[0]).powi(2) + (f[1] - p[1]).powi(2);
+                if ok && d2 <= t2 {
+                    // pull 0 is the thesis' rule: the flow whole.
+                    let a = if pull > 0.0 { pull.max(d2 / t2) } else { 0.0 };
+                    *p = [f[0] + a * (p[0] - f[0]), f[1] + a * (p[1] - f[1])];
                     used += 1;
                 }
             }
@@ -1955,7 +1972,7 @@ mod tests {
         let mut f = FlowFilter::new(LkConfig::default()).unwrap();
         // First frame of a track: the detection passes through.
         let mut pts = truth0.clone();
-        assert_eq!(f.apply(&p0, &p0, &mut pts, 5.0).unwrap(), 0);
+        assert_eq!(f.apply(&p0, &p0, &mut pts, 5.0, 0.0).unwrap(), 0);
         assert_eq!(pts, truth0);
         // Next frame: detections = truth + jitter (±1.5 px) on all but point 0, which the detector
         // puts 20 px off (a jump the filter must follow: beyond the threshold).
@@ -1969,7 +1986,7 @@ mod tests {
             .collect();
         det[0][0] += 20.0;
         let mut out = det.clone();
-        let used = f.apply(&p0, &p1, &mut out, 5.0).unwrap();
+        let used = f.apply(&p0, &p1, &mut out, 5.0, 0.0).unwrap();
         assert!(used >= det.len() - 3, "used {used}");
         assert_eq!(out[0], det[0], "far detection must win");
         let mut err_det = 0.0;
@@ -1983,11 +2000,66 @@ mod tests {
         assert!(err_out < 0.2 * err_det, "{err_out} vs {err_det}");
         // Threshold 0 takes the detections; reset restarts.
         let mut out2 = det.clone();
-        f.apply(&p1, &p1, &mut out2, 0.0).unwrap();
+        f.apply(&p1, &p1, &mut out2, 0.0, 0.1).unwrap();
         f.reset();
         assert!(!f.has_previous());
         let mut out3 = det.clone();
-        assert_eq!(f.apply(&p1, &p1, &mut out3, 5.0).unwrap(), 0);
-        assert!(f.apply(&p1, &p1, &mut out3, f32::NAN).is_err());
+        assert_eq!(f.apply(&p1, &p1, &mut out3, 5.0, 0.1).unwrap(), 0);
+        assert!(f.apply(&p1, &p1, &mut out3, f32::NAN, 0.1).is_err());
+        assert!(f.apply(&p1, &p1, &mut out3, 5.0, f32::NAN).is_err());
+        assert!(f.apply(&p1, &p1, &mut out3, 5.0, -0.1).is_err());
+    }
+
+    /// The pull's rule, against the flow computed apart: each point kept from the flow moves
+    /// towards its detection by max(pull, (distance / threshold)²); pull 0 keeps the flow whole
+    /// (the thesis' filter) and pull 1 gives the detections.
+    #[test]
+    fn the_pull_moves_flow_points_towards_the_detections() {
+        let id = [[1.0, 0.0], [0.0, 1.0]];
+        let shift = [2.0f32, 1.0];
+        let (mut p0, mut p1) = (Pyramid::new(), Pyramid::new());
+        p0.build(&warped(id, [0.0, 0.0]), 3);
+        p1.build(&warped(id, shift), 3);
+        let prev = grid();
+        let det: Vec<[f32; 2]> = prev
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let j = 0.5 * (i % 7) as f32;
+                [p[0] + shift[0] + j, p[1] + shift[1] - 0.5 * j]
+            })
+            .collect();
+        let mut lk = PyramidalLk::new(LkConfig::default()).unwrap();
+        let mut flow = det.clone();
+        let (mut st, mut e) = (vec![false; det.len()], vec![0.0f32; det.len()]);
+        lk.track_guided(&p0, &p1, &prev, &mut flow, &mut st, &mut e)
+            .unwrap();
+        let threshold = 5.0f32;
+        for pull in [0.0f32, crate::track::DEFAULT_FLOW_PULL, 1.0] {
+            let mut f = FlowFilter::new(LkConfig::default()).unwrap();
+            let mut first = prev.clone();
+            f.apply(&p0, &p0, &mut first, threshold, pull).unwrap();
+            let mut out = det.clone();
+            let used = f.apply(&p0, &p1, &mut out, threshold, pull).unwrap();
+            assert!(used >= det.len() - 2, "used {used}");
+            for i in 0..det.len() {
+                let (fl, d) = (flow[i], det[i]);
+                let d2 = (fl[0] - d[0]).powi(2) + (fl[1] - d[1]).powi(2);
+                if !st[i] || d2 > threshold * threshold {
+                    assert_eq!(out[i], d);
+                    continue;
+                }
+                let a = if pull > 0.0 {
+                    pull.max(d2 / (threshold * threshold))
+                } else {
+                    0.0
+                };
+                let want = [fl[0] + a * (d[0] - fl[0]), fl[1] + a * (d[1] - fl[1])];
+                assert_eq!(out[i], want, "point {i}, pull {pull}");
+                if pull == 1.0 {
+                    assert!((out[i][0] - d[0]).abs() < 1e-4 && (out[i][1] - d[1]).abs() < 1e-4);
+                }
+            }
+        }
     }
 }

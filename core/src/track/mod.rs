@@ -79,6 +79,12 @@ pub const DEFAULT_MIN_DETECTION_CONFIDENCE: f32 = 0.95;
 /// threshold scales with the face's box size relative to this.
 pub const FLOW_REFERENCE_FACE_PX: f32 = 200.0;
 
+/// Default [`TrackerConfig::flow_pull`]. On `track_eval`'s clips with the light swinging ±30 %
+/// (a phone's exposure) the thesis' filter (0) made landmarks less accurate and less steady than
+/// no filter at all; 0.25 is as accurate and as steady as no filter there and keeps two thirds of
+/// the filter's jitter cut on steadily lit still faces (BENCHMARKS.md, "Tracking").
+pub const DEFAULT_FLOW_PULL: f32 = 0.25;
+
 /// Whole-frame face detection (`core::detect`'s detector implements it).
 pub trait RegionDetector {
     /// Appends the faces found in `image` to `out` (cleared first by the callee) as (box, score in
@@ -283,6 +289,10 @@ pub struct TrackerConfig {
     /// The filter's threshold for a face of [`FLOW_REFERENCE_FACE_PX`] (thesis: 5 px); scaled by
     /// face size.
     pub flow_threshold_px: f32,
+    /// Least fraction by which a point the filter takes from the flow moves towards this frame's
+    /// landmark (more when the two are farther apart: (distance / threshold)²); 0 is the thesis'
+    /// filter, which keeps the flow whole ([`FlowFilter::apply`]). Default [`DEFAULT_FLOW_PULL`].
+    pub flow_pull: f32,
     /// Lucas–Kanade settings of the filter.
     pub lk: LkConfig,
     /// Frames at the start of a track over which shape units are estimated before being held.
@@ -348,6 +358,7 @@ impl Default for TrackerConfig {
             ncc_template_px: 32,
             flow_filter: true,
             flow_threshold_px: 5.0,
+            flow_pull: DEFAULT_FLOW_PULL,
             lk: LkConfig::default(),
             shape_frames: 10,
             tracking_fit_rounds: 1,
@@ -417,6 +428,12 @@ impl TrackerConfig {
             return Err(Error::InvalidConfig(format!(
                 "flow_threshold_px must be finite and >= 0, got {}",
                 self.flow_threshold_px
+            )));
+        }
+        if !(0.0..=1.0).contains(&self.flow_pull) {
+            return Err(Error::InvalidConfig(format!(
+                "flow_pull must be in 0..=1, got {}",
+                self.flow_pull
             )));
         }
         self.lk.validate()?;
@@ -1423,6 +1440,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                     &self.pyr_cur,
                     &mut self.points,
                     ref_scale * size,
+                    self.config.flow_pull,
                 )?;
                 s.landmarks.points = self.points;
                 s.flow_points = used as u32;
@@ -1762,6 +1780,14 @@ mod tests {
             },
             TrackerConfig {
                 flow_threshold_px: -1.0,
+                ..Default::default()
+            },
+            TrackerConfig {
+                flow_pull: f32::NAN,
+                ..Default::default()
+            },
+            TrackerConfig {
+                flow_pull: 1.5,
                 ..Default::default()
             },
             TrackerConfig {
