@@ -153,6 +153,14 @@ fn tracker_on_synthetic_sequences() {
         },
     );
     report("video, flow filter off", &no_filter);
+    let thesis_filter = run(
+        &frames,
+        TrackerConfig {
+            flow_pull: 0.0,
+            ..video
+        },
+    );
+    report("video, the thesis' flow filter", &thesis_filter);
     let every = run(
         &frames,
         TrackerConfig {
@@ -182,9 +190,18 @@ fn tracker_on_synthetic_sequences() {
         "{immediate:?} vs {every:?}"
     );
     assert!(tracking.correct + cuts + 2 >= every.correct);
-    // The flow filter removes most of the still-face jitter.
+    // The thesis' flow filter removes most of the still-face jitter of these oracle landmarks,
+    // whose noise is new each frame and unbiased; the default filter, which pulls each point
+    // towards the new landmarks so that a lasting error fades (under changing light on M3's
+    // points it is the steadier one: BENCHMARKS.md), removes less of it but still a good part.
     assert!(
-        tracking.jitter_still < 0.5 * no_filter.jitter_still,
+        thesis_filter.jitter_still < 0.5 * no_filter.jitter_still,
+        "thesis' filter {} px vs off {} px",
+        thesis_filter.jitter_still,
+        no_filter.jitter_still
+    );
+    assert!(
+        tracking.jitter_still < 0.65 * no_filter.jitter_still,
         "filter on {} px vs off {} px",
         tracking.jitter_still,
         no_filter.jitter_still
