@@ -97,18 +97,6 @@ def write_dlib_manifest(path, cal, paths, faces, boxes):
                 "box": [cx - side / 2, cy - side / 2, side, side], "landmarks68": f["pts"].tolist()}]}) + "\n")
 
 
-def f1_macro(y, p, n):
-    f1s = []
-    for c in range(n):
-        tp = np.sum((p == c) & (y == c))
-        fp = np.sum((p == c) & (y != c))
-        fn = np.sum((p != c) & (y == c))
-        if tp + fn == 0:
-            continue
-        f1s.append(2 * tp / max(2 * tp + fp + fn, 1))
-    return float(np.mean(f1s)) if f1s else float("nan")
-
-
 def f1_per_class(y, p, n):
     """F1 of each class (None where the class has no example)."""
     out = []
@@ -118,6 +106,12 @@ def f1_per_class(y, p, n):
         fn = np.sum((p != c) & (y == c))
         out.append(None if tp + fn == 0 else float(2 * tp / max(2 * tp + fp + fn, 1)))
     return out
+
+
+def f1_macro(y, p, n):
+    """Mean F1 over the classes that have an example."""
+    f1s = [f for f in f1_per_class(y, p, n) if f is not None]
+    return float(np.mean(f1s)) if f1s else float("nan")
 
 
 def summarize(errs):
