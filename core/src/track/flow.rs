@@ -23,8 +23,9 @@
 //!   landmarks when it lies within a threshold of the new detection, moved a little towards the
 //!   detection (more the farther it is), else takes the detection. The flow follows real motion,
 //!   so this removes detection jitter without adding lag; a landmark that moved farther than the
-//!   threshold snaps to the detection at once, and an error the flow carries fades within frames. The flow starts at the
-//!   detection: only a match near it is kept, so two levels serve whatever the face's motion.
+//!   threshold snaps to the detection at once, and an error the flow carries fades within frames.
+//!   The flow starts at the detection: only a match near it is kept, so two levels serve whatever
+//!   the face's motion.
 //!
 //! Coordinates follow [`crate::camera`]: pixel (i, j) covers [i, i+1)×[j, j+1). With 2×2 box
 //! decimation that corner convention scales exactly: level l's coordinates are level 0's / 2^l.
@@ -1459,14 +1460,15 @@ impl FlowFilter {
     /// previous output from `prev` to `next` was tracked and lies within `threshold_px` of the
     /// detection, the point becomes that flow moved towards the detection by the fraction
     /// max(`pull`, (distance / threshold)²), or stays the flow when `pull` is 0; elsewhere it
-    /// stays the detection. The result is remembered for the next frame. Returns how many points came from the flow (0 on the first
-    /// frame of a track or when the number of points changed, which restarts the filter).
+    /// stays the detection. The result is remembered for the next frame. Returns how many points
+    /// came from the flow (0 on the first frame of a track or when the number of points changed,
+    /// which restarts the filter).
     ///
-    /// `pull = 0` is the thesis' rule (Alg. 8: the flow kept whole). Why a pull: a
-    /// point held wholly on the flow keeps any error it once had for as long as it stays within
-    /// the threshold (a blurred frame's reading, or the drift of the flow itself when the light
-    /// changes), so on sharp still frames after motion, or under a phone's changing exposure, the
-    /// filter was less accurate and less steady than no filter at all (`TrackerConfig::flow_pull`).
+    /// `pull = 0` is the thesis' rule (Alg. 8: the flow kept whole). Why a pull: a point held
+    /// wholly on the flow keeps any error it once had for as long as it stays within the threshold
+    /// (a blurred frame's reading, or the drift of the flow itself when the light changes), so on
+    /// sharp still frames after motion, or under a phone's changing exposure, that filter was less
+    /// accurate and less steady than no filter at all (`TrackerConfig::flow_pull`).
     ///
     /// # Errors
     /// [`Error::InvalidInput`] when the pyramids differ in size or depth (the caller must reset on
