@@ -8,7 +8,7 @@
 //!     [--video ../shared/data/video/obama_3ddfa_demo.mp4 --reference REF.jsonl] [--mirror-average]
 //!     [--only ROW] [--passes N] [--camera-frames] [--ultra-light]
 //!     [--scale A] [--roll DEG] [--roll-offset DEG] [--translation PX] [--period FRAMES]
-//!     [--segments N] [--brightness A] [--blur] [--flow-pull P]
+//!     [--segments N] [--brightness A] [--blur] [--flow-pull P] [--plain-lk]
 //! ```
 //! `--ultra-light` runs the ultra-light mode's rows instead (`TrackerConfig::ultra_light`:
 //! tracking, tracking with the flow filter off, and re-detect every frame). Each row's `box IoU`
@@ -26,7 +26,8 @@
 //! `--camera-frames` passes them as `Gray8` camera frames instead (`process_frame`, which copies
 //! each into the tracker's luma buffer: the `image` column, counted in the frame's total).
 //! `--mirror-average` runs M3 in its mirror-average mode (`core/models/M3_IO.md`).
-//! `--flow-pull P` sets the tracking rows' `TrackerConfig::flow_pull` (0: the thesis' filter).
+//! `--flow-pull P` sets the tracking rows' `TrackerConfig::flow_pull` (0: the thesis' filter);
+//! `--plain-lk` turns the flow's brightness offset off (`LkConfig::offset_invariant`).
 //! `--only ROW` runs only the table's row ROW (0 = tracking, 3 = re-detect every frame) and
 //! `--passes N` repeats each measured pass N times (the row shows the last), for `perf record`.
 //! `REF.jsonl` comes from `tests/scripts/video_reference.py VIDEO REF.jsonl` (dlib's 68 points as
@@ -35,6 +36,7 @@
 
 use monotrack_core::image::GrayImage;
 use monotrack_core::image::rgb_to_contract_luma;
+use monotrack_core::track::flow::LkConfig;
 use monotrack_core::track::{Mode, Tracker, TrackerConfig};
 use monotrack_tests::shared_data;
 use monotrack_tests::synth::{SeqConfig, load_validation_faces};
@@ -47,13 +49,17 @@ use std::process::{Command, Stdio};
 /// NME below which a frame counts as correct (see `tests/tests/track_models.rs`).
 const CORRECT_NME: f32 = 0.10;
 
-fn configs(ultra_light: bool, flow_pull: Option<f32>) -> Vec<(&'static str, TrackerConfig)> {
+fn configs(ultra_light: bool, opt: &Options) -> Vec<(&'static str, TrackerConfig)> {
+    let tune = |defaults: TrackerConfig| TrackerConfig {
+        flow_pull: opt.flow_pull.unwrap_or(defaults.flow_pull),
+        lk: LkConfig {
+            offset_invariant: defaults.lk.offset_invariant && !opt.plain_lk,
+            ..defaults.lk
+        },
+        ..defaults
+    };
     if ultra_light {
-        let defaults = TrackerConfig::ultra_light();
-        let video = TrackerConfig {
-            flow_pull: flow_pull.unwrap_or(defaults.flow_pull),
-            ..defaults
-        };
+        let video = tune(TrackerConfig::ultra_light());
         return vec![
             ("ultra-light tracking", video),
             (
@@ -72,11 +78,7 @@ fn configs(ultra_light: bool, flow_pull: Option<f32>) -> Vec<(&'static str, Trac
             ),
         ];
     }
-    let defaults = TrackerConfig::default();
-    let video = TrackerConfig {
-        flow_pull: flow_pull.unwrap_or(defaults.flow_pull),
-        ..defaults
-    };
+    let video = tune(TrackerConfig::default());
     vec![
         (
             "tracking (default: re-detect in the frame of a loss)",
@@ -114,14 +116,12 @@ struct Options {
     passes: usize,
     input: Input,
     flow_pull: Option<f32>,
+    plain_lk: bool,
 }
 
 fn report(title: &str, clip: &[ClipFrame], opt: &Options) -> Result<(), String> {
     println!("\n### {title}\n\n{}", table_header());
-    for (row, (name, cfg)) in configs(opt.ultra_light, opt.flow_pull)
-        .into_iter()
-        .enumerate()
-    {
+    for (row, (name, cfg)) in configs(opt.ultra_light, opt).into_iter().enumerate() {
         if opt.only.is_some_and(|only| only != row) {
             continue;
         }
@@ -233,6 +233,7 @@ fn main() -> Result<(), String> {
         flow_pull: arg("--flow-pull")
             .map(|v| v.parse().map_err(|e| format!("--flow-pull {v}: {e}")))
             .transpose()?,
+        plain_lk: args.iter().any(|a| a == "--plain-lk"),
     };
     println!(
         "correct frame: NME (inter-ocular) < {CORRECT_NME}; M3 mirror average {}; input {:?}; \

@@ -60,6 +60,13 @@ pub struct LkConfig {
     /// 1e-4 is on gradients scaled to 0..1, i.e. 6.5 in our 0..255 units — we take 1.0, since faces
     /// have gentle texture and the filter falls back to the detection anyway).
     pub min_eigenvalue: f32,
+    /// Solve each window's motion together with a brightness offset between the two frames (the
+    /// window's gradients taken about their mean), so a change of exposure does not read as
+    /// motion. A window whose gradients about their mean fail `min_eigenvalue` (a single edge or
+    /// a smooth ramp, where the offset and the motion cannot be told apart) is tracked as plain
+    /// Lucas–Kanade. On by default: under ±30 % changing light it halves the flow filter's
+    /// jitter on still faces (BENCHMARKS.md, "The flow filter under changing light").
+    pub offset_invariant: bool,
 }
 
 impl Default for LkConfig {
@@ -70,6 +77,7 @@ impl Default for LkConfig {
             max_iterations: 10,
             epsilon: 0.01,
             min_eigenvalue: 1.0,
+            offset_invariant: true,
         }
     }
 }
@@ -583,8 +591,12 @@ impl PyramidalLk {
                 let fx = s.p[0] * scale - 0.5;
                 let fy = s.p[1] * scale - 0.5;
                 let (cx, cy) = (fx - (po[0] >> l) as f32, fy - (po[1] >> l) as f32);
-                let [gxx, gxy, gyy] =
+                let mut sums =
                     self.window_gradients(pi, cx - hw as f32 - 1.0, cy - hw as f32 - 1.0, slot);
+                if cfg.offset_invariant {
+                    sums = self.centre_gradients(n, slot, sums);
+                }
+                let [gxx, gxy, gyy] = sums;
                 let det = gxx * gyy - gxy * gxy;
                 let min_eig = 0.5 * (gxx + gyy - ((gxx - gyy).powi(2) + 4.0 * gxy * gxy).sqrt());
                 if min_eig / area < cfg.min_eigenvalue || det.abs() < f32::EPSILON {
@@ -679,6 +691,41 @@ impl PyramidalLk {
         }
         self.sample_bordered(img, x, y);
         self.gradients(n, slot)
+    }
+
+    /// The window's gradients in `slot` taken about their mean, and their matrix
+    /// Σ g·gᵀ − N·ḡ·ḡᵀ, when that matrix keeps a smallest eigenvalue of `min_eigenvalue` per pixel;
+    /// else `sums` with the gradients left as they are.
+    ///
+    /// Why this solves for a brightness offset β with the motion: the least-squares system of
+    /// Σ (I − J − g·d − β)² eliminates β as Σ (g − ḡ)(g − ḡ)ᵀ · d = Σ (g − ḡ) · (I − J), so the
+    /// mismatch kernels, summing the stored gradients times the difference, need no change.
+    /// Plain code: n² subtractions per window and level, beside the kernels' n² per iteration.
+    #[inline(always)]
+    fn centre_gradients(&mut self, n: usize, slot: usize, sums: [f32; 3]) -> [f32; 3] {
+        let st = self.stride;
+        let at = slot * n * st;
+        let (gx, gy) = (&mut self.gx[at..at + n * st], &mut self.gy[at..at + n * st]);
+        let (mut sx, mut sy) = (0.0f32, 0.0f32);
+        for r in 0..n {
+            sx += gx[r * st..r * st + n].iter().sum::<f32>();
+            sy += gy[r * st..r * st + n].iter().sum::<f32>();
+        }
+        let area = (n * n) as f32;
+        let (mx, my) = (sx / area, sy / area);
+        let c = [sums[0] - sx * mx, sums[1] - sx * my, sums[2] - sy * my];
+        let min_eig = 0.5 * (c[0] + c[2] - ((c[0] - c[2]).powi(2) + 4.0 * c[1] * c[1]).sqrt());
+        // NaN (a non-finite window) falls back too.
+        if min_eig.is_nan() || min_eig / area < self.config.min_eigenvalue {
+            return sums;
+        }
+        // Only the window's n columns: the padding past them stays zero, which is what keeps it
+        // out of the mismatch sums.
+        for r in 0..n {
+            gx[r * st..r * st + n].iter_mut().for_each(|v| *v -= mx);
+            gy[r * st..r * st + n].iter_mut().for_each(|v| *v -= my);
+        }
+        c
     }
 
     /// Samples the previous image's `(n + 2)²` window with its top-left sample at (x, y) into
@@ -1867,6 +1914,57 @@ mod tests {
                 "{a:?} {b:?}"
             );
         }
+    }
+
+    /// A change of exposure between the frames (grey × 1.05 + 3) on fine texture: plain
+    /// Lucas–Kanade reads part of it as motion, the offset-invariant window does not.
+    #[test]
+    fn a_brightness_change_does_not_read_as_motion() {
+        let fine = [[1.0 / 3.0, 0.0], [0.0, 1.0 / 3.0]];
+        let shift = [1.3, -0.7];
+        let img0 = warped(fine, [0.0, 0.0]);
+        let mut img1 = warped(fine, shift);
+        for v in img1.data_mut() {
+            *v = (f32::from(*v) * 1.05 + 3.0).round().min(255.0) as u8;
+        }
+        let (mut p0, mut p1) = (Pyramid::new(), Pyramid::new());
+        p0.build(&img0, 2);
+        p1.build(&img1, 2);
+        let from: Vec<[f32; 2]> = (0..60)
+            .map(|i| [100.0 + 7.3 * i as f32, 120.0 + 4.1 * (i % 37) as f32])
+            .collect();
+        let median_error = |offset_invariant: bool| {
+            let n = from.len();
+            let (mut to, mut st, mut err) = (vec![[0.0; 2]; n], vec![false; n], vec![0.0; n]);
+            let mut lk = PyramidalLk::new(LkConfig {
+                offset_invariant,
+                ..LkConfig::default()
+            })
+            .unwrap();
+            lk.track(&p0, &p1, &from, &mut to, &mut st, &mut err)
+                .unwrap();
+            let mut e: Vec<f32> = from
+                .iter()
+                .zip(&to)
+                .zip(&st)
+                .filter(|&(_, &ok)| ok)
+                .map(|((a, b), _)| {
+                    ((b[0] - a[0] - shift[0]).powi(2) + (b[1] - a[1] - shift[1]).powi(2)).sqrt()
+                })
+                .collect();
+            assert!(e.len() > n / 2, "{offset_invariant}: {} tracked", e.len());
+            e.sort_by(f32::total_cmp);
+            e[e.len() / 2]
+        };
+        let (plain, invariant) = (median_error(false), median_error(true));
+        assert!(
+            invariant < 0.1,
+            "offset-invariant median error {invariant} px"
+        );
+        assert!(
+            plain > 3.0 * invariant,
+            "plain {plain} px, offset-invariant {invariant} px"
+        );
     }
 
     #[test]

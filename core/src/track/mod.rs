@@ -80,9 +80,10 @@ pub const DEFAULT_MIN_DETECTION_CONFIDENCE: f32 = 0.95;
 pub const FLOW_REFERENCE_FACE_PX: f32 = 200.0;
 
 /// Default [`TrackerConfig::flow_pull`]. On `track_eval`'s clips with the light swinging ±30 %
-/// (a phone's exposure) the thesis' filter (0) made landmarks less accurate and less steady than
-/// no filter at all; 0.25 is as accurate and as steady as no filter there and keeps two thirds of
-/// the filter's jitter cut on steadily lit still faces (BENCHMARKS.md, "Tracking").
+/// (a phone's exposure) the thesis' filter (0) made landmarks less accurate than no filter at all:
+/// a point kept on its flow keeps any error it once had. With 0.25 the filter is as accurate as
+/// no filter there and steadier, and keeps most of the thesis' jitter cut on steadily lit still
+/// faces (BENCHMARKS.md, "Tracking").
 pub const DEFAULT_FLOW_PULL: f32 = 0.25;
 
 /// Whole-frame face detection (`core::detect`'s detector implements it).
