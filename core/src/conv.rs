@@ -66,7 +66,7 @@
 
 /// [`Products::whole_graph_tolerance`] of the int8 form. Each layer's input is rounded to 1/255
 /// of its largest value, so a product is off by up to half of that step times its weight.
-/// Measured on the shipped networks (the tests' inputs): up to 1.24e-2 for the mouth net's
+/// Measured on the shipped networks (the tests' inputs): up to 1.08e-2 for the mouth net's
 /// gesture logits, 7.5e-3 for level 1's face logit, up to 2.0e-3 for every other output (the
 /// detector's layers hold f16 weights and stay f32). What this costs in landmarks is measured end
 /// to end (`models/MODEL_CARD.md`).
@@ -75,7 +75,7 @@ pub(crate) const INT8_TOLERANCE: f32 = 2e-2;
 
 /// [`INT8_TOLERANCE`] of [`Products::Maddubs`], whose inputs keep 131–160 steps instead of 255
 /// ([`maddubs_levels`]). Measured on the shipped networks (the tests' inputs): up to 2.6e-2 for
-/// level 1's face logit, 1.9e-2 and 1.5e-2 for the mouth and brow nets' gesture logits, up to
+/// level 1's face logit, 1.5e-2 and 8.9e-3 for the brow and mouth nets' gesture logits, up to
 /// 3.9e-3 for every other output. What this costs in landmarks is measured end to end
 /// (`models/MODEL_CARD.md`).
 #[cfg(test)]

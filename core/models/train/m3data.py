@@ -249,6 +249,18 @@ def gestures_from_teacher(t):
     return mouth, brows
 
 
+def gesture_scores(t):
+    """The teacher's continuous scores behind gestures_from_teacher's classes: (mouth [smile, pucker,
+    frown], brows [raise, down]), each the same mean or maximum of blendshapes the thresholds read.
+    Symmetric in left and right, so a mirrored face keeps them."""
+    b = t["blendshapes"]
+    mouth = [0.5 * (b["mouthSmileLeft"] + b["mouthSmileRight"]), b["mouthPucker"],
+             0.5 * (b["mouthFrownLeft"] + b["mouthFrownRight"])]
+    brows = [max(b["browInnerUp"], 0.5 * (b["browOuterUpLeft"] + b["browOuterUpRight"])),
+             0.5 * (b["browDownLeft"] + b["browDownRight"])]
+    return np.array(mouth, np.float32), np.array(brows, np.float32)
+
+
 def yaw_class(yaw):
     if yaw < -60:
         return 0
@@ -366,6 +378,7 @@ def load_faces68(split):
                     "yaw_class": yaw_class(yaw), "mouth": -1, "brows": -1, "gaze": None}
             if found:
                 face["mouth"], face["brows"] = gestures_from_teacher(t)
+                face["mouth_scores"], face["brows_scores"] = gesture_scores(t)
                 face["gaze"] = gaze_from_teacher(t)
             faces.append(face)
     return images, faces

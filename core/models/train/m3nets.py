@@ -65,7 +65,8 @@ class Level2(nn.Module):
     """Zone patch (1 x H x W) + level-1 yaw probabilities (5) -> zone landmarks (patch units) and
     gesture logits or a gaze vector. The yaw enters in an extra fully connected layer (thesis)."""
 
-    def __init__(self, width, height, n_points, n_gestures=0, gaze=False, spec="8s-16s-32s-48s", hidden=64):
+    def __init__(self, width, height, n_points, n_gestures=0, gaze=False, spec="8s-16s-32s-48s", hidden=64,
+                 n_scores=0):
         super().__init__()
         self.trunk = trunk(spec)
         features = last_channels(spec) * out_side(width, spec) * out_side(height, spec)
@@ -75,18 +76,26 @@ class Level2(nn.Module):
         self.landmarks = nn.Linear(hidden, 2 * n_points)
         self.gestures = nn.Linear(hidden, n_gestures) if n_gestures else None
         self.gaze = nn.Linear(hidden, 3) if gaze else None
+        # Training-only head (not in forward, so not exported): the teacher's continuous gesture
+        # scores, a denser signal for the shared features than the rare thresholded classes.
+        self.scores = nn.Linear(hidden, n_scores) if n_scores else None
         with torch.no_grad():
             self.landmarks.bias.fill_(0.5)
             if self.gaze is not None:
                 self.gaze.bias.copy_(torch.tensor([0.0, 0.0, -1.0]))
 
-    def forward(self, patch, yaw):
-        h = self.fc2(torch.cat([self.fc1(self.trunk(patch)), yaw], dim=1))
+    def features(self, patch, yaw):
+        return self.fc2(torch.cat([self.fc1(self.trunk(patch)), yaw], dim=1))
+
+    def heads(self, h):
         if self.gestures is not None:
             return self.landmarks(h), self.gestures(h)
         if self.gaze is not None:
             return self.landmarks(h), self.gaze(h)
         return (self.landmarks(h),)
+
+    def forward(self, patch, yaw):
+        return self.heads(self.features(patch, yaw))
 
 
 def n_params(m):
