@@ -379,6 +379,7 @@ def load_faces68(split):
             if found:
                 face["mouth"], face["brows"] = gestures_from_teacher(t)
                 face["mouth_scores"], face["brows_scores"] = gesture_scores(t)
+                face["pose"] = np.array([t["yaw_deg"], t["pitch_deg"]], np.float32) / 60.0
                 face["gaze"] = gaze_from_teacher(t)
             faces.append(face)
     return images, faces

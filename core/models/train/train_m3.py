@@ -82,6 +82,14 @@ GENKI_GESTURE_NETS = ()
 # (MODEL_CARD.md, "Measured and not adopted").
 SCORE_NETS = ("mouth",)
 SCORE_WEIGHT = 10.0
+# Zone nets that regress the teacher's head yaw and pitch (/ 60°) the same way (SCORE_WEIGHT, a
+# training-only head): where the jaw's contour lies depends on the turn. None by default.
+POSE_NETS = ()
+# Zone nets that also locate, in a training-only head, the 68 points outside their zone that fall
+# in their patch's frame (point loss × AUX_POINT_WEIGHT): more tasks on the same features, as the
+# face zone's nose outputs help its jaw. None by default.
+AUX_POINT_NETS = ()
+AUX_POINT_WEIGHT = 0.5
 # Share of training patches smeared by a motion blur (motion_blur) whose length is drawn up to
 # 2 × MOTION_BLUR_MAX_PX image pixels: a phone frame of a fast face. 0 in the shipped nets: at 0.3
 # fewer blurred faces were lost in tracking but sharp faces' NME rose (MODEL_CARD.md, "Measured
@@ -101,7 +109,9 @@ ZONE_TRUNK = {"eye": "8s-16s-16c-32s", "face": "16s-32s-48s-48c-96s", "mouth_fin
               "default": "8s-16s-32s-32c-48s"}
 STEPS = {"level1": 15000, "brows": 10000, "eye": 10000, "mouth": 12500, "face": 15000, "nose": 10000,
          "mouth_fine": 10000}
-ZONE_SEED = {"brows": 2, "eye": 3, "mouth": 4, "face": 5, "nose": 6, "mouth_fine": 7}
+# The mouth's 5 (20261127) is the second of the two seeds its score head was trained with, the one
+# with the lower validation NME (MODEL_CARD.md, "Teacher scores for the gesture features").
+ZONE_SEED = {"brows": 2, "eye": 3, "mouth": 5, "face": 5, "nose": 6, "mouth_fine": 7}
 # Standard deviation of the Gaussian jitter of a zone's two reference points in training, in units of
 # the outer-eye-corner distance (zone_sample): the size of the reference errors the net must absorb.
 REF_NOISE = {"default": 0.045}
@@ -157,6 +167,8 @@ class Data:
             m["pts"] = pts[D.MIRROR68]
             m["yaw"] = -f["yaw"]
             m["yaw_class"] = 4 - f["yaw_class"]
+            if f.get("pose") is not None:
+                m["pose"] = f["pose"] * np.array([-1.0, 1.0], np.float32)
             if f["gaze"] is not None:
                 r, l = f["gaze"]
                 m["gaze"] = (l * [-1, 1, 1], r * [-1, 1, 1])
@@ -384,6 +396,14 @@ def occlude_patch(patch, data, rng):
     return np.clip(np.floor(out + 0.5), 0, 255).astype(np.uint8)
 
 
+def score_dim(name):
+    """Width of a net's training-only head: the other points (AUX_POINT_NETS), the head pose
+    (POSE_NETS), else its gestures' teacher scores (m3data.gesture_scores)."""
+    if name in AUX_POINT_NETS:
+        return 2 * (68 - len(D.ZONES[name]["indices68"]))
+    return 2 if name in POSE_NETS else 3 if name == "mouth" else 2
+
+
 def zone_batch(name, data, faces, rng, weights, genki=None):
     zone = D.ZONES[name]
     W, H = zone["width"], zone["height"]
@@ -396,7 +416,7 @@ def zone_batch(name, data, faces, rng, weights, genki=None):
     GZM = np.zeros(BATCH, np.float32)
     SM = np.full(BATCH, -1.0, np.float32)  # GENKI smile label (mouth only)
     LM = np.ones(BATCH, np.float32)
-    n_sc = 3 if name == "mouth" else 2
+    n_sc = score_dim(name)
     SC = np.zeros((BATCH, n_sc), np.float32)
     SCM = np.zeros(BATCH, np.float32)
     idx = rng.choice(len(weights), BATCH, p=weights)
@@ -423,9 +443,16 @@ def zone_batch(name, data, faces, rng, weights, genki=None):
         X[k, 0] = patch / 255.0
         Y[k] = tgt.reshape(-1)
         YAW[k] = soft_yaw(f["yaw_class"], rng)
+        if name in AUX_POINT_NETS:
+            others = [j for j in range(68) if j not in zone["indices68"]]
+            SC[k] = (D.apply(D.invert(A), f["pts"][others]) / [W, H]).reshape(-1)
+            SCM[k] = 1.0
+        elif name in POSE_NETS and f.get("pose") is not None:
+            SC[k] = f["pose"]
+            SCM[k] = 1.0
         if name in ("mouth", "brows"):
             G[k] = f[name]
-            if f.get(name + "_scores") is not None:
+            if name not in POSE_NETS + AUX_POINT_NETS and f.get(name + "_scores") is not None:
                 SC[k] = f[name + "_scores"]
                 SCM[k] = 1.0
         elif name == "eye" and f["gaze"] is not None:
@@ -492,7 +519,7 @@ def train_zone(name, data, steps, fh, genki=None):
     spec = ZONE_TRUNK.get(name, ZONE_TRUNK["default"])
     # Each net seeds its own initialisation so it does not depend on which nets ran before it.
     torch.manual_seed(SEED + ZONE_SEED[name])
-    n_scores = (3 if name == "mouth" else 2) if name in SCORE_NETS and gest else 0
+    n_scores = score_dim(name) if (name in SCORE_NETS and gest) or name in POSE_NETS + AUX_POINT_NETS else 0
     model = Level2(zone["width"], zone["height"], len(zone["indices68"]), gest, bool(zone.get("gaze")),
                    spec=spec, n_scores=n_scores).to(DEVICE)
     log(fh, f"{name}: {n_params(model)} parameters, {steps} steps of {BATCH}")
@@ -533,15 +560,18 @@ def train_zone(name, data, steps, fh, genki=None):
                 p = F.softmax(extra[s], dim=1)[:, 0].clamp(1e-6, 1 - 1e-6)
                 l_x = l_x + F.binary_cross_entropy(p, SM[s])
             loss = l_lm + GESTURE_WEIGHT * l_x
-            if n_scores:
-                e = (model.scores(h) - SC).pow(2).sum(1)
-                loss = loss + SCORE_WEIGHT * (e * SCM).sum() / SCM.sum().clamp(min=1)
         elif not zone.get("gaze"):
             loss = l_lm
         else:
             g = F.normalize(extra, dim=1)
             l_x = ((1 - (g * GZ).sum(1)) * GZM).sum() / GZM.sum().clamp(min=1)
             loss = l_lm + GAZE_WEIGHT * 10 * l_x
+        if n_scores and name in AUX_POINT_NETS:
+            e = point_loss(model.scores(h), SC)
+            loss = loss + AUX_POINT_WEIGHT * (e * SCM).sum() / SCM.sum().clamp(min=1)
+        elif n_scores:
+            e = (model.scores(h) - SC).pow(2).sum(1)
+            loss = loss + SCORE_WEIGHT * (e * SCM).sum() / SCM.sum().clamp(min=1)
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -636,6 +666,11 @@ def main():
     # e.g. --score-nets brows,mouth (default SCORE_NETS) and --score-weight W
     ap.add_argument("--score-nets", default=None)
     ap.add_argument("--score-weight", type=float, default=None)
+    # e.g. --pose-nets face,nose (default POSE_NETS)
+    ap.add_argument("--pose-nets", default=None)
+    # e.g. --aux-point-nets face,nose (default AUX_POINT_NETS) and --aux-point-weight W
+    ap.add_argument("--aux-point-nets", default=None)
+    ap.add_argument("--aux-point-weight", type=float, default=None)
     # Share of patches with motion blur (default MOTION_BLUR_P)
     ap.add_argument("--motion-blur", type=float, default=None)
     # e.g. --ref-noise face=0.025,nose=0.025 (default REF_NOISE)
@@ -655,7 +690,14 @@ def main():
     ap.add_argument("--no-calibrate", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
     global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE, SEED, EMA_DECAYS, TURNED_NETS, TURNED_SHARE
-    global MOTION_BLUR_P, GENKI_GESTURE_NETS, SCORE_NETS, SCORE_WEIGHT, OCCLUDER_NETS, OCCLUDER_P
+    global MOTION_BLUR_P, GENKI_GESTURE_NETS, SCORE_NETS, SCORE_WEIGHT, OCCLUDER_NETS, OCCLUDER_P, POSE_NETS
+    global AUX_POINT_NETS, AUX_POINT_WEIGHT
+    if a.aux_point_nets is not None:
+        AUX_POINT_NETS = tuple(n for n in a.aux_point_nets.split(",") if n)
+    if a.aux_point_weight is not None:
+        AUX_POINT_WEIGHT = a.aux_point_weight
+    if a.pose_nets is not None:
+        POSE_NETS = tuple(n for n in a.pose_nets.split(",") if n)
     if a.occluder_nets is not None:
         OCCLUDER_NETS = tuple(n for n in a.occluder_nets.split(",") if n)
     if a.occluder_p is not None:
@@ -710,7 +752,7 @@ def main():
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
-            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} turned={TURNED_NETS}@{TURNED_SHARE} genki_gestures={GENKI_GESTURE_NETS} scores={SCORE_NETS}@{SCORE_WEIGHT} occluders={OCCLUDER_NETS}@{OCCLUDER_P} motion_blur={MOTION_BLUR_P} ref_noise={REF_NOISE}"
+            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} turned={TURNED_NETS}@{TURNED_SHARE} genki_gestures={GENKI_GESTURE_NETS} scores={SCORE_NETS}@{SCORE_WEIGHT} occluders={OCCLUDER_NETS}@{OCCLUDER_P} pose={POSE_NETS} aux_points={AUX_POINT_NETS}@{AUX_POINT_WEIGHT} motion_blur={MOTION_BLUR_P} ref_noise={REF_NOISE}"
             f"{f' shape_warp={SHAPE_WARP}' if SHAPE_WARP else ''} device={DEVICE}")
     pseudo = None
     if any(n in only for n in PSEUDO_NETS):
@@ -769,6 +811,8 @@ def run_zones_in_processes(zones, a, fh):
              "--motion-blur", str(MOTION_BLUR_P), "--genki-gesture-nets", ",".join(GENKI_GESTURE_NETS),
              "--score-nets", ",".join(SCORE_NETS), "--score-weight", str(SCORE_WEIGHT),
              "--occluder-nets", ",".join(OCCLUDER_NETS), "--occluder-p", str(OCCLUDER_P),
+             "--pose-nets", ",".join(POSE_NETS), "--aux-point-nets", ",".join(AUX_POINT_NETS),
+             "--aux-point-weight", str(AUX_POINT_WEIGHT),
              "--ref-noise", ",".join(f"{k}={v}" for k, v in REF_NOISE.items())]
     if SHAPE_WARP:
         base += ["--shape-warp", ",".join(f"{k}={v}" for k, v in SHAPE_WARP.items())]
