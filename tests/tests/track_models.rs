@@ -263,10 +263,11 @@ fn a_fast_tilted_head_stays_tracked_through_blur_and_light() {
 }
 
 /// Changing light (brightness ±30 % over 90 frames, a phone's exposure) on the default clip: the
-/// flow filter must not make the landmarks less accurate or less steady than no filter. The
-/// thesis' filter (`flow_pull` 0, which keeps a flow point whole) did both here: NME 3.83 against
-/// 3.45 %, still jitter 0.576 against 0.211 px (AMD EPYC Zen 4, native); the default pull gives
-/// 3.47 % and 0.210 px.
+/// flow filter must keep the landmarks as accurate as no filter and steadier. Measured (AMD EPYC
+/// Zen 4, native): the default 3.47 % and 0.143 px still jitter, no filter 3.49 % and 0.205 px.
+/// With plain Lucas–Kanade (`LkConfig::offset_invariant` off) the default pull is only level
+/// with no filter (3.50 %, 0.211 px) and the thesis' filter (`flow_pull` 0) worse on both (3.85 %,
+/// 0.580 px): the exposure change reads as motion.
 #[test]
 fn the_flow_filter_holds_under_changing_light() {
     let Some(data) = shared_data_or_skip("track_models") else {
@@ -303,7 +304,7 @@ fn the_flow_filter_holds_under_changing_light() {
         off.mean_nme
     );
     assert!(
-        filtered.jitter_px <= 1.15 * off.jitter_px,
+        filtered.jitter_px <= 0.85 * off.jitter_px,
         "jitter with the filter {} px, without {} px",
         filtered.jitter_px,
         off.jitter_px
@@ -312,10 +313,10 @@ fn the_flow_filter_holds_under_changing_light() {
 
 /// A head held tilted past what the upright detector finds (40°, alternately either way per
 /// segment), with no track to have lost: the whole frame is searched turned, and the faces found
-/// are tracked with level 1 reading them turned by their roll. Measured on this clip: a face on 257
-/// of 360 frames and 249 correct (portable path 266 and 257; 258 and 238 with upright checks of
-/// tracked faces; 127 and 120 with the upright detector alone). The clip moves by a few frames
-/// with the last bits of the arithmetic, hence the margin.
+/// are tracked with level 1 reading them turned by their roll. Measured on this clip (AMD EPYC
+/// Zen 4): a face on 275 of 360 frames and 265 correct natively, 288 and 272 on the portable
+/// path; with the upright detector alone (Intel Xeon) 127 and 120. The clip moves by a few frames
+/// with the last bits of the arithmetic and by tens with a retrained net, hence the margin.
 #[test]
 fn a_head_tilted_from_the_start_is_found_turned() {
     let Some(stats) = tilted_clip_stats(
