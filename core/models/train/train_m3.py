@@ -798,6 +798,11 @@ def main():
                                   for f in ["level1.onnx"] + [f"{n}.onnx" for n in D.ZONES]):
         value, n = calibrate_m3.write(OUT)
         log(fh, f"x_offset_iod = {value}, shape prior fitted (calibrate_m3.py, {n} training faces)")
+    # The brow net's gesture decision offsets (calibrate_gestures.py), fitted on GENKI-4K crops no
+    # net learns from, once the nets that place its patch exist.
+    if not a.no_calibrate and "brows" in only and os.path.exists(os.path.join(OUT, "brows.onnx")):
+        import calibrate_gestures
+        calibrate_gestures.main(OUT)
     log(fh, f"done {only}")
 
 
