@@ -96,6 +96,10 @@ AUX_POINT_WEIGHT = 0.5
 # and not adopted").
 MOTION_BLUR_P = 0.0
 MOTION_BLUR_MAX_PX = 4.0
+# Share of level 1's crops smeared the same way for its face / not-face output only (their
+# landmarks and yaw are not learned from): a tracked face is lost when the check fails on a
+# blurred frame, while blur in the landmark loss costs sharp faces' accuracy. 0 in the shipped net.
+FACE_BLUR_P = 0.0
 # Zone nets whose training patches are partly covered, with probability OCCLUDER_P, by a textured
 # occluder (occlude_patch: an ellipse of another training image's pixels, as a hand, a microphone
 # or hair over the face), and that share. None by default.
@@ -281,6 +285,7 @@ def level1_batch(data, faces, rng, weights):
     Y = np.zeros((BATCH, 64), np.float32)
     yaw = np.zeros(BATCH, np.int64)
     face = np.zeros(BATCH, np.float32)
+    sharp = np.ones(BATCH, np.float32)
     idx = rng.choice(len(weights), BATCH, p=weights)
     for k, i in enumerate(idx):
         f = faces[i]
@@ -303,12 +308,18 @@ def level1_batch(data, faces, rng, weights):
             c, s = D.level1_negative(c, s, img.shape, rng)
         A = D.level1_map(c, s, S, cs, angle)
         patch = photometric(D.sample(img, A, S, S), rng, scale=float(np.hypot(A[0, 0], A[1, 0])))
+        if FACE_BLUR_P > 0 and rng.random() < FACE_BLUR_P:
+            blur = rng.uniform(2.0, 2.0 * MOTION_BLUR_MAX_PX) / float(np.hypot(A[0, 0], A[1, 0]))
+            if blur >= 1.5:
+                patch = motion_blur(patch.astype(np.float32), rng, blur).clip(0, 255).astype(np.uint8)
+                sharp[k] = 0.0
         X[k, 0] = patch / 255.0
         pts = D.apply(D.invert(A), f["pts"][D.LEVEL1_INDICES]) / S
         Y[k] = pts.reshape(-1)
         yaw[k] = f["yaw_class"]
         face[k] = 1.0 if positive else 0.0
-    return torch.from_numpy(X), torch.from_numpy(Y), torch.from_numpy(yaw), torch.from_numpy(face)
+    t = torch.from_numpy
+    return t(X), t(Y), t(yaw), t(face), t(sharp)
 
 
 def soft_yaw(cls, rng):
@@ -492,9 +503,10 @@ def train_level1(data, steps, fh):
     t0, acc = time.time(), np.zeros(3)
     model.train()
     for step in range(steps):
-        X, Y, yaw, face = (t.to(DEVICE) for t in level1_batch(data, faces, rng, weights))
+        X, Y, yaw, face, sharp = (t.to(DEVICE) for t in level1_batch(data, faces, rng, weights))
         lm, yl, fl = model(X)
-        pos = face > 0.5
+        # Blurred crops (FACE_BLUR_P) teach the face output only.
+        pos = (face > 0.5) & (sharp > 0.5)
         l_lm = point_loss(lm[pos], Y[pos]).mean() if pos.any() else lm.sum() * 0
         l_yaw = F.cross_entropy(yl[pos], yaw[pos], weight=yaw_w) if pos.any() else yl.sum() * 0
         l_face = F.binary_cross_entropy_with_logits(fl[:, 0], face)
@@ -666,6 +678,8 @@ def main():
     # e.g. --score-nets brows,mouth (default SCORE_NETS) and --score-weight W
     ap.add_argument("--score-nets", default=None)
     ap.add_argument("--score-weight", type=float, default=None)
+    # Share of level 1's crops blurred for its face output only (default FACE_BLUR_P)
+    ap.add_argument("--face-blur", type=float, default=None)
     # e.g. --pose-nets face,nose (default POSE_NETS)
     ap.add_argument("--pose-nets", default=None)
     # e.g. --aux-point-nets face,nose (default AUX_POINT_NETS) and --aux-point-weight W
@@ -691,7 +705,9 @@ def main():
     a = ap.parse_args()
     global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE, SEED, EMA_DECAYS, TURNED_NETS, TURNED_SHARE
     global MOTION_BLUR_P, GENKI_GESTURE_NETS, SCORE_NETS, SCORE_WEIGHT, OCCLUDER_NETS, OCCLUDER_P, POSE_NETS
-    global AUX_POINT_NETS, AUX_POINT_WEIGHT
+    global AUX_POINT_NETS, AUX_POINT_WEIGHT, FACE_BLUR_P
+    if a.face_blur is not None:
+        FACE_BLUR_P = a.face_blur
     if a.aux_point_nets is not None:
         AUX_POINT_NETS = tuple(n for n in a.aux_point_nets.split(",") if n)
     if a.aux_point_weight is not None:
@@ -752,7 +768,7 @@ def main():
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
-            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} turned={TURNED_NETS}@{TURNED_SHARE} genki_gestures={GENKI_GESTURE_NETS} scores={SCORE_NETS}@{SCORE_WEIGHT} occluders={OCCLUDER_NETS}@{OCCLUDER_P} pose={POSE_NETS} aux_points={AUX_POINT_NETS}@{AUX_POINT_WEIGHT} motion_blur={MOTION_BLUR_P} ref_noise={REF_NOISE}"
+            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} turned={TURNED_NETS}@{TURNED_SHARE} genki_gestures={GENKI_GESTURE_NETS} scores={SCORE_NETS}@{SCORE_WEIGHT} occluders={OCCLUDER_NETS}@{OCCLUDER_P} pose={POSE_NETS} aux_points={AUX_POINT_NETS}@{AUX_POINT_WEIGHT} motion_blur={MOTION_BLUR_P} face_blur={FACE_BLUR_P} ref_noise={REF_NOISE}"
             f"{f' shape_warp={SHAPE_WARP}' if SHAPE_WARP else ''} device={DEVICE}")
     pseudo = None
     if any(n in only for n in PSEUDO_NETS):
