@@ -72,11 +72,7 @@ def log_probs(model_dir, teacher):
     for path, _, name in D.genki_files("train"):
         if name not in teacher or teacher[name][1] < 0:
             continue
-        img = D.load_gray(path)
-        box = np.array([6.0, 8.0, 52.0, 52.0])
-        for _ in range(2):
-            r = m3.run(img, box)
-            box = D.box_of(r["landmarks68"])
+        r = E.read_genki_crop(m3, D.load_gray(path))
         out.append((teacher[name][1], np.log(np.array(list(r["brows"].values())) + 1e-9)))
     return np.array([y for y, _ in out]), np.array([p for _, p in out])
 

@@ -118,6 +118,16 @@ def summarize(errs):
     return {k: float(np.mean([e[k] for e in errs])) for k in errs[0]}
 
 
+def read_genki_crop(m3, img):
+    """`m3`'s result on a GENKI-4K crop: run on D.GENKI_START_BOX, then again on the box of the
+    points it found (the crops carry no box)."""
+    box = np.array(D.GENKI_START_BOX)
+    for _ in range(2):
+        r = m3.run(img, box)
+        box = D.box_of(r["landmarks68"])
+    return r
+
+
 def measure(m3, faces, boxes, grays, genki):
     """The Python reference's metrics in `m3`'s mode: NME per zone, yaw-class accuracy, gestures on
     the validation faces (`grays`: their images by name), smile on the held-out GENKI-4K split
@@ -154,10 +164,7 @@ def measure(m3, faces, boxes, grays, genki):
     teacher = genki_teacher()
     ys, ps, t_mouth, t_brows = [], [], [], []
     for img, label, name in genki:
-        box = np.array([6.0, 8.0, 52.0, 52.0])
-        for _ in range(2):
-            r = m3.run(img, box)
-            box = D.box_of(r["landmarks68"])
+        r = read_genki_crop(m3, img)
         ys.append(label)
         ps.append(r["mouth"]["smile"] > 0.5)
         if name in teacher:

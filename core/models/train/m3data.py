@@ -399,6 +399,11 @@ def genki_files(split):
     return out
 
 
+# Where a GENKI-4K crop's face is first looked for (the crops are 64x64, the face about 52 px):
+# level 1 reads it there, then again on the box of its own points.
+GENKI_START_BOX = (6.0, 8.0, 52.0, 52.0)
+
+
 def load_genki(split):
     """GENKI-4K crops: (gray 64x64, smile 0/1, file name) of genki_files(split)."""
     return [(load_gray(path), label, f) for path, label, f in genki_files(split)]

@@ -238,14 +238,20 @@ def motion_blur(p, rng, k):
     return cv2.filter2D(p, -1, kern / kern.sum(), borderType=cv2.BORDER_REPLICATE)
 
 
+def smear(p, rng, scale):
+    """`p` (float) smeared by a motion blur whose length is drawn up to 2 × MOTION_BLUR_MAX_PX image
+    pixels (`scale`: image pixels per patch pixel), and whether it was: a smear under 1.5 patch
+    pixels is left out."""
+    k = rng.uniform(2.0, 2.0 * MOTION_BLUR_MAX_PX) / scale
+    return (motion_blur(p, rng, k), True) if k >= 1.5 else (p, False)
+
+
 def photometric(p, rng, occlude=True, scale=1.0):
     """Illumination, blur, noise and occlusion on a patch; `scale`: image pixels per patch pixel
     (the motion blur's length is drawn in image pixels)."""
     p = p.astype(np.float32)
     if MOTION_BLUR_P > 0 and rng.random() < MOTION_BLUR_P:
-        k = rng.uniform(2.0, 2.0 * MOTION_BLUR_MAX_PX) / scale
-        if k >= 1.5:
-            p = motion_blur(p, rng, k)
+        p, _ = smear(p, rng, scale)
     # illumination: contrast, brightness, gamma, a linear gradient
     p = p * rng.uniform(0.6, 1.4) + rng.uniform(-40, 40)
     if rng.random() < 0.3:
@@ -309,9 +315,9 @@ def level1_batch(data, faces, rng, weights):
         A = D.level1_map(c, s, S, cs, angle)
         patch = photometric(D.sample(img, A, S, S), rng, scale=float(np.hypot(A[0, 0], A[1, 0])))
         if FACE_BLUR_P > 0 and rng.random() < FACE_BLUR_P:
-            blur = rng.uniform(2.0, 2.0 * MOTION_BLUR_MAX_PX) / float(np.hypot(A[0, 0], A[1, 0]))
-            if blur >= 1.5:
-                patch = motion_blur(patch.astype(np.float32), rng, blur).clip(0, 255).astype(np.uint8)
+            smeared, done = smear(patch.astype(np.float32), rng, float(np.hypot(A[0, 0], A[1, 0])))
+            if done:
+                patch = smeared.clip(0, 255).astype(np.uint8)
                 sharp[k] = 0.0
         X[k, 0] = patch / 255.0
         pts = D.apply(D.invert(A), f["pts"][D.LEVEL1_INDICES]) / S
@@ -407,12 +413,19 @@ def occlude_patch(patch, data, rng):
     return np.clip(np.floor(out + 0.5), 0, 255).astype(np.uint8)
 
 
-def score_dim(name):
-    """Width of a net's training-only head: the other points (AUX_POINT_NETS), the head pose
-    (POSE_NETS), else its gestures' teacher scores (m3data.gesture_scores)."""
+def score_head(name):
+    """What net `name`'s training-only head learns, and its width: the 68 points outside its zone
+    (AUX_POINT_NETS: "points", the list of those points), the head pose (POSE_NETS: "pose"), its
+    gestures' teacher scores (SCORE_NETS: "gestures", m3data.gesture_scores), or nothing
+    (None, 0)."""
     if name in AUX_POINT_NETS:
-        return 2 * (68 - len(D.ZONES[name]["indices68"]))
-    return 2 if name in POSE_NETS else 3 if name == "mouth" else 2
+        others = [j for j in range(68) if j not in D.ZONES[name]["indices68"]]
+        return "points", 2 * len(others), others
+    if name in POSE_NETS:
+        return "pose", 2, None
+    if name in SCORE_NETS and D.ZONES[name].get("gestures"):
+        return "gestures", 3 if name == "mouth" else 2, None
+    return None, 0, None
 
 
 def zone_batch(name, data, faces, rng, weights, genki=None):
@@ -427,7 +440,7 @@ def zone_batch(name, data, faces, rng, weights, genki=None):
     GZM = np.zeros(BATCH, np.float32)
     SM = np.full(BATCH, -1.0, np.float32)  # GENKI smile label (mouth only)
     LM = np.ones(BATCH, np.float32)
-    n_sc = score_dim(name)
+    head, n_sc, others = score_head(name)
     SC = np.zeros((BATCH, n_sc), np.float32)
     SCM = np.zeros(BATCH, np.float32)
     idx = rng.choice(len(weights), BATCH, p=weights)
@@ -454,18 +467,18 @@ def zone_batch(name, data, faces, rng, weights, genki=None):
         X[k, 0] = patch / 255.0
         Y[k] = tgt.reshape(-1)
         YAW[k] = soft_yaw(f["yaw_class"], rng)
-        if name in AUX_POINT_NETS:
-            others = [j for j in range(68) if j not in zone["indices68"]]
-            SC[k] = (D.apply(D.invert(A), f["pts"][others]) / [W, H]).reshape(-1)
-            SCM[k] = 1.0
-        elif name in POSE_NETS and f.get("pose") is not None:
-            SC[k] = f["pose"]
+        target = None
+        if head == "points":
+            target = (D.apply(D.invert(A), f["pts"][others]) / [W, H]).reshape(-1)
+        elif head == "pose":
+            target = f.get("pose")
+        elif head == "gestures":
+            target = f.get(name + "_scores")
+        if target is not None:
+            SC[k] = target
             SCM[k] = 1.0
         if name in ("mouth", "brows"):
             G[k] = f[name]
-            if name not in POSE_NETS + AUX_POINT_NETS and f.get(name + "_scores") is not None:
-                SC[k] = f[name + "_scores"]
-                SCM[k] = 1.0
         elif name == "eye" and f["gaze"] is not None:
             g = f["gaze"][0]  # the right eye's (the mirrored faces carry the other eye here)
             # camera frame -> patch frame: undo the patch's in-plane rotation
@@ -531,7 +544,7 @@ def train_zone(name, data, steps, fh, genki=None):
     spec = ZONE_TRUNK.get(name, ZONE_TRUNK["default"])
     # Each net seeds its own initialisation so it does not depend on which nets ran before it.
     torch.manual_seed(SEED + ZONE_SEED[name])
-    n_scores = score_dim(name) if (name in SCORE_NETS and gest) or name in POSE_NETS + AUX_POINT_NETS else 0
+    head, n_scores, _ = score_head(name)
     model = Level2(zone["width"], zone["height"], len(zone["indices68"]), gest, bool(zone.get("gaze")),
                    spec=spec, n_scores=n_scores).to(DEVICE)
     log(fh, f"{name}: {n_params(model)} parameters, {steps} steps of {BATCH}")
@@ -578,10 +591,10 @@ def train_zone(name, data, steps, fh, genki=None):
             g = F.normalize(extra, dim=1)
             l_x = ((1 - (g * GZ).sum(1)) * GZM).sum() / GZM.sum().clamp(min=1)
             loss = l_lm + GAZE_WEIGHT * 10 * l_x
-        if n_scores and name in AUX_POINT_NETS:
+        if head == "points":
             e = point_loss(model.scores(h), SC)
             loss = loss + AUX_POINT_WEIGHT * (e * SCM).sum() / SCM.sum().clamp(min=1)
-        elif n_scores:
+        elif head:
             e = (model.scores(h) - SC).pow(2).sum(1)
             loss = loss + SCORE_WEIGHT * (e * SCM).sum() / SCM.sum().clamp(min=1)
         opt.zero_grad()
@@ -641,7 +654,7 @@ def genki_with_refs(level1_path, split, teacher=None, only_found=False):
             mouth = -1
         if only_found and name not in teacher:
             continue
-        box = np.array([6.0, 8.0, 52.0, 52.0])
+        box = np.array(D.GENKI_START_BOX)
         pts = None
         for _ in range(2):
             pts, _, _ = l1.run(img, box)
@@ -651,6 +664,11 @@ def genki_with_refs(level1_path, split, teacher=None, only_found=False):
         full[36], full[45] = pts[D.LEVEL1_INDICES.index(36)], pts[D.LEVEL1_INDICES.index(45)]
         out.append((img, full, float(label), mouth, brows))
     return out
+
+
+def net_names(arg):
+    """"mouth,brows" -> ("mouth", "brows"); "" -> () (the value a flag gives for none)."""
+    return tuple(n for n in arg.split(",") if n)
 
 
 def main():
@@ -709,25 +727,25 @@ def main():
     if a.face_blur is not None:
         FACE_BLUR_P = a.face_blur
     if a.aux_point_nets is not None:
-        AUX_POINT_NETS = tuple(n for n in a.aux_point_nets.split(",") if n)
+        AUX_POINT_NETS = net_names(a.aux_point_nets)
     if a.aux_point_weight is not None:
         AUX_POINT_WEIGHT = a.aux_point_weight
     if a.pose_nets is not None:
-        POSE_NETS = tuple(n for n in a.pose_nets.split(",") if n)
+        POSE_NETS = net_names(a.pose_nets)
     if a.occluder_nets is not None:
-        OCCLUDER_NETS = tuple(n for n in a.occluder_nets.split(",") if n)
+        OCCLUDER_NETS = net_names(a.occluder_nets)
     if a.occluder_p is not None:
         OCCLUDER_P = a.occluder_p
     if a.score_nets is not None:
-        SCORE_NETS = tuple(n for n in a.score_nets.split(",") if n)
+        SCORE_NETS = net_names(a.score_nets)
     if a.score_weight is not None:
         SCORE_WEIGHT = a.score_weight
     if a.genki_gesture_nets is not None:
-        GENKI_GESTURE_NETS = tuple(n for n in a.genki_gesture_nets.split(",") if n)
+        GENKI_GESTURE_NETS = net_names(a.genki_gesture_nets)
     if a.motion_blur is not None:
         MOTION_BLUR_P = a.motion_blur
     if a.turned_nets is not None:
-        TURNED_NETS = tuple(n for n in a.turned_nets.split(",") if n)
+        TURNED_NETS = net_names(a.turned_nets)
     if a.turned_share is not None:
         TURNED_SHARE = a.turned_share
     if a.ema:
@@ -744,7 +762,7 @@ def main():
             REF_NOISE[k] = float(v)
     DEVICE = torch.device(a.device)
     if a.pseudo_nets is not None:
-        PSEUDO_NETS = tuple(n for n in a.pseudo_nets.split(",") if n)
+        PSEUDO_NETS = net_names(a.pseudo_nets)
     if a.pseudo_share is not None:
         PSEUDO_SHARE = a.pseudo_share
     if a.level1_trunk:

@@ -121,6 +121,12 @@ impl LkConfig {
     }
 }
 
+/// The smaller eigenvalue of the symmetric 2×2 matrix [[a, b], [b, c]] given as [a, b, c].
+#[inline(always)]
+fn smallest_eigenvalue([a, b, c]: [f32; 3]) -> f32 {
+    0.5 * (a + c - ((a - c).powi(2) + 4.0 * b * b).sqrt())
+}
+
 /// An image pyramid: level 0 is a copy of the image, or of a region of it, each next level the 2×2
 /// mean of the one before.
 ///
@@ -599,7 +605,7 @@ impl PyramidalLk {
                 }
                 let [gxx, gxy, gyy] = sums;
                 let det = gxx * gyy - gxy * gxy;
-                let min_eig = 0.5 * (gxx + gyy - ((gxx - gyy).powi(2) + 4.0 * gxy * gxy).sqrt());
+                let min_eig = smallest_eigenvalue(sums);
                 if min_eig / area < cfg.min_eigenvalue || det.abs() < f32::EPSILON {
                     s.alive = false;
                     continue;
@@ -715,7 +721,7 @@ impl PyramidalLk {
         let area = (n * n) as f32;
         let (mx, my) = (sx / area, sy / area);
         let c = [sums[0] - sx * mx, sums[1] - sx * my, sums[2] - sy * my];
-        let min_eig = 0.5 * (c[0] + c[2] - ((c[0] - c[2]).powi(2) + 4.0 * c[1] * c[1]).sqrt());
+        let min_eig = smallest_eigenvalue(c);
         // NaN (a non-finite window) falls back too.
         if min_eig.is_nan() || min_eig / area < self.config.min_eigenvalue {
             return sums;
