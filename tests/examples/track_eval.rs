@@ -9,6 +9,7 @@
 //!     [--only ROW] [--passes N] [--camera-frames] [--ultra-light]
 //!     [--scale A] [--roll DEG] [--roll-offset DEG] [--translation PX] [--period FRAMES]
 //!     [--segments N] [--brightness A] [--blur] [--flow-pull P] [--plain-lk]
+//!     [--min-face-confidence C]
 //! ```
 //! `--ultra-light` runs the ultra-light mode's rows instead (`TrackerConfig::ultra_light`:
 //! tracking, tracking with the flow filter off, and re-detect every frame). Each row's `box IoU`
@@ -28,6 +29,8 @@
 //! `--mirror-average` runs M3 in its mirror-average mode (`core/models/M3_IO.md`).
 //! `--flow-pull P` sets the tracking rows' `TrackerConfig::flow_pull` (0: the thesis' filter);
 //! `--plain-lk` turns the flow's brightness offset off (`LkConfig::offset_invariant`).
+//! `--min-face-confidence C` sets the tracking rows' `TrackerConfig::min_face_confidence` (the
+//! face check a tracked window must pass).
 //! `--only ROW` runs only the table's row ROW (0 = tracking, 3 = re-detect every frame) and
 //! `--passes N` repeats each measured pass N times (the row shows the last), for `perf record`.
 //! `REF.jsonl` comes from `tests/scripts/video_reference.py VIDEO REF.jsonl` (dlib's 68 points as
@@ -52,6 +55,9 @@ const CORRECT_NME: f32 = 0.10;
 fn configs(ultra_light: bool, opt: &Options) -> Vec<(&'static str, TrackerConfig)> {
     let tune = |defaults: TrackerConfig| TrackerConfig {
         flow_pull: opt.flow_pull.unwrap_or(defaults.flow_pull),
+        min_face_confidence: opt
+            .min_face_confidence
+            .unwrap_or(defaults.min_face_confidence),
         lk: LkConfig {
             offset_invariant: defaults.lk.offset_invariant && !opt.plain_lk,
             ..defaults.lk
@@ -117,6 +123,7 @@ struct Options {
     input: Input,
     flow_pull: Option<f32>,
     plain_lk: bool,
+    min_face_confidence: Option<f32>,
 }
 
 fn report(title: &str, clip: &[ClipFrame], opt: &Options) -> Result<(), String> {
@@ -234,6 +241,12 @@ fn main() -> Result<(), String> {
             .map(|v| v.parse().map_err(|e| format!("--flow-pull {v}: {e}")))
             .transpose()?,
         plain_lk: args.iter().any(|a| a == "--plain-lk"),
+        min_face_confidence: arg("--min-face-confidence")
+            .map(|v| {
+                v.parse()
+                    .map_err(|e| format!("--min-face-confidence {v}: {e}"))
+            })
+            .transpose()?,
     };
     println!(
         "correct frame: NME (inter-ocular) < {CORRECT_NME}; M3 mirror average {}; input {:?}; \

@@ -523,8 +523,13 @@ fn motion_time(cfg: &SeqConfig, local: usize) -> f32 {
 fn similarity(seg: &Segment, t: f32) -> ([f32; 2], f32, f32) {
     let w = |k: usize| {
         let [a, om, ph] = seg.waves[k];
-        // Zero at t = 0 so the still part and the motion join without a jump.
-        a * ((om * t + ph).sin() - ph.sin())
+        // Zero at t = 0, so each segment starts at its drawn pose (upright but for the drawn tilt,
+        // where the detector first meets the face) and the still part joins the motion without a
+        // jump; and within ±amplitude, as `SeqConfig` states and the face's placement margin
+        // assumes. (A wave a·(sin(ωt + φ) − sin φ) reached twice its amplitude: a "±35°" roll
+        // turned the head by up to 76°.) The phase only picks the direction.
+        let dir = if ph < std::f32::consts::PI { 1.0 } else { -1.0 };
+        dir * a * (om * t).sin()
     };
     (
         [seg.center[0] + w(0), seg.center[1] + w(1)],

@@ -112,6 +112,9 @@ fn tracked_frames_reuse_the_level1_check_exactly() {
         noise_sigma: 2.0,
         crop_margin: Some(0.5),
         seed: 9,
+        // Small turns only: a face tracked past 15° of roll is read on a turned crop (the
+        // tracker's turned check), which a fresh estimate on its box does not reproduce.
+        rotation_deg: 4.0,
         ..Default::default()
     };
     let clip = synthetic_clip(cfg, faces).unwrap();
@@ -140,8 +143,8 @@ fn tracked_frames_reuse_the_level1_check_exactly() {
 /// cuts and every `verify_interval` frames (and a few more times), and its mean NME over all 68
 /// points stays under 50 % (41 of them are placed by the gradient detector's geometry alone).
 /// Against the same mode without the periodic check, which re-anchors the region on the
-/// detector's box and ends tracks that drifted off the face: measured box IoU 0.81 against 0.74
-/// and 79 correct frames of 240 against 42.
+/// detector's box and ends tracks that drifted off the face: measured box IoU 0.84 against 0.71
+/// and 94 correct frames of 240 against 34.
 #[test]
 fn ultra_light_mode_tracks_without_landmark_networks() {
     let Some(data) = shared_data_or_skip("track_models") else {
@@ -205,9 +208,8 @@ fn ultra_light_mode_tracks_without_landmark_networks() {
 /// turned past what the upright detector finds (about 25°); the tracker then searches a window
 /// around the face's last place turned by its last roll and ±30° (`FaceTracker`'s lost-face
 /// search), and its level-1 points found upright there place level 2's zones. While tracked, a face
-/// turned 15–75° is checked and read by level 1 on a crop turned by its last roll. Measured: a
-/// face on 360 of 360 frames and 360 correct (339 with upright checks of tracked faces; 306 with
-/// the upright detector alone).
+/// turned 15–75° is checked and read by level 1 on a crop turned by its last roll. Measured (AMD
+/// EPYC Zen 4, native): a face on 360 of 360 frames and 360 correct.
 #[test]
 fn a_lost_tilted_face_is_found_again_turned() {
     let Some(stats) = tilted_clip_stats(
@@ -233,9 +235,9 @@ fn a_lost_tilted_face_is_found_again_turned() {
 
 /// The same fast, tilted heads with a phone camera's degradations: scale ±35 %, brightness
 /// swinging ±30 % and fast frames box-blurred by their motion (`track_eval --roll 35 --scale 0.35
-/// --brightness 0.3 --blur --translation 100 --period 20`). Measured: a face on 334 of 360 frames
-/// and 333 correct (333 and 328 with upright checks of tracked faces); the frames without one are
-/// a single small face (20–28 px between the eye corners) lost while blurred.
+/// --brightness 0.3 --blur --translation 100 --period 20`). Measured (AMD EPYC Zen 4, native and
+/// portable path): a face on 360 of 360 frames and 360 correct; over 30 segments (1,800 frames)
+/// 1,788 and 1,588 (BENCHMARKS.md).
 #[test]
 fn a_fast_tilted_head_stays_tracked_through_blur_and_light() {
     let Some(stats) = tilted_clip_stats(
@@ -264,10 +266,10 @@ fn a_fast_tilted_head_stays_tracked_through_blur_and_light() {
 
 /// Changing light (brightness ±30 % over 90 frames, a phone's exposure) on the default clip: the
 /// flow filter must keep the landmarks as accurate as no filter and steadier. Measured (AMD EPYC
-/// Zen 4, native): the default 3.47 % and 0.143 px still jitter, no filter 3.49 % and 0.205 px.
-/// With plain Lucas–Kanade (`LkConfig::offset_invariant` off) the default pull is only level
-/// with no filter (3.50 %, 0.211 px) and the thesis' filter (`flow_pull` 0) worse on both (3.85 %,
-/// 0.580 px): the exposure change reads as motion.
+/// Zen 4, native): the default 3.31 % and 0.162 px still jitter, no filter 3.32 % and 0.213 px.
+/// With plain Lucas–Kanade (`LkConfig::offset_invariant` off) the default pull is level with no
+/// filter in accuracy and no steadier (3.37 %, 0.230 px) and the thesis' filter (`flow_pull` 0)
+/// worse on both (3.80 %, 0.594 px): the exposure change reads as motion.
 #[test]
 fn the_flow_filter_holds_under_changing_light() {
     let Some(data) = shared_data_or_skip("track_models") else {
@@ -314,9 +316,9 @@ fn the_flow_filter_holds_under_changing_light() {
 /// A head held tilted past what the upright detector finds (40°, alternately either way per
 /// segment), with no track to have lost: the whole frame is searched turned, and the faces found
 /// are tracked with level 1 reading them turned by their roll. Measured on this clip (AMD EPYC
-/// Zen 4): a face on 275 of 360 frames and 265 correct natively, 288 and 272 on the portable
-/// path; with the upright detector alone (Intel Xeon) 127 and 120. The clip moves by a few frames
-/// with the last bits of the arithmetic and by tens with a retrained net, hence the margin.
+/// Zen 4, native): a face on 238 of 360 frames and 235 correct (each segment's tilt is drawn
+/// within ±8.6° of 40°, so up to 54°). The clip moves by a few frames with the last bits of the
+/// arithmetic and by tens with a retrained net, hence the margin.
 #[test]
 fn a_head_tilted_from_the_start_is_found_turned() {
     let Some(stats) = tilted_clip_stats(
@@ -334,7 +336,7 @@ fn a_head_tilted_from_the_start_is_found_turned() {
         "{stats:?}"
     );
     assert!(
-        stats.correct as f32 >= 0.65 * stats.scored as f32,
+        stats.correct as f32 >= 0.6 * stats.scored as f32,
         "{stats:?}"
     );
 }
