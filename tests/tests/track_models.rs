@@ -237,7 +237,7 @@ fn a_lost_tilted_face_is_found_again_turned() {
 /// swinging ±30 % and fast frames box-blurred by their motion (`track_eval --roll 35 --scale 0.35
 /// --brightness 0.3 --blur --translation 100 --period 20`). Measured (AMD EPYC Zen 4, native and
 /// portable path): a face on 360 of 360 frames and 360 correct; over 30 segments (1,800 frames)
-/// 1,788 and 1,588 (BENCHMARKS.md).
+/// 1,791 and 1,591 (BENCHMARKS.md).
 #[test]
 fn a_fast_tilted_head_stays_tracked_through_blur_and_light() {
     let Some(stats) = tilted_clip_stats(
@@ -315,10 +315,13 @@ fn the_flow_filter_holds_under_changing_light() {
 
 /// A head held tilted past what the upright detector finds (40°, alternately either way per
 /// segment), with no track to have lost: the whole frame is searched turned, and the faces found
-/// are tracked with level 1 reading them turned by their roll. Measured on this clip (AMD EPYC
-/// Zen 4, native): a face on 238 of 360 frames and 235 correct (each segment's tilt is drawn
-/// within ±8.6° of 40°, so up to 54°). The clip moves by a few frames with the last bits of the
-/// arithmetic and by tens with a retrained net, hence the margin.
+/// are tracked with level 1 reading them turned by their roll. After each cut the last face's
+/// loss is still being searched for around its place; from its 4th frame every other frame
+/// searches the whole frame turned too. Measured on this clip (AMD EPYC Zen 4, native and
+/// portable path): a face on 344 of 360 frames and 344 correct (each segment's tilt is drawn
+/// within ±8.6° of 40°, so up to 54°); with the window alone for the 30 frames of a loss, 238 and
+/// 235. The clip moves by a few frames with the last bits of the arithmetic and by tens with a
+/// retrained net, hence the margin.
 #[test]
 fn a_head_tilted_from_the_start_is_found_turned() {
     let Some(stats) = tilted_clip_stats(
@@ -332,11 +335,11 @@ fn a_head_tilted_from_the_start_is_found_turned() {
         return;
     };
     assert!(
-        stats.with_face as f32 >= 0.6 * stats.scored as f32,
+        stats.with_face as f32 >= 0.9 * stats.scored as f32,
         "{stats:?}"
     );
     assert!(
-        stats.correct as f32 >= 0.6 * stats.scored as f32,
+        stats.correct as f32 >= 0.9 * stats.scored as f32,
         "{stats:?}"
     );
 }
