@@ -105,6 +105,14 @@ FACE_BLUR_P = 0.0
 # or hair over the face), and that share. None by default.
 OCCLUDER_NETS = ()
 OCCLUDER_P = 0.2
+# Zone nets whose point loss is the wing loss (Feng et al. 2018) of each point's distance instead
+# of the distance itself: ω·ln(1 + d/ε) below ω patch pixels, d − C above, so errors of a pixel
+# or two, most of the jaw's, pull several times harder than with the plain distance. ω and ε in
+# pixels of the patch's larger side (the paper's 10 and 2 on 128 px, scaled to about 48). None
+# by default.
+WING_NETS = ()
+WING_W = 4.0
+WING_EPS = 0.8
 # Trunks (m3nets.trunk spec strings) of the shipped models; --level1-trunk / --zone-trunk override
 # them for experiments.
 LEVEL1_TRUNK = "16s-32s-48s-48c-64s"
@@ -496,6 +504,15 @@ def point_loss(pred, tgt):
     return (d.pow(2).sum(2) + 1e-6).sqrt().sum(1)
 
 
+def wing_point_loss(pred, tgt, side):
+    """point_loss with each distance through the wing loss (WING_NETS); `side`: patch pixels per
+    patch unit. Linear above WING_W pixels with point_loss's slope, so large errors weigh the same."""
+    d = (((pred - tgt) * side).view(pred.shape[0], -1, 2).pow(2).sum(2) + 1e-6).sqrt()
+    c = WING_W - WING_W * np.log(1.0 + WING_W / WING_EPS)
+    w = torch.where(d < WING_W, WING_W * torch.log1p(d / WING_EPS), d - c)
+    return (w * LM_SCALE / side).sum(1)
+
+
 def log(fh, msg):
     print(msg, flush=True)
     fh.write(msg + "\n")
@@ -573,7 +590,10 @@ def train_zone(name, data, steps, fh, genki=None):
         h = model.features(X, YAW)
         out = model.heads(h)
         lm, extra = out[0], out[-1]
-        l_lm = (point_loss(lm, Y) * LM).sum() / LM.sum().clamp(min=1)
+        if name in WING_NETS:
+            l_lm = (wing_point_loss(lm, Y, max(zone["width"], zone["height"])) * LM).sum() / LM.sum().clamp(min=1)
+        else:
+            l_lm = (point_loss(lm, Y) * LM).sum() / LM.sum().clamp(min=1)
         l_x = lm.sum() * 0
         if gest:
             m = G >= 0
@@ -705,6 +725,8 @@ def main():
     ap.add_argument("--aux-point-weight", type=float, default=None)
     # Share of patches with motion blur (default MOTION_BLUR_P)
     ap.add_argument("--motion-blur", type=float, default=None)
+    # e.g. --wing-nets face (default WING_NETS: none)
+    ap.add_argument("--wing-nets", default=None)
     # e.g. --ref-noise face=0.025,nose=0.025 (default REF_NOISE)
     ap.add_argument("--ref-noise", default=None)
     # e.g. --shape-warp face=0.5 (default SHAPE_WARP: none)
@@ -723,7 +745,9 @@ def main():
     a = ap.parse_args()
     global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE, SEED, EMA_DECAYS, TURNED_NETS, TURNED_SHARE
     global MOTION_BLUR_P, GENKI_GESTURE_NETS, SCORE_NETS, SCORE_WEIGHT, OCCLUDER_NETS, OCCLUDER_P, POSE_NETS
-    global AUX_POINT_NETS, AUX_POINT_WEIGHT, FACE_BLUR_P
+    global AUX_POINT_NETS, AUX_POINT_WEIGHT, FACE_BLUR_P, WING_NETS
+    if a.wing_nets is not None:
+        WING_NETS = net_names(a.wing_nets)
     if a.face_blur is not None:
         FACE_BLUR_P = a.face_blur
     if a.aux_point_nets is not None:
@@ -786,7 +810,7 @@ def main():
     only = a.only.split(",")
     fh = open(os.path.join(OUT, f"train_log_{a.only.replace(',', '_')}.txt"), "w")
     log(fh, f"== train_m3 {time.strftime('%Y-%m-%d %H:%M:%S')} only={only} steps_scale={a.steps_scale} seed={SEED}"
-            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} turned={TURNED_NETS}@{TURNED_SHARE} genki_gestures={GENKI_GESTURE_NETS} scores={SCORE_NETS}@{SCORE_WEIGHT} occluders={OCCLUDER_NETS}@{OCCLUDER_P} pose={POSE_NETS} aux_points={AUX_POINT_NETS}@{AUX_POINT_WEIGHT} motion_blur={MOTION_BLUR_P} face_blur={FACE_BLUR_P} ref_noise={REF_NOISE}"
+            f" level1={LEVEL1_TRUNK}/{LEVEL1_HIDDEN} zones={ZONE_TRUNK} pseudo={PSEUDO_NETS}@{PSEUDO_SHARE} turned={TURNED_NETS}@{TURNED_SHARE} genki_gestures={GENKI_GESTURE_NETS} scores={SCORE_NETS}@{SCORE_WEIGHT} occluders={OCCLUDER_NETS}@{OCCLUDER_P} pose={POSE_NETS} aux_points={AUX_POINT_NETS}@{AUX_POINT_WEIGHT} motion_blur={MOTION_BLUR_P} face_blur={FACE_BLUR_P} wing={WING_NETS} ref_noise={REF_NOISE}"
             f"{f' shape_warp={SHAPE_WARP}' if SHAPE_WARP else ''} device={DEVICE}")
     pseudo = None
     if any(n in only for n in PSEUDO_NETS):
@@ -851,7 +875,7 @@ def run_zones_in_processes(zones, a, fh):
              "--score-nets", ",".join(SCORE_NETS), "--score-weight", str(SCORE_WEIGHT),
              "--occluder-nets", ",".join(OCCLUDER_NETS), "--occluder-p", str(OCCLUDER_P),
              "--pose-nets", ",".join(POSE_NETS), "--aux-point-nets", ",".join(AUX_POINT_NETS),
-             "--aux-point-weight", str(AUX_POINT_WEIGHT),
+             "--aux-point-weight", str(AUX_POINT_WEIGHT), "--wing-nets", ",".join(WING_NETS),
              "--ref-noise", ",".join(f"{k}={v}" for k, v in REF_NOISE.items())]
     if SHAPE_WARP:
         base += ["--shape-warp", ",".join(f"{k}={v}" for k, v in SHAPE_WARP.items())]
