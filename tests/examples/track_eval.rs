@@ -9,7 +9,7 @@
 //!     [--only ROW] [--passes N] [--camera-frames] [--ultra-light]
 //!     [--scale A] [--roll DEG] [--roll-offset DEG] [--translation PX] [--period FRAMES]
 //!     [--segments N] [--brightness A] [--blur] [--flow-pull P] [--plain-lk]
-//!     [--min-face-confidence C]
+//!     [--min-face-confidence C] [--min-detection-confidence C] [--min-redetection-confidence C]
 //! ```
 //! `--ultra-light` runs the ultra-light mode's rows instead (`TrackerConfig::ultra_light`:
 //! tracking, tracking with the flow filter off, and re-detect every frame). Each row's `box IoU`
@@ -30,7 +30,9 @@
 //! `--flow-pull P` sets the tracking rows' `TrackerConfig::flow_pull` (0: the thesis' filter);
 //! `--plain-lk` turns the flow's brightness offset off (`LkConfig::offset_invariant`).
 //! `--min-face-confidence C` sets the tracking rows' `TrackerConfig::min_face_confidence` (the
-//! face check a tracked window must pass).
+//! face check a tracked window must pass) and `--min-detection-confidence C` its
+//! `min_detection_confidence` (the one a new detection must pass), `--min-redetection-confidence
+//! C` its `min_redetection_confidence` (the one a detection where a face was just lost must pass).
 //! `--only ROW` runs only the table's row ROW (0 = tracking, 3 = re-detect every frame) and
 //! `--passes N` repeats each measured pass N times (the row shows the last), for `perf record`.
 //! `REF.jsonl` comes from `tests/scripts/video_reference.py VIDEO REF.jsonl` (dlib's 68 points as
@@ -58,6 +60,12 @@ fn configs(ultra_light: bool, opt: &Options) -> Vec<(&'static str, TrackerConfig
         min_face_confidence: opt
             .min_face_confidence
             .unwrap_or(defaults.min_face_confidence),
+        min_detection_confidence: opt
+            .min_detection_confidence
+            .unwrap_or(defaults.min_detection_confidence),
+        min_redetection_confidence: opt
+            .min_redetection_confidence
+            .unwrap_or(defaults.min_redetection_confidence),
         lk: LkConfig {
             offset_invariant: defaults.lk.offset_invariant && !opt.plain_lk,
             ..defaults.lk
@@ -124,6 +132,8 @@ struct Options {
     flow_pull: Option<f32>,
     plain_lk: bool,
     min_face_confidence: Option<f32>,
+    min_detection_confidence: Option<f32>,
+    min_redetection_confidence: Option<f32>,
 }
 
 fn report(title: &str, clip: &[ClipFrame], opt: &Options) -> Result<(), String> {
@@ -245,6 +255,18 @@ fn main() -> Result<(), String> {
             .map(|v| {
                 v.parse()
                     .map_err(|e| format!("--min-face-confidence {v}: {e}"))
+            })
+            .transpose()?,
+        min_detection_confidence: arg("--min-detection-confidence")
+            .map(|v| {
+                v.parse()
+                    .map_err(|e| format!("--min-detection-confidence {v}: {e}"))
+            })
+            .transpose()?,
+        min_redetection_confidence: arg("--min-redetection-confidence")
+            .map(|v| {
+                v.parse()
+                    .map_err(|e| format!("--min-redetection-confidence {v}: {e}"))
             })
             .transpose()?,
     };

@@ -74,6 +74,14 @@ pub const SMALL_FACES_MIN_DETECTION_SCORE: f32 = 0.25;
 /// Default [`TrackerConfig::min_detection_confidence`] (see [`DEFAULT_MIN_DETECTION_SCORE`]).
 pub const DEFAULT_MIN_DETECTION_CONFIDENCE: f32 = 0.95;
 
+/// Default [`TrackerConfig::min_redetection_confidence`]: a lost face's place and size are
+/// evidence for a detection that matches them, so it needs less of the classifier than a guess
+/// anywhere in the frame. On `track_eval --roll 35 --scale 0.35 --brightness 0.3 --blur
+/// --translation 100 --period 20 --segments 30` (1,800 frames) the one face left unfound for 9
+/// frames (a small face, heavily blurred, whose detections scored below 0.95) is found at once at
+/// 0.8 (and at 0.5); tracked windows keep 0.5.
+pub const DEFAULT_MIN_REDETECTION_CONFIDENCE: f32 = 0.8;
+
 /// Face width (pixels) at which the flow threshold applies unscaled: the thesis' 5 px were set on
 /// 640×480 video of a user at arm's length, where the 68-point box spans about 200 px. The
 /// threshold scales with the face's box size relative to this.
@@ -190,6 +198,26 @@ pub fn check_detections<L: LandmarkEstimator>(
     scratch: &mut FaceLandmarks,
     out: &mut Vec<(Rect, f32, f32, FaceLandmarks)>,
 ) -> Result<()> {
+    check_detections_by(
+        estimator,
+        image,
+        candidates,
+        |_, conf| conf >= min_confidence,
+        scratch,
+        out,
+    )
+}
+
+/// [`check_detections`] with the acceptance decided by `accept(box, confidence)` (the box the
+/// last check ran on), before the overlaps are merged.
+fn check_detections_by<L: LandmarkEstimator>(
+    estimator: &mut L,
+    image: &GrayImage,
+    candidates: &mut [(Rect, f32)],
+    accept: impl Fn(&Rect, f32) -> bool,
+    scratch: &mut FaceLandmarks,
+    out: &mut Vec<(Rect, f32, f32, FaceLandmarks)>,
+) -> Result<()> {
     out.clear();
     candidates.sort_by(|a, b| b.1.total_cmp(&a.1));
     for &(rect, score) in candidates.iter() {
@@ -201,7 +229,7 @@ pub fn check_detections<L: LandmarkEstimator>(
             rect = better;
             conf = estimator.face_confidence(image, &rect, scratch)?;
         }
-        if conf >= min_confidence {
+        if accept(&rect, conf) {
             out.push((rect, score, conf, *scratch));
         }
     }
@@ -273,6 +301,11 @@ pub struct TrackerConfig {
     /// window is where the face just was. On jittered validation faces 99.8 % score ≥ 0.95 while 1.7 %
     /// of the detector's false positives do (`models/train/eval_face_check.py`).
     pub min_detection_confidence: f32,
+    /// In video mode, for the frames a lost face is searched for ([`FaceTracker`]'s lost-face
+    /// search), a detection near its last place and of about its size is accepted at this face
+    /// confidence instead of [`Self::min_detection_confidence`]. Default
+    /// [`DEFAULT_MIN_REDETECTION_CONFIDENCE`]; set it to `min_detection_confidence` for one bar.
+    pub min_redetection_confidence: f32,
     /// A tracked window whose face confidence is below this is a loss. 0.5: the classifier's
     /// decision point (M3 level 1 is trained with a balanced face / non-face loss).
     pub min_face_confidence: f32,
@@ -338,6 +371,7 @@ impl TrackerConfig {
         Self {
             landmarks: LandmarkMode::Gradient,
             min_detection_confidence: 0.0,
+            min_redetection_confidence: 0.0,
             min_face_confidence: 0.3,
             verify_interval: ULTRA_LIGHT_VERIFY_INTERVAL,
             ..Self::default()
@@ -353,6 +387,7 @@ impl Default for TrackerConfig {
             camera: None,
             min_detection_score: DEFAULT_MIN_DETECTION_SCORE,
             min_detection_confidence: DEFAULT_MIN_DETECTION_CONFIDENCE,
+            min_redetection_confidence: DEFAULT_MIN_REDETECTION_CONFIDENCE,
             min_face_confidence: 0.5,
             min_ncc_score: 0.5,
             search_margin: 0.5,
@@ -402,6 +437,10 @@ impl TrackerConfig {
         }
         unit_interval("min_detection_score", self.min_detection_score)?;
         unit_interval("min_detection_confidence", self.min_detection_confidence)?;
+        unit_interval(
+            "min_redetection_confidence",
+            self.min_redetection_confidence,
+        )?;
         unit_interval("min_face_confidence", self.min_face_confidence)?;
         unit_interval("match_iou", self.match_iou)?;
         if !(self.min_ncc_score.is_finite() && (-1.0..=1.0).contains(&self.min_ncc_score)) {
@@ -722,8 +761,27 @@ struct LostFace {
     frames: u32,
 }
 
+impl LostFace {
+    /// Whether `r` could be this face now: its centre within [`LOST_NEAR_FACES`] face sizes of the
+    /// last place, plus [`LOST_DRIFT_FACES`] for each frame since, and its size within a factor
+    /// of 2 of the last.
+    fn near(&self, r: &Rect) -> bool {
+        let [cx, cy] = r.center();
+        let reach = (LOST_NEAR_FACES + LOST_DRIFT_FACES * self.frames as f32) * self.size;
+        let ratio = r.w.max(r.h) / self.size;
+        (cx - self.centre[0]).hypot(cy - self.centre[1]) <= reach && (0.5..=2.0).contains(&ratio)
+    }
+}
+
 /// Frames a lost face is looked for turned.
 const LOST_FRAMES: u32 = 30;
+
+/// Reach of [`LostFace::near`] at the loss, face sizes: half the turned window's side.
+const LOST_NEAR_FACES: f32 = 0.5 * TURNED_WINDOW_FACES;
+
+/// Growth of that reach per frame since the loss, face sizes: a face moving a quarter of its size
+/// a frame (fast: 25 px a frame for a 100 px face).
+const LOST_DRIFT_FACES: f32 = 0.25;
 
 /// Frames after a loss that search only the window around the face's last place (one round of
 /// its three turns): a face lost to fast motion is still near it. Past them the face may be
@@ -731,9 +789,9 @@ const LOST_FRAMES: u32 = 30;
 /// frame turned ([`WHOLE_FRAME_TURNS_DEG`]) as when nothing is tracked. With the window alone a
 /// head held at 40–55° that appeared elsewhere went unfound until the loss expired, 27–32 frames
 /// in each such segment of `track_eval --roll-offset 40 --roll 5` (235 correct frames of 360;
-/// 344 with 3 window-only frames, 320 with 6, 352 with none, which left 11 frames with no face on
-/// the blur-and-light clip against 9). A frame costs at most what a frame with nothing tracked
-/// costs (the upright pass plus the whole-frame turn).
+/// with a new face's bar for re-detections, 344 with 3 window-only frames, 320 with 6, 352 with
+/// none, which left 11 frames with no face on the blur-and-light clip against 9). A frame costs at
+/// most what a frame with nothing tracked costs (the upright pass plus the whole-frame turn).
 const LOST_WINDOW_ONLY_FRAMES: u32 = 3;
 
 /// Side of the turned window in face sizes (the face may have moved about a face size).
@@ -763,8 +821,9 @@ const UPRIGHT_COVERS: f32 = 15.0 * std::f32::consts::PI / 180.0;
 /// for good), one per frame: the upright detector finds faces to about 25° of roll, and each turn
 /// covers about as much either side of it, so with these a head held at up to about 85° either way
 /// is found within four frames, at the cost of one turned pass per frame. With ±30° alone a head
-/// held at 60° (`track_eval --roll-offset 60 --roll 5`) was found on 159 of 360 frames against
-/// 328 with these; at 30° and 40° both give the same frames.
+/// held at 60° (`track_eval --roll-offset 60 --roll 5`) was read correctly on 159 of 360 frames
+/// against 328 with these (both with a new face's bar for re-detections); at 30° and 40° both give
+/// the same frames.
 const WHOLE_FRAME_TURNS_DEG: [f32; 4] = [30.0, -30.0, 60.0, -60.0];
 
 /// Side of the square window the whole frame is turned into, pixels: the frame's longer side
@@ -1144,11 +1203,19 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         self.turned_detections.retain(|(r, s)| {
             r.is_valid() && s.is_finite() && *s >= self.config.min_detection_score
         });
+        // The lost face's window is its place and size: the re-detection bar applies there.
+        let min_confidence = if window.is_some() {
+            self.config
+                .min_detection_confidence
+                .min(self.config.min_redetection_confidence)
+        } else {
+            self.config.min_detection_confidence
+        };
         check_detections(
             &mut self.estimator,
             &self.turned,
             &mut self.turned_detections,
-            self.config.min_detection_confidence,
+            min_confidence,
             &mut self.checked,
             &mut self.ranked,
         )?;
@@ -1327,11 +1394,16 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             // face confidence), on the face's own box; ranked by detector score × confidence
             // (subtitle characters at 20 px pass at 0.99-1.0 while the real face scores 0.95 /
             // 0.99, so the confidence alone ranks badly).
-            check_detections(
+            let (min_new, min_again) = (
+                self.config.min_detection_confidence,
+                self.config.min_redetection_confidence,
+            );
+            let lost = self.lost.filter(|_| video);
+            check_detections_by(
                 &mut self.estimator,
                 image,
                 &mut self.detections,
-                self.config.min_detection_confidence,
+                |r, conf| conf >= min_new || (conf >= min_again && lost.is_some_and(|l| l.near(r))),
                 &mut self.checked,
                 &mut self.ranked,
             )?;
@@ -1772,6 +1844,27 @@ mod tests {
     }
 
     #[test]
+    fn a_lost_face_is_near_where_it_was_and_of_its_size() {
+        let lost = LostFace {
+            centre: [300.0, 200.0],
+            size: 100.0,
+            roll: 0.0,
+            frames: 0,
+        };
+        let at = |cx: f32, side: f32| Rect::new(cx - side / 2.0, 200.0 - side / 2.0, side, side);
+        assert!(lost.near(&at(300.0, 100.0)));
+        assert!(lost.near(&at(440.0, 60.0)));
+        // Beyond the reach, or half / twice the size.
+        assert!(!lost.near(&at(460.0, 100.0)));
+        assert!(!lost.near(&at(300.0, 45.0)));
+        assert!(!lost.near(&at(300.0, 210.0)));
+        // The reach grows with the frames since the loss (a quarter of a face size each).
+        let later = LostFace { frames: 4, ..lost };
+        assert!(later.near(&at(540.0, 100.0)));
+        assert!(!later.near(&at(560.0, 100.0)));
+    }
+
+    #[test]
     fn bad_configs_are_typed_errors() {
         assert!(TrackerConfig::default().validate().is_ok());
         let bad = [
@@ -1793,6 +1886,10 @@ mod tests {
             },
             TrackerConfig {
                 min_detection_confidence: -0.1,
+                ..Default::default()
+            },
+            TrackerConfig {
+                min_redetection_confidence: f32::NAN,
                 ..Default::default()
             },
             TrackerConfig {
