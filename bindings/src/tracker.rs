@@ -43,7 +43,9 @@ pub struct TrackerConfig {
     /// 0.25 at the small-faces operating point.
     pub min_detection_score: f32,
     /// Face presence: a detection becomes a face when M3's face confidence on its box is at least
-    /// this (0..=1; default 0.95). Lower finds more faces and more false ones.
+    /// this (0..=1; default 0.95). Lower finds more faces and more false ones. In video mode a
+    /// detection where a face was lost in the last 30 frames, and of its size, needs 0.8 / 0.95 of
+    /// this (0.8 by default): where the face just was is evidence for it.
     pub min_detection_confidence: f32,
     /// Tracking confidence: a tracked face is kept while M3's face confidence in its window is at
     /// least this (0..=1; default 0.5, the classifier's decision point); below it the face is
@@ -197,6 +199,9 @@ fn to_core(
         shape_frames: c.shape_frames as usize,
         min_detection_score: c.min_detection_score,
         min_detection_confidence: c.min_detection_confidence,
+        min_redetection_confidence: c.min_detection_confidence
+            * (core_track::DEFAULT_MIN_REDETECTION_CONFIDENCE
+                / core_track::DEFAULT_MIN_DETECTION_CONFIDENCE),
         min_face_confidence: c.min_tracking_confidence,
         min_ncc_score: c.min_match_score,
         search_margin: c.search_margin,
@@ -1053,6 +1058,23 @@ pub(crate) mod tests {
     }
 
     /// In the image running mode stills go through the one tracker built: no second one.
+    #[test]
+    fn the_redetection_bar_follows_the_detection_bar() {
+        let (core, _) = to_core(&default_tracker_config()).unwrap();
+        assert_eq!(
+            core.min_redetection_confidence,
+            core_track::DEFAULT_MIN_REDETECTION_CONFIDENCE
+        );
+        let strict = TrackerConfig {
+            min_detection_confidence: 0.99,
+            ..default_tracker_config()
+        };
+        let (core, _) = to_core(&strict).unwrap();
+        assert!(core.min_redetection_confidence > 0.8 && core.min_redetection_confidence < 0.99);
+        let (core, _) = to_core(&ultra_light_tracker_config()).unwrap();
+        assert_eq!(core.min_redetection_confidence, 0.0);
+    }
+
     #[test]
     fn image_mode_builds_one_tracker() {
         let (upright, w, h) = upright_face();

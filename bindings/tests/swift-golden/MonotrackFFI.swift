@@ -5296,7 +5296,9 @@ public struct TrackerConfig: Equatable, Hashable {
     public var minDetectionScore: Float
     /**
      * Face presence: a detection becomes a face when M3's face confidence on its box is at least
-     * this (0..=1; default 0.95). Lower finds more faces and more false ones.
+     * this (0..=1; default 0.95). Lower finds more faces and more false ones. In video mode a
+     * detection where a face was lost in the last 30 frames, and of its size, needs 0.8 / 0.95 of
+     * this (0.8 by default): where the face just was is evidence for it.
      */
     public var minDetectionConfidence: Float
     /**
@@ -5385,7 +5387,9 @@ public struct TrackerConfig: Equatable, Hashable {
          */minDetectionScore: Float, 
         /**
          * Face presence: a detection becomes a face when M3's face confidence on its box is at least
-         * this (0..=1; default 0.95). Lower finds more faces and more false ones.
+         * this (0..=1; default 0.95). Lower finds more faces and more false ones. In video mode a
+         * detection where a face was lost in the last 30 frames, and of its size, needs 0.8 / 0.95 of
+         * this (0.8 by default): where the face just was is evidence for it.
          */minDetectionConfidence: Float, 
         /**
          * Tracking confidence: a tracked face is kept while M3's face confidence in its window is at
