@@ -225,18 +225,23 @@ fn video_clip(video: &str, reference: &str) -> Result<Vec<ClipFrame>, String> {
         .collect())
 }
 
+/// The value after `name` in `args`, parsed; `None` when `name` is not given.
+fn parsed<T: std::str::FromStr>(args: &[String], name: &str) -> Result<Option<T>, String>
+where
+    T::Err: std::fmt::Display,
+{
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .map(|v| v.parse().map_err(|e| format!("{name} {v}: {e}")))
+        .transpose()
+}
+
 fn main() -> Result<(), String> {
     let args: Vec<String> = std::env::args().collect();
-    let arg = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1).cloned())
-    };
-    let number = |name: &str| -> Result<Option<usize>, String> {
-        arg(name)
-            .map(|v| v.parse().map_err(|e| format!("{name} {v}: {e}")))
-            .transpose()
-    };
+    let arg = |name: &str| parsed::<String>(&args, name).ok().flatten();
+    let number = |name: &str| parsed::<usize>(&args, name);
+    let real = |name: &str| parsed::<f32>(&args, name);
     let opt = Options {
         mirror_average: args.iter().any(|a| a == "--mirror-average"),
         ultra_light: args.iter().any(|a| a == "--ultra-light"),
@@ -247,28 +252,11 @@ fn main() -> Result<(), String> {
         } else {
             Input::Luma
         },
-        flow_pull: arg("--flow-pull")
-            .map(|v| v.parse().map_err(|e| format!("--flow-pull {v}: {e}")))
-            .transpose()?,
+        flow_pull: real("--flow-pull")?,
         plain_lk: args.iter().any(|a| a == "--plain-lk"),
-        min_face_confidence: arg("--min-face-confidence")
-            .map(|v| {
-                v.parse()
-                    .map_err(|e| format!("--min-face-confidence {v}: {e}"))
-            })
-            .transpose()?,
-        min_detection_confidence: arg("--min-detection-confidence")
-            .map(|v| {
-                v.parse()
-                    .map_err(|e| format!("--min-detection-confidence {v}: {e}"))
-            })
-            .transpose()?,
-        min_redetection_confidence: arg("--min-redetection-confidence")
-            .map(|v| {
-                v.parse()
-                    .map_err(|e| format!("--min-redetection-confidence {v}: {e}"))
-            })
-            .transpose()?,
+        min_face_confidence: real("--min-face-confidence")?,
+        min_detection_confidence: real("--min-detection-confidence")?,
+        min_redetection_confidence: real("--min-redetection-confidence")?,
     };
     println!(
         "correct frame: NME (inter-ocular) < {CORRECT_NME}; M3 mirror average {}; input {:?}; \
@@ -282,9 +270,7 @@ fn main() -> Result<(), String> {
         let faces = load_validation_faces(&data, 24, 100.0)?;
         let cfg = SeqConfig::eval_clips();
         let float = |name: &str, default: f32| -> Result<f32, String> {
-            arg(name).map_or(Ok(default), |v| {
-                v.parse().map_err(|e| format!("{name} {v}: {e}"))
-            })
+            Ok(real(name)?.unwrap_or(default))
         };
         let cfg = SeqConfig {
             scale_amplitude: float("--scale", cfg.scale_amplitude)?,

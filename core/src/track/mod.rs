@@ -363,6 +363,13 @@ pub struct TrackerConfig {
 }
 
 impl TrackerConfig {
+    /// The face confidence a detection where a face was just lost needs: the re-detection bar,
+    /// never stricter than a new face's.
+    fn redetection_bar(&self) -> f32 {
+        self.min_detection_confidence
+            .min(self.min_redetection_confidence)
+    }
+
     /// The ultra-light mode's settings: [`LandmarkMode::Gradient`], a detection accepted on the
     /// detector's score alone (the gradient points' mean confidence is no face classifier), and a
     /// tracked window kept while that confidence is at least 0.3 (95 % of the faces68 validation
@@ -1205,9 +1212,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         });
         // The lost face's window is its place and size: the re-detection bar applies there.
         let min_confidence = if window.is_some() {
-            self.config
-                .min_detection_confidence
-                .min(self.config.min_redetection_confidence)
+            self.config.redetection_bar()
         } else {
             self.config.min_detection_confidence
         };
@@ -1396,7 +1401,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             // 0.99, so the confidence alone ranks badly).
             let (min_new, min_again) = (
                 self.config.min_detection_confidence,
-                self.config.min_redetection_confidence,
+                self.config.redetection_bar(),
             );
             let lost = self.lost.filter(|_| video);
             check_detections_by(
