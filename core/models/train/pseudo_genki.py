@@ -35,21 +35,31 @@ def default_path():
     return os.path.join(cache, "monotrack", "genki_pfld.jsonl")
 
 
+def peer_points(images, boxes, peer, *flags):
+    """`peer`'s 68 points (the shared peer tool) for one face per image, on `boxes` (x, y, w, h)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        man, res = os.path.join(tmp, "in.jsonl"), os.path.join(tmp, "out.jsonl")
+        with open(man, "w") as fh:
+            for p, b in zip(images, boxes):
+                fh.write(json.dumps({"image": p, "faces": [{"box": [float(v) for v in b]}]}) + "\n")
+        subprocess.run([sys.executable, TOOL, man, "--peers", peer, "--out", res, *flags], check=True,
+                       stdout=subprocess.DEVNULL)
+        return [np.array(json.loads(line)["faces"][0][peer]) for line in open(res)]
+
+
+def pfld_settled(images, boxes):
+    """PFLD's points run from `boxes`, then ROUNDS - 1 times more on the box of its own points."""
+    for _ in range(ROUNDS):
+        pts = peer_points(images, boxes, "pfld")
+        boxes = [D.box_of(p).tolist() for p in pts]
+    return pts
+
+
 def main(out=None):
     out = out or default_path()
     os.makedirs(os.path.dirname(out), exist_ok=True)
     images = [os.path.abspath(path) for path, _, _ in D.genki_files("train")]
-    boxes = [FIRST_BOX] * len(images)
-    with tempfile.TemporaryDirectory() as tmp:
-        for _ in range(ROUNDS):
-            man, res = os.path.join(tmp, "in.jsonl"), os.path.join(tmp, "out.jsonl")
-            with open(man, "w") as fh:
-                for p, b in zip(images, boxes):
-                    fh.write(json.dumps({"image": p, "faces": [{"box": [float(v) for v in b]}]}) + "\n")
-            subprocess.run([sys.executable, TOOL, man, "--peers", "pfld", "--out", res], check=True,
-                           stdout=subprocess.DEVNULL)
-            pts = [np.array(json.loads(line)["faces"][0]["pfld"]) for line in open(res)]
-            boxes = [D.box_of(p).tolist() for p in pts]
+    pts = pfld_settled(images, [FIRST_BOX] * len(images))
     with open(out, "w") as fh:
         for p, q in zip(images, pts):
             fh.write(json.dumps({"image": p, "faces": [{"pfld": q.round(2).tolist()}]}) + "\n")

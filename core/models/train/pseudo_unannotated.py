@@ -21,9 +21,7 @@ Measured and not adopted (MODEL_CARD.md, "Measured and not adopted").
 import argparse
 import json
 import os
-import subprocess
 import sys
-import tempfile
 
 import numpy as np
 
@@ -34,22 +32,8 @@ import m3data as D  # noqa: E402
 import pseudo_genki  # noqa: E402
 import unlabeled  # noqa: E402
 
-TOOL = os.path.join(D.DATA, "..", "tools", "peer_landmarks.py")
-ROUNDS = 3
 # Teachers' agreement: mean point distance over PFLD's outer-eye-corner distance.
 AGREE = 0.08
-
-
-def peers(items, boxes, args):
-    """Each peer tool run's points for `items` (image path, _) on `boxes`."""
-    with tempfile.TemporaryDirectory() as tmp:
-        man, res = os.path.join(tmp, "in.jsonl"), os.path.join(tmp, "out.jsonl")
-        with open(man, "w") as fh:
-            for (p, _), b in zip(items, boxes):
-                fh.write(json.dumps({"image": p, "faces": [{"box": [float(v) for v in b]}]}) + "\n")
-        subprocess.run([sys.executable, TOOL, man, "--out", res] + args, check=True, stdout=subprocess.DEVNULL)
-        name = args[1]
-        return [np.array(json.loads(line)["faces"][0][name]) for line in open(res)]
 
 
 def main():
@@ -65,10 +49,9 @@ def main():
     # Ultra-Light's loose box, narrowed and lowered to about the 68 points' box.
     boxes = [[x + w / 2 - 0.4 * max(w, h), y + h / 2 + 0.1 * h - 0.4 * max(w, h), 0.8 * max(w, h), 0.8 * max(w, h)]
              for _, (x, y, w, h) in items]
-    for _ in range(ROUNDS):
-        pts = peers(items, boxes, ["--peers", "pfld"])
-        boxes = [D.box_of(q).tolist() for q in pts]
-    dl = peers(items, boxes, ["--peers", "dlib", "--dlib-own-detector"])
+    images = [p for p, _ in items]
+    pts = pseudo_genki.pfld_settled(images, boxes)
+    dl = pseudo_genki.peer_points(images, [D.box_of(q).tolist() for q in pts], "dlib", "--dlib-own-detector")
     keep = [(p, q) for (p, _), q, d in zip(items, pts, dl)
             if np.linalg.norm(q - d, axis=1).mean() / np.linalg.norm(q[36] - q[45]) < AGREE]
     genki = pseudo_genki.default_path()

@@ -498,16 +498,21 @@ def zone_batch(name, data, faces, rng, weights, genki=None):
     return t(X), t(Y), t(YAW), t(G), t(GZ), t(GZM), t(SM), t(LM), t(SC), t(SCM)
 
 
+def point_distances(pred, tgt, scale):
+    """Each point's Euclidean distance, in `scale` per patch unit, per sample (samples × points)."""
+    d = ((pred - tgt) * scale).view(pred.shape[0], -1, 2)
+    return (d.pow(2).sum(2) + 1e-6).sqrt()
+
+
 def point_loss(pred, tgt):
     """Sum over points of the Euclidean distance (scaled), per sample."""
-    d = ((pred - tgt) * LM_SCALE).view(pred.shape[0], -1, 2)
-    return (d.pow(2).sum(2) + 1e-6).sqrt().sum(1)
+    return point_distances(pred, tgt, LM_SCALE).sum(1)
 
 
 def wing_point_loss(pred, tgt, side):
     """point_loss with each distance through the wing loss (WING_NETS); `side`: patch pixels per
     patch unit. Linear above WING_W pixels with point_loss's slope, so large errors weigh the same."""
-    d = (((pred - tgt) * side).view(pred.shape[0], -1, 2).pow(2).sum(2) + 1e-6).sqrt()
+    d = point_distances(pred, tgt, side)
     c = WING_W - WING_W * np.log(1.0 + WING_W / WING_EPS)
     w = torch.where(d < WING_W, WING_W * torch.log1p(d / WING_EPS), d - c)
     return (w * LM_SCALE / side).sum(1)
