@@ -696,50 +696,56 @@ def net_names(arg):
     return tuple(n for n in arg.split(",") if n)
 
 
+def floats(arg):
+    """"0.999,0.9995" -> (0.999, 0.9995); "" -> ()."""
+    return tuple(float(v) for v in arg.split(",") if v)
+
+
+def key_values(arg):
+    """"face=0.5,nose=0.25" -> {"face": "0.5", "nose": "0.25"}."""
+    return dict(item.split("=") for item in arg.split(",") if item)
+
+
+# Flags that set one module setting each (default: the setting as shipped, see its comment above):
+# flag -> (setting, parser of the flag's value, help).
+SETTING_FLAGS = {
+    "--level1-trunk": ("LEVEL1_TRUNK", str, "level 1's m3nets.trunk spec, e.g. 16s-32s-48s-64s"),
+    "--level1-hidden": ("LEVEL1_HIDDEN", int, "level 1's hidden FC width"),
+    "--pseudo-nets": ("PSEUDO_NETS", net_names, "nets that learn from the teacher-labelled GENKI-4K faces too, e.g. face,mouth"),
+    "--pseudo-share": ("PSEUDO_SHARE", float, "their share of those nets' batches"),
+    "--turned-nets": ("TURNED_NETS", net_names, "nets that learn from the turned faces too (empty for none), e.g. level1,face"),
+    "--turned-share": ("TURNED_SHARE", float, "their share of those nets' batches"),
+    "--genki-gesture-nets": ("GENKI_GESTURE_NETS", net_names, "e.g. mouth,brows"),
+    "--occluder-nets": ("OCCLUDER_NETS", net_names, "e.g. mouth,face"),
+    "--occluder-p": ("OCCLUDER_P", float, "share of those nets' patches with an occluder"),
+    "--score-nets": ("SCORE_NETS", net_names, "e.g. brows,mouth"),
+    "--score-weight": ("SCORE_WEIGHT", float, "weight of the teacher-score loss"),
+    "--face-blur": ("FACE_BLUR_P", float, "share of level 1's crops blurred for its face output only"),
+    "--pose-nets": ("POSE_NETS", net_names, "e.g. face,nose"),
+    "--aux-point-nets": ("AUX_POINT_NETS", net_names, "e.g. face,nose"),
+    "--aux-point-weight": ("AUX_POINT_WEIGHT", float, "weight of the other points' loss"),
+    "--motion-blur": ("MOTION_BLUR_P", float, "share of patches with motion blur"),
+    "--wing-nets": ("WING_NETS", net_names, "e.g. face"),
+    "--seed": ("SEED", int, "another seed for a run-to-run spread check (the shipped weights use SEED)"),
+    "--ema": ("EMA_DECAYS", floats, "e.g. 0.999,0.9995: also write NAME.ema0.999.onnx ... (weight averages of the same run)"),
+}
+# Flags that change entries of a per-net table: flag -> (table, parser of each value, help).
+TABLE_FLAGS = {
+    "--zone-trunk": (ZONE_TRUNK, str, "e.g. eye=8s-16s-32s,default=8s-16s-32s-48s (m3nets.trunk specs)"),
+    "--ref-noise": (REF_NOISE, float, "e.g. face=0.025,nose=0.025"),
+    "--shape-warp": (SHAPE_WARP, float, "e.g. face=0.5"),
+}
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps-scale", type=float, default=1.0)
     ap.add_argument("--only", default="level1,brows,eye,mouth,face,nose,mouth_fine")
-    # Architecture experiments (defaults = the shipped models), m3nets.trunk specs: e.g.
-    # --level1-trunk 16s-32s-48s-64s --zone-trunk eye=8s-16s-32s,default=8s-16s-32s-48s
-    ap.add_argument("--level1-trunk", default=None)
-    ap.add_argument("--level1-hidden", type=int, default=None)
-    ap.add_argument("--zone-trunk", default=None)
-    # e.g. --zone-size face=48x48 (the patch size in m3.json follows)
-    ap.add_argument("--zone-size", default=None)
-    # Nets that learn from the teacher-labelled GENKI-4K faces too (default PSEUDO_NETS), e.g. face,mouth
-    ap.add_argument("--pseudo-nets", default=None)
-    ap.add_argument("--pseudo-share", type=float, default=None)
-    # Nets that learn from the turned faces too (default TURNED_NETS; empty for none), e.g. level1,face
-    ap.add_argument("--turned-nets", default=None)
-    # e.g. --genki-gesture-nets mouth,brows (default GENKI_GESTURE_NETS)
-    ap.add_argument("--genki-gesture-nets", default=None)
-    ap.add_argument("--turned-share", type=float, default=None)
-    # e.g. --occluder-nets mouth,face (default OCCLUDER_NETS) and --occluder-p P
-    ap.add_argument("--occluder-nets", default=None)
-    ap.add_argument("--occluder-p", type=float, default=None)
-    # e.g. --score-nets brows,mouth (default SCORE_NETS) and --score-weight W
-    ap.add_argument("--score-nets", default=None)
-    ap.add_argument("--score-weight", type=float, default=None)
-    # Share of level 1's crops blurred for its face output only (default FACE_BLUR_P)
-    ap.add_argument("--face-blur", type=float, default=None)
-    # e.g. --pose-nets face,nose (default POSE_NETS)
-    ap.add_argument("--pose-nets", default=None)
-    # e.g. --aux-point-nets face,nose (default AUX_POINT_NETS) and --aux-point-weight W
-    ap.add_argument("--aux-point-nets", default=None)
-    ap.add_argument("--aux-point-weight", type=float, default=None)
-    # Share of patches with motion blur (default MOTION_BLUR_P)
-    ap.add_argument("--motion-blur", type=float, default=None)
-    # e.g. --wing-nets face (default WING_NETS: none)
-    ap.add_argument("--wing-nets", default=None)
-    # e.g. --ref-noise face=0.025,nose=0.025 (default REF_NOISE)
-    ap.add_argument("--ref-noise", default=None)
-    # e.g. --shape-warp face=0.5 (default SHAPE_WARP: none)
-    ap.add_argument("--shape-warp", default=None)
-    # Another seed for a run-to-run spread check (the shipped weights use SEED)
-    ap.add_argument("--seed", type=int, default=None)
-    # e.g. --ema 0.999,0.9995: also write NAME.ema0.999.onnx ... (weight averages of the same run)
-    ap.add_argument("--ema", default=None)
+    for flag, (_, _, doc) in SETTING_FLAGS.items():
+        ap.add_argument(flag, default=None, help=doc)
+    for flag, (_, _, doc) in TABLE_FLAGS.items():
+        ap.add_argument(flag, default=None, help=doc)
+    ap.add_argument("--zone-size", default=None, help="e.g. face=48x48 (the patch size in m3.json follows)")
     # Results differ from the CPU run's in the last bits (GPU kernels); the shipped weights are CPU's.
     ap.add_argument("--device", default="cpu")
     # Zone nets train in this many processes at once after level 1 (each net seeds itself, so the
@@ -748,64 +754,17 @@ def main():
     # Set for the zone processes run_zones_in_processes starts: their parent calibrates at the end.
     ap.add_argument("--no-calibrate", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
-    global LEVEL1_TRUNK, LEVEL1_HIDDEN, DEVICE, PSEUDO_NETS, PSEUDO_SHARE, SEED, EMA_DECAYS, TURNED_NETS, TURNED_SHARE
-    global MOTION_BLUR_P, GENKI_GESTURE_NETS, SCORE_NETS, SCORE_WEIGHT, OCCLUDER_NETS, OCCLUDER_P, POSE_NETS
-    global AUX_POINT_NETS, AUX_POINT_WEIGHT, FACE_BLUR_P, WING_NETS
-    if a.wing_nets is not None:
-        WING_NETS = net_names(a.wing_nets)
-    if a.face_blur is not None:
-        FACE_BLUR_P = a.face_blur
-    if a.aux_point_nets is not None:
-        AUX_POINT_NETS = net_names(a.aux_point_nets)
-    if a.aux_point_weight is not None:
-        AUX_POINT_WEIGHT = a.aux_point_weight
-    if a.pose_nets is not None:
-        POSE_NETS = net_names(a.pose_nets)
-    if a.occluder_nets is not None:
-        OCCLUDER_NETS = net_names(a.occluder_nets)
-    if a.occluder_p is not None:
-        OCCLUDER_P = a.occluder_p
-    if a.score_nets is not None:
-        SCORE_NETS = net_names(a.score_nets)
-    if a.score_weight is not None:
-        SCORE_WEIGHT = a.score_weight
-    if a.genki_gesture_nets is not None:
-        GENKI_GESTURE_NETS = net_names(a.genki_gesture_nets)
-    if a.motion_blur is not None:
-        MOTION_BLUR_P = a.motion_blur
-    if a.turned_nets is not None:
-        TURNED_NETS = net_names(a.turned_nets)
-    if a.turned_share is not None:
-        TURNED_SHARE = a.turned_share
-    if a.ema:
-        EMA_DECAYS = tuple(float(d) for d in a.ema.split(","))
-    if a.seed is not None:
-        SEED = a.seed
-    if a.shape_warp:
-        for item in a.shape_warp.split(","):
-            k, v = item.split("=")
-            SHAPE_WARP[k] = float(v)
-    if a.ref_noise:
-        for item in a.ref_noise.split(","):
-            k, v = item.split("=")
-            REF_NOISE[k] = float(v)
+    global DEVICE
+    for flag, (name, parse, _) in SETTING_FLAGS.items():
+        value = getattr(a, flag[2:].replace("-", "_"))
+        if value is not None:
+            globals()[name] = parse(value)
+    for flag, (table, parse, _) in TABLE_FLAGS.items():
+        for k, v in key_values(getattr(a, flag[2:].replace("-", "_")) or "").items():
+            table[k] = parse(v)
+    for k, v in key_values(a.zone_size or "").items():
+        D.ZONES[k]["width"], D.ZONES[k]["height"] = (int(n) for n in v.split("x"))
     DEVICE = torch.device(a.device)
-    if a.pseudo_nets is not None:
-        PSEUDO_NETS = net_names(a.pseudo_nets)
-    if a.pseudo_share is not None:
-        PSEUDO_SHARE = a.pseudo_share
-    if a.level1_trunk:
-        LEVEL1_TRUNK = a.level1_trunk
-    if a.level1_hidden:
-        LEVEL1_HIDDEN = a.level1_hidden
-    if a.zone_trunk:
-        for item in a.zone_trunk.split(","):
-            k, v = item.split("=")
-            ZONE_TRUNK[k] = v
-    if a.zone_size:
-        for item in a.zone_size.split(","):
-            k, v = item.split("=")
-            D.ZONES[k]["width"], D.ZONES[k]["height"] = (int(n) for n in v.split("x"))
     random.seed(SEED)
     np.random.seed(SEED)
     torch.manual_seed(SEED)
@@ -870,22 +829,9 @@ def main():
 
 
 def run_zones_in_processes(zones, a, fh):
-    base = [sys.executable, os.path.abspath(__file__), "--jobs", "1", "--no-calibrate", "--steps-scale", str(a.steps_scale),
-            "--device", a.device, "--zone-trunk", ",".join(f"{k}={v}" for k, v in ZONE_TRUNK.items())]
-    if a.zone_size:
-        base += ["--zone-size", a.zone_size]
-    base += ["--pseudo-nets", ",".join(PSEUDO_NETS), "--pseudo-share", str(PSEUDO_SHARE), "--seed", str(SEED),
-             "--turned-nets", ",".join(TURNED_NETS), "--turned-share", str(TURNED_SHARE),
-             "--motion-blur", str(MOTION_BLUR_P), "--genki-gesture-nets", ",".join(GENKI_GESTURE_NETS),
-             "--score-nets", ",".join(SCORE_NETS), "--score-weight", str(SCORE_WEIGHT),
-             "--occluder-nets", ",".join(OCCLUDER_NETS), "--occluder-p", str(OCCLUDER_P),
-             "--pose-nets", ",".join(POSE_NETS), "--aux-point-nets", ",".join(AUX_POINT_NETS),
-             "--aux-point-weight", str(AUX_POINT_WEIGHT), "--wing-nets", ",".join(WING_NETS),
-             "--ref-noise", ",".join(f"{k}={v}" for k, v in REF_NOISE.items())]
-    if SHAPE_WARP:
-        base += ["--shape-warp", ",".join(f"{k}={v}" for k, v in SHAPE_WARP.items())]
-    if EMA_DECAYS:
-        base += ["--ema", ",".join(str(d) for d in EMA_DECAYS)]
+    # Each process gets this run's own flags (the later --jobs and --only win), so it trains its
+    # net exactly as this process would.
+    base = [sys.executable, os.path.abspath(__file__)] + sys.argv[1:] + ["--jobs", "1", "--no-calibrate"]
     pending, running = list(zones), []
     while pending or running:
         while pending and len(running) < a.jobs:
