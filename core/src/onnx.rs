@@ -597,7 +597,7 @@ mod tests {
             ("face.onnx", zone(48, 48)),
             ("mouth.onnx", zone(48, 48)),
             ("mouth_fine.onnx", zone(40, 48)),
-            ("nose.onnx", zone(32, 32)),
+            ("nose.onnx", zone(40, 24)),
         ] {
             let bytes = crate::landmarks::embedded_file(file).unwrap();
             assert_same_as_tract_onnx(file, bytes, &shapes);

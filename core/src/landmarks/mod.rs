@@ -2,10 +2,11 @@
 //!
 //! Level 1 runs on the face crop and gives 32 landmarks, a 5-class head yaw and a face confidence;
 //! level-2 zone networks (brows, eye — one model, the left eye mirrored — and mouth, plus this
-//! project's face zone for the jaw and nose, nose zone for the nose alone and `mouth_fine` zone for
-//! the lips on the mouth zone's corners) run on similarity-normalised patches plus the level-1 yaw
-//! and give their zone's landmarks, gestures and gaze; the two are merged into the 68-point iBUG
-//! order (the face and nose zones' points averaged with level 1's, `level1_weight`, and the
+//! project's face zone for the jaw and nose, nose zone for the nose alone on the face zone's
+//! nostril corners and `mouth_fine` zone for the lips on the mouth zone's corners) run on
+//! similarity-normalised patches plus the level-1 yaw and give their zone's landmarks, gestures
+//! and gaze; the two are merged into the 68-point iBUG order (the face zone's points averaged
+//! with level 1's, `level1_weight`, and the
 //! `mouth_fine` zone's with the mouth zone's, `prior_weight`; a zone running later replaces an
 //! earlier one's points), and the merged points carry the annotations' x offset (`x_offset_iod`,
 //! which training on mirrored faces hides from the nets). The preprocessing contract shared with

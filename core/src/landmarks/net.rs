@@ -272,7 +272,7 @@ mod tests {
             "mouth_fine.onnx" => patch(1, 40, 48),
             "brows.onnx" => patch(1, 32, 64),
             "eye.onnx" => patch(1, 24, 40),
-            "nose.onnx" => patch(1, 32, 32),
+            "nose.onnx" => patch(1, 40, 24),
             _ => panic!("unknown network {name}"),
         }
     }
@@ -374,7 +374,7 @@ mod tests {
     fn a_first_layer_of_another_form_is_left_to_tract() {
         let mut proto =
             crate::onnx::parse(crate::landmarks::embedded_file("nose.onnx").unwrap()).unwrap();
-        let shapes = vec![vec![1, 1, 32, 32], vec![1, 5]];
+        let shapes = vec![vec![1, 1, 40, 24], vec![1, 5]];
         assert!(StemLayer::find(&proto, &shapes, false).is_some());
         assert!(StemLayer::find(&proto, &shapes, true).is_some());
         // A chain that ends at a node padding by rules of its own (a pooling's padding is no zero
@@ -394,7 +394,7 @@ mod tests {
         assert!(StemLayer::find(&padded_end, &shapes, true).is_none());
         // Wrong input count, a two-channel input, stride 1: no stem.
         assert!(StemLayer::find(&proto, &shapes[..1], false).is_none());
-        assert!(StemLayer::find(&proto, &[vec![1, 2, 32, 32], vec![1, 5]], false).is_none());
+        assert!(StemLayer::find(&proto, &[vec![1, 2, 40, 24], vec![1, 5]], false).is_none());
         let graph = proto.graph.as_mut().unwrap();
         let conv = graph.node.iter_mut().find(|n| n.op_type == "Conv").unwrap();
         for a in conv.attribute.iter_mut().filter(|a| a.name == "strides") {
