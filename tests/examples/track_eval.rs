@@ -33,6 +33,8 @@
 //! face check a tracked window must pass) and `--min-detection-confidence C` its
 //! `min_detection_confidence` (the one a new detection must pass), `--min-redetection-confidence
 //! C` its `min_redetection_confidence` (the one a detection where a face was just lost must pass).
+//! `--m3-dir DIR` runs M3 from the `m3.json` and network files in DIR instead of the embedded
+//! ones (a training run's output), so retrained nets are measured on these clips without a rebuild.
 //! `--only ROW` runs only the table's row ROW (0 = tracking, 3 = re-detect every frame) and
 //! `--passes N` repeats each measured pass N times (the row shows the last), for `perf record`.
 //! `REF.jsonl` comes from `tests/scripts/video_reference.py VIDEO REF.jsonl` (dlib's 68 points as
@@ -41,7 +43,9 @@
 
 use monotrack_core::image::GrayImage;
 use monotrack_core::image::rgb_to_contract_luma;
+use monotrack_core::landmarks::M3;
 use monotrack_core::track::flow::LkConfig;
+use monotrack_core::track::models::Landmarker;
 use monotrack_core::track::{Mode, Tracker, TrackerConfig};
 use monotrack_tests::shared_data;
 use monotrack_tests::synth::{SeqConfig, load_validation_faces};
@@ -134,6 +138,40 @@ struct Options {
     min_face_confidence: Option<f32>,
     min_detection_confidence: Option<f32>,
     min_redetection_confidence: Option<f32>,
+    /// M3's `m3.json` and network files (file name, bytes), when not the embedded ones.
+    m3_files: Option<Vec<(String, Vec<u8>)>>,
+}
+
+/// Every file in `dir` as (name, bytes): `M3::from_bytes` takes the ones `m3.json` names.
+fn m3_files(dir: &str) -> Result<Vec<(String, Vec<u8>)>, String> {
+    let entries = std::fs::read_dir(dir).map_err(|e| format!("--m3-dir {dir}: {e}"))?;
+    let mut files = Vec::new();
+    for entry in entries {
+        let path = entry.map_err(|e| e.to_string())?.path();
+        if path.is_file()
+            && let Some(name) = path.file_name().and_then(|n| n.to_str())
+        {
+            files.push((
+                name.to_string(),
+                std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?,
+            ));
+        }
+    }
+    Ok(files)
+}
+
+/// M3 from `files` (`m3_files`).
+fn m3_from(files: &[(String, Vec<u8>)]) -> Result<M3, String> {
+    let named: Vec<(&str, &[u8])> = files
+        .iter()
+        .map(|(n, b)| (n.as_str(), b.as_slice()))
+        .collect();
+    let json = named
+        .iter()
+        .find(|(n, _)| *n == "m3.json")
+        .map(|(_, b)| *b)
+        .ok_or("--m3-dir: no m3.json")?;
+    M3::from_bytes(json, &named).map_err(|e| e.to_string())
 }
 
 fn report(title: &str, clip: &[ClipFrame], opt: &Options) -> Result<(), String> {
@@ -143,6 +181,11 @@ fn report(title: &str, clip: &[ClipFrame], opt: &Options) -> Result<(), String> 
             continue;
         }
         let mut tracker = Tracker::with_default_models(cfg).map_err(|e| e.to_string())?;
+        if let Some(files) = &opt.m3_files
+            && !opt.ultra_light
+        {
+            *tracker.estimator_mut() = Landmarker::M3(Box::new(m3_from(files)?));
+        }
         tracker
             .estimator_mut()
             .set_mirror_average(opt.mirror_average);
@@ -257,6 +300,7 @@ fn main() -> Result<(), String> {
         min_face_confidence: real("--min-face-confidence")?,
         min_detection_confidence: real("--min-detection-confidence")?,
         min_redetection_confidence: real("--min-redetection-confidence")?,
+        m3_files: arg("--m3-dir").map(|d| m3_files(&d)).transpose()?,
     };
     println!(
         "correct frame: NME (inter-ocular) < {CORRECT_NME}; M3 mirror average {}; input {:?}; \

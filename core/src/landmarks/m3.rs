@@ -797,7 +797,7 @@ impl M3 {
         Self::from_bytes(json, EMBEDDED_FILES)
     }
 
-    /// The detector from other weights: `m3.json` and the network files it names, given as
+    /// M3 from other weights: `m3.json` and the network files it names, given as
     /// (file name, ONNX bytes) pairs (`models/M3_IO.md`).
     ///
     /// # Errors
