@@ -20,6 +20,13 @@ faces shared across the split: how far the validation figures can stand in for u
   same photo of the same face, or nearly. faces68 has no identity labels, so this is the check
   that can be made.
 Writes core/models/m3/source_metrics.json and prints the table.
+
+    python3 core/models/train/eval_sources.py --shrink
+
+- Resolution: the HELEN part's photos shrunk by area averaging to a half and a third of their
+  stored size (landmarks scaled with them), ours (Python reference, mirror average, ground-truth
+  boxes), PFLD and dlib as above at each size: whether a method gains from a sharper photo.
+  Writes core/models/m3/shrink_metrics.json.
 """
 import argparse
 import json
@@ -139,10 +146,55 @@ def dlib_own(paths, faces, by_image):
     return errs
 
 
+def shrink(scales=(1.0, 0.5, 1 / 3)):
+    from m3_reference import M3
+    paths, faces = D.load_faces68("val")
+    src = sources()
+    faces = [f for f in faces if src[f["line"]] == "helen"]
+    m3 = M3(os.path.join(D.REPO, "core", "models", "m3"), mirror_average=True)
+    iod = np.median([np.linalg.norm(f["pts"][36] - f["pts"][45]) for f in faces])
+    metrics = {"faces": len(faces), "median_outer_eye_distance_px": float(iod), "by_scale": {}}
+    print(f"HELEN validation faces: {len(faces)}, median outer-eye distance {iod:.0f} px")
+    print("| scale | ours, ground-truth boxes | PFLD, its crop | dlib, own HOG detector |")
+    print("|---|---|---|---|")
+    for s in scales:
+        tmp = tempfile.mkdtemp()
+        spaths = {}
+        for i in {f["image"] for f in faces}:
+            img = cv2.imread(paths[i])
+            if s != 1.0:
+                size = (max(1, round(img.shape[1] * s)), max(1, round(img.shape[0] * s)))
+                img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+            spaths[i] = os.path.join(tmp, f"{i}.png")
+            cv2.imwrite(spaths[i], img)
+        sf = [dict(f, pts=f["pts"] * s) for f in faces]
+        ours = [E.nme_parts(m3.run(cv2.imread(spaths[f["image"]], cv2.IMREAD_GRAYSCALE),
+                                   np.array(D.box_of(f["pts"]), float))["landmarks68"], f["pts"])["all"]
+                for f in sf]
+        by_image = {}
+        for k, f in enumerate(sf):
+            by_image.setdefault(f["image"], []).append(k)
+        dl = [e for e in dlib_own(spaths, sf, by_image) if e is not None]
+        row = {"ours": float(np.mean(ours)), "pfld": float(np.mean(pfld(spaths, sf))),
+               "dlib": float(np.mean(dl)), "dlib_found": len(dl)}
+        metrics["by_scale"][f"{s:.3f}"] = row
+        print(f"| {s:.2f} | {100 * row['ours']:.2f} % | {100 * row['pfld']:.2f} % | "
+              f"{100 * row['dlib']:.2f} % ({len(dl)} found) |")
+    path = os.path.join(D.REPO, "core", "models", "m3", "shrink_metrics.json")
+    with open(path, "w") as fh:
+        json.dump(metrics, fh, indent=1)
+    print("wrote", path)
+
+
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--monotrack", required=True)
+    ap.add_argument("--monotrack")
+    ap.add_argument("--shrink", action="store_true", help="the resolution measurement only")
     a = ap.parse_args()
+    if a.shrink:
+        return shrink()
+    if not a.monotrack:
+        ap.error("--monotrack is required (or --shrink)")
     paths, faces = D.load_faces68("val")
     src = sources()
     by_image = {}
