@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Builds monotrack-ffi for the host, generates the Kotlin bindings (uniffi library mode), compiles
+# Takes monotrack-ffi from the workspace's test build, generates the Kotlin bindings (uniffi library mode), compiles
 # them with the JVM tests in bindings/tests/kotlin, runs the tests on the JVM through JNA, prints
 # "N passed, N failed" and exits non-zero on any failure. Installs what it needs:
 # kotlinc (npm package kotlin-compiler), JNA (Debian libjna-java), JUnit 5 console (Debian junit5).
@@ -25,20 +25,21 @@ if [ ! -x "$KOTLINC" ]; then
 fi
 KOTLIN_LIB="$TOOLS/node_modules/kotlin-compiler/lib"
 
-echo "== building monotrack-ffi (host)"
-# The whole workspace, as `cargo test --workspace` built it: same feature set, so nothing rebuilds.
-cargo build -q --workspace --lib
-# Where cargo put it: CARGO_TARGET_DIR and cargo config are honoured.
-TARGET_DIR=$(cargo metadata -q --format-version 1 --no-deps |
-  python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
-LIBDIR="$TARGET_DIR/debug"
-LIB="$LIBDIR/libmonotrack_ffi.so"
-[ -f "$LIB" ] || { echo "no $LIB after the build"; echo "kotlin: 0 passed, 1 failed"; exit 1; }
+echo "== the FFI library and uniffi-bindgen of the workspace's test build"
+# The same cargo call as ./test-all.sh's build (one feature set): after it, a no-op that lists
+# the artifacts; run alone, it builds them.
+cargo test -q --workspace --no-run --message-format=json-render-diagnostics |
+  python3 "$ROOT/tests/scripts/cargo_artifacts.py" > "$WORK/artifacts.txt"
+LIB=$(awk '$1 == "cdylib" && $2 == "monotrack_ffi" {print $4}' "$WORK/artifacts.txt" | head -1)
+BINDGEN=$(awk '$1 == "bin" && $2 == "uniffi-bindgen" {print $4}' "$WORK/artifacts.txt" | head -1)
+if [ -z "$LIB" ] || [ ! -f "$LIB" ] || [ -z "$BINDGEN" ]; then
+  echo "the test build made no FFI library or uniffi-bindgen"; echo "kotlin: 0 passed, 1 failed"; exit 1
+fi
+LIBDIR=$(dirname "$LIB")
 
 echo "== generating Kotlin"
 rm -rf "$WORK/gen" && mkdir -p "$WORK/gen"
-cargo run -q -p monotrack-uniffi-bindgen -- generate --library "$LIB" \
-  --language kotlin --out-dir "$WORK/gen" --no-format
+"$BINDGEN" generate --library "$LIB" --language kotlin --out-dir "$WORK/gen" --no-format
 
 JNA=/usr/share/java/jna.jar
 JUNIT=/usr/share/java/junit-platform-console-standalone.jar

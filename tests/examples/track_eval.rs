@@ -47,7 +47,7 @@ use monotrack_core::landmarks::M3;
 use monotrack_core::track::flow::LkConfig;
 use monotrack_core::track::models::Landmarker;
 use monotrack_core::track::{Mode, Tracker, TrackerConfig};
-use monotrack_tests::shared_data;
+use monotrack_tests::shared_data_if_present;
 use monotrack_tests::synth::{SeqConfig, load_validation_faces};
 use monotrack_tests::trackeval::{
     ClipFrame, Input, run_clip_with, synthetic_clip, table_header, table_row,
@@ -310,7 +310,7 @@ fn main() -> Result<(), String> {
         monotrack_core::cpu::kernel_path().as_str(),
         monotrack_core::cpu::cpu_name()
     );
-    if let Some(data) = shared_data() {
+    if let Some(data) = shared_data_if_present() {
         let faces = load_validation_faces(&data, 24, 100.0)?;
         let cfg = SeqConfig::eval_clips();
         let float = |name: &str, default: f32| -> Result<f32, String> {

@@ -75,8 +75,8 @@ def humaneva(shared, out):
                 x2 = p2[key][action][cam]
                 seqs.append({"subject": subject, "action": action, "camera": cam, "frames": idx,
                              "joints3d_mm": rnd(x3[idx]), "joints2d": rnd(x2[idx], 3)})
-    json.dump({"cameras": cameras, "sequences": seqs}, open(path + ".tmp", "w"))
-    os.replace(path + ".tmp", path)
+    json.dump({"cameras": cameras, "sequences": seqs}, open(path + f".{os.getpid()}.tmp", "w"))
+    os.replace(path + f".{os.getpid()}.tmp", path)
 
 
 def h36m(shared, out):
@@ -101,8 +101,8 @@ def h36m(shared, out):
         subject, action = key.split("/", 1)
         x = poses[key][::STEP_H36M][:, H36M_TO_HE15, :]
         seqs.append({"subject": subject, "action": action, "joints3d_mm": rnd(x)})
-    json.dump({"cameras": cameras, "sequences": seqs}, open(path + ".tmp", "w"))
-    os.replace(path + ".tmp", path)
+    json.dump({"cameras": cameras, "sequences": seqs}, open(path + f".{os.getpid()}.tmp", "w"))
+    os.replace(path + f".{os.getpid()}.tmp", path)
 
 
 # Whole sequences (10 fps, not subsampled) for the motion comparison tests: the first 12 s.
@@ -120,8 +120,8 @@ def motion(shared, out):
         subject, action = key.split("/", 1)
         x = poses[key][:MOTION_FRAMES][:, H36M_TO_HE15, :]
         seqs.append({"subject": subject, "action": action, "joints3d_mm": rnd(x)})
-    json.dump({"fps": 10, "sequences": seqs}, open(path + ".tmp", "w"))
-    os.replace(path + ".tmp", path)
+    json.dump({"fps": 10, "sequences": seqs}, open(path + f".{os.getpid()}.tmp", "w"))
+    os.replace(path + f".{os.getpid()}.tmp", path)
 
 
 def main():

@@ -1,23 +1,35 @@
-//! Helpers shared by the cross-crate tests: locating `../shared/data` and skipping with a printed
-//! reason when it is absent (a user's fresh clone has no `../shared`).
+//! Helpers shared by the cross-crate tests: locating `../shared/data` (a user's fresh clone has
+//! no `../shared`: the tests that need it are then ignored, with the reason, by the `shared_data`
+//! cfg that build.rs sets).
 
 use std::path::PathBuf;
 
-/// The shared data folder, if present: `$MONOTRACK_SHARED_DATA`, else `<workspace>/../shared/data`.
-pub fn shared_data() -> Option<PathBuf> {
-    let p = std::env::var_os("MONOTRACK_SHARED_DATA")
+/// Where the shared data folder is looked for: `$MONOTRACK_SHARED_DATA`, else
+/// `<workspace>/../shared/data` (build.rs reads the same place).
+pub fn shared_data_path() -> PathBuf {
+    std::env::var_os("MONOTRACK_SHARED_DATA")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"));
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"))
+}
+
+/// The shared data folder, if present (for tools that work with or without it).
+pub fn shared_data_if_present() -> Option<PathBuf> {
+    let p = shared_data_path();
     p.is_dir().then_some(p)
 }
 
-/// Like [`shared_data`], but prints why a test is skipped when the data is absent.
-pub fn shared_data_or_skip(test: &str) -> Option<PathBuf> {
-    let d = shared_data();
-    if d.is_none() {
-        eprintln!("SKIPPED {test}: ../shared/data not found (set MONOTRACK_SHARED_DATA to run it)");
-    }
-    d
+/// The shared data folder, for a test marked
+/// `#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]`: build.rs sets `shared_data`
+/// when the folder is present, so the test runs only then, and a folder gone since the build is a
+/// failure with this message, never a silent pass.
+pub fn shared_data() -> PathBuf {
+    let p = shared_data_path();
+    assert!(
+        p.is_dir(),
+        "{} is not a folder (it was at build time: rebuild, or set MONOTRACK_SHARED_DATA)",
+        p.display()
+    );
+    p
 }
 
 pub mod synth;

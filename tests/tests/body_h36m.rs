@@ -36,10 +36,9 @@ fn true_dimensions(frames: &[[[f64; 3]; N_JOINTS]]) -> Dimensions {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn human36m_synthetic_projections() {
-    let Some(dir) = converted("body_h36m") else {
-        return;
-    };
+    let dir = converted("body_h36m");
     let h: H36m = load(&dir, "h36m.json");
     let conv = Convention::Human36M;
     let per_subject = h.subject_lengths();
@@ -220,10 +219,9 @@ fn human36m_synthetic_projections() {
 /// dimensions. `WRITE_POSE_PRIOR=1` rewrites the file (the one command that makes it):
 /// `WRITE_POSE_PRIOR=1 cargo test --release -p monotrack-tests --test body_h36m -- shipped_pose_prior`.
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn shipped_pose_prior_is_the_data_s() {
-    let Some(dir) = converted("body_h36m") else {
-        return;
-    };
+    let dir = converted("body_h36m");
     let h: H36m = load(&dir, "h36m.json");
     let (poses, rms) = h.poses_by_subject();
     let (prior, count) = pose_prior(&poses, |_| true);

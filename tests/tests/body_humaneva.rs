@@ -87,10 +87,9 @@ fn rotation_error_deg(a: &nalgebra::Matrix3<f64>, b: &nalgebra::Matrix3<f64>) ->
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn humaneva_train_with_ground_truth_2d() {
-    let Some(dir) = converted("body_humaneva") else {
-        return;
-    };
+    let dir = converted("body_humaneva");
     let he: HumanEva = load(&dir, "humaneva.json");
     let refs = reference_intrinsics(&he);
     check_calibration(&he, &refs);
@@ -275,9 +274,7 @@ fn check_calibration(he: &HumanEva, refs: &BTreeMap<(String, usize), (BodyCamera
 #[test]
 #[ignore = "experiment table, about a minute per row in release"]
 fn humaneva_dimension_experiments() {
-    let Some(dir) = converted("body_humaneva") else {
-        return;
-    };
+    let dir = converted("body_humaneva");
     let he: HumanEva = load(&dir, "humaneva.json");
     let refs = reference_intrinsics(&he);
     let per_subject = he.subject_lengths();
@@ -605,9 +602,7 @@ fn evaluate(
 fn humaneva_pose_prior_experiments() {
     use monotrack_core::body::prior::fit_to_joints;
     use monotrack_core::body::{BodyFitConfig, PosePrior};
-    let Some(dir) = converted("body_humaneva") else {
-        return;
-    };
+    let dir = converted("body_humaneva");
     let he: HumanEva = load(&dir, "humaneva.json");
     let refs = reference_intrinsics(&he);
     let per_subject = he.subject_lengths();

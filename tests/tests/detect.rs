@@ -132,10 +132,9 @@ fn score_split(data: &Path, mut detect: impl FnMut(&GrayImage) -> Vec<Rect>) -> 
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn faces68_validation_recall() {
-    let Some(data) = monotrack_tests::shared_data_or_skip("faces68_validation_recall") else {
-        return;
-    };
+    let data = monotrack_tests::shared_data();
     let mut det = FaceDetector::with_config(DetectorConfig {
         min_face_px: 16.0,
         score_threshold: 0.5,
@@ -165,10 +164,9 @@ fn faces68_validation_recall() {
 /// unannotated background faces (`eval_peers.py` ignores those, so its false positive rate is lower
 /// than this count).
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn faces68_validation_cascade() {
-    let Some(data) = monotrack_tests::shared_data_or_skip("faces68_validation_cascade") else {
-        return;
-    };
+    let data = monotrack_tests::shared_data();
     for (min_face_px, score, min_recall, max_unmatched) in [
         (
             DetectorConfig::default().min_face_px,

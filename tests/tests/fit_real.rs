@@ -35,10 +35,9 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn msbp_on_real_landmarks() {
-    let Some(data) = monotrack_tests::shared_data_or_skip("msbp_on_real_landmarks") else {
-        return;
-    };
+    let data = monotrack_tests::shared_data();
     let train = std::fs::read_to_string(data.join("faces68/train.jsonl")).unwrap();
     let mut teacher = HashMap::new();
     for l in std::fs::read_to_string(data.join("faces68/teacher_mediapipe.jsonl"))

@@ -25,12 +25,9 @@ fn dist(a: [f32; 2], b: [f32; 2]) -> f64 {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn gradient_points_beat_the_mean_face_on_validation_faces() {
-    let Some(data) = monotrack_tests::shared_data_or_skip(
-        "gradient_points_beat_the_mean_face_on_validation_faces",
-    ) else {
-        return;
-    };
+    let data = monotrack_tests::shared_data();
     let faces = load_validation_faces(&data, usize::MAX, 0.0).expect("faces68 validation faces");
     assert!(faces.len() > 80, "{} faces", faces.len());
     let mut det = GradientDetector::new();

@@ -80,10 +80,9 @@ fn points64(out: &FaceLandmarks) -> Vec<[f64; 2]> {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn m3_nme_on_the_validation_split() {
-    let Some(data) = monotrack_tests::shared_data_or_skip("m3_nme_on_the_validation_split") else {
-        return;
-    };
+    let data = monotrack_tests::shared_data();
     let train = std::fs::read_to_string(data.join("faces68/train.jsonl")).unwrap();
     let mut m3 = M3::new().unwrap();
     let mut mirrored = M3::new().unwrap();

@@ -91,10 +91,9 @@ fn bend_right_elbow(p: &Pose3, deg: f64) -> Pose3 {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn human36m_warps_faults_and_people() {
-    let Some(dir) = converted("motion_h36m") else {
-        return;
-    };
+    let dir = converted("motion_h36m");
     let m: Motion = load(&dir, "motion.json");
     let find = |s: &str, a: &str| {
         &m.sequences

@@ -10,7 +10,6 @@
 
 use monotrack_core::landmarks::{FaceLandmarks, M3};
 use monotrack_core::track::{LandmarkMode, Mode, Tracker, TrackerConfig};
-use monotrack_tests::shared_data_or_skip;
 use monotrack_tests::synth::{SeqConfig, load_validation_faces};
 use monotrack_tests::trackeval::{ClipStats, run_clip, synthetic_clip, table_header, table_row};
 
@@ -27,14 +26,13 @@ fn run(clip: &[monotrack_tests::trackeval::ClipFrame], cfg: TrackerConfig) -> Cl
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn shipped_models_track_synthetic_sequences() {
-    let Some(data) = shared_data_or_skip("track_models") else {
-        return;
-    };
+    let data = monotrack_tests::shared_data();
     // Under emulation (tests/aarch64.sh sets MONOTRACK_EMULATED: qemu runs the networks about a
     // thousand times slower than the host) a shorter clip, without the filter-off pass: the flow
     // filter's kernels are checked against their portable forms by the unit tests there.
-    let emulated = std::env::var_os("MONOTRACK_EMULATED").is_some();
+    let emulated = cfg!(emulated);
     let faces = load_validation_faces(&data, if emulated { 6 } else { 16 }, 100.0).unwrap();
     let cfg = SeqConfig {
         segments: if emulated { 2 } else { 3 },
@@ -100,10 +98,9 @@ fn shipped_models_track_synthetic_sequences() {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn tracked_frames_reuse_the_level1_check_exactly() {
-    let Some(data) = shared_data_or_skip("track_models") else {
-        return;
-    };
+    let data = monotrack_tests::shared_data();
     let faces = load_validation_faces(&data, 4, 100.0).unwrap();
     let cfg = SeqConfig {
         segments: 2,
@@ -146,11 +143,10 @@ fn tracked_frames_reuse_the_level1_check_exactly() {
 /// detector's box and ends tracks that drifted off the face: measured box IoU 0.84 against 0.71
 /// and 94 correct frames of 240 against 34.
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn ultra_light_mode_tracks_without_landmark_networks() {
-    let Some(data) = shared_data_or_skip("track_models") else {
-        return;
-    };
-    let emulated = std::env::var_os("MONOTRACK_EMULATED").is_some();
+    let data = monotrack_tests::shared_data();
+    let emulated = cfg!(emulated);
     let faces = load_validation_faces(&data, if emulated { 4 } else { 12 }, 100.0).unwrap();
     let cfg = SeqConfig {
         segments: if emulated { 2 } else { 4 },
@@ -211,8 +207,13 @@ fn ultra_light_mode_tracks_without_landmark_networks() {
 /// turned 15–75° is checked and read by level 1 on a crop turned by its last roll. Measured (AMD
 /// EPYC Zen 4, native): a face on 360 of 360 frames and 360 correct.
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
+#[cfg_attr(
+    all(shared_data, emulated),
+    ignore = "360 frames and more of tracking: too slow under qemu"
+)]
 fn a_lost_tilted_face_is_found_again_turned() {
-    let Some(stats) = tilted_clip_stats(
+    let stats = tilted_clip_stats(
         "tilted, fast",
         SeqConfig {
             rotation_deg: 35.0,
@@ -220,9 +221,7 @@ fn a_lost_tilted_face_is_found_again_turned() {
             min_period_frames: 20.0,
             ..SeqConfig::eval_clips()
         },
-    ) else {
-        return;
-    };
+    );
     assert_shares(&stats, 0.98, 0.98);
 }
 
@@ -232,11 +231,13 @@ fn a_lost_tilted_face_is_found_again_turned() {
 /// portable path): a face on 360 of 360 frames and 360 correct; over 30 segments (1,800 frames)
 /// 1,799 and 1,583 (BENCHMARKS.md).
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
+#[cfg_attr(
+    all(shared_data, emulated),
+    ignore = "360 frames and more of tracking: too slow under qemu"
+)]
 fn a_fast_tilted_head_stays_tracked_through_blur_and_light() {
-    let Some(stats) = tilted_clip_stats("tilted, fast, blur and light", blur_and_light_clip())
-    else {
-        return;
-    };
+    let stats = tilted_clip_stats("tilted, fast, blur and light", blur_and_light_clip());
     assert_shares(&stats, 0.9, 0.9);
 }
 
@@ -247,16 +248,19 @@ fn a_fast_tilted_head_stays_tracked_through_blur_and_light() {
 /// face's bar throughout (and the earlier nose zone), 9 frames without a face while it is wholly
 /// in the frame (one small face, blurred) and 1,592 correct.
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
+#[cfg_attr(
+    all(shared_data, emulated),
+    ignore = "360 frames and more of tracking: too slow under qemu"
+)]
 fn a_blurred_face_is_found_again_where_it_was_lost() {
-    let Some(stats) = tilted_clip_stats(
+    let stats = tilted_clip_stats(
         "tilted, fast, blur and light, 1,800 frames",
         SeqConfig {
             segments: 30,
             ..blur_and_light_clip()
         },
-    ) else {
-        return;
-    };
+    );
     assert!(stats.no_face_visible <= 3, "{stats:?}");
     assert!(
         stats.correct as f32 >= 0.85 * stats.scored as f32,
@@ -271,14 +275,13 @@ fn a_blurred_face_is_found_again_where_it_was_lost() {
 /// filter in accuracy and no steadier (3.34 %, 0.229 px) and the thesis' filter (`flow_pull` 0)
 /// worse on both (3.79 %, 0.599 px): the exposure change reads as motion.
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
+#[cfg_attr(
+    all(shared_data, emulated),
+    ignore = "360 frames and more of tracking: too slow under qemu"
+)]
 fn the_flow_filter_holds_under_changing_light() {
-    let Some(data) = shared_data_or_skip("track_models") else {
-        return;
-    };
-    if std::env::var_os("MONOTRACK_EMULATED").is_some() {
-        println!("skipped under emulation: 2 × 360 frames of tracking");
-        return;
-    }
+    let data = monotrack_tests::shared_data();
     let faces = load_validation_faces(&data, 24, 100.0).unwrap();
     let clip = synthetic_clip(
         SeqConfig {
@@ -323,10 +326,13 @@ fn the_flow_filter_holds_under_changing_light() {
 /// 235. The clip moves by a few frames with the last bits of the arithmetic and by tens with a
 /// retrained net, hence the margin.
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
+#[cfg_attr(
+    all(shared_data, emulated),
+    ignore = "360 frames and more of tracking: too slow under qemu"
+)]
 fn a_head_tilted_from_the_start_is_found_turned() {
-    let Some(stats) = tilted_clip_stats("tilted 40° from the start", held_tilt_clip(40.0)) else {
-        return;
-    };
+    let stats = tilted_clip_stats("tilted 40° from the start", held_tilt_clip(40.0));
     assert_shares(&stats, 0.9, 0.9);
 }
 
@@ -335,10 +341,13 @@ fn a_head_tilted_from_the_start_is_found_turned() {
 /// 4): a face on 331 of 360 frames and 310 correct natively, 332 and 309 on the portable path
 /// (326 correct with the earlier nose zone); with the ±30° turns alone 159 correct.
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
+#[cfg_attr(
+    all(shared_data, emulated),
+    ignore = "360 frames and more of tracking: too slow under qemu"
+)]
 fn a_head_tilted_60_degrees_is_found_turned() {
-    let Some(stats) = tilted_clip_stats("tilted 60° from the start", held_tilt_clip(60.0)) else {
-        return;
-    };
+    let stats = tilted_clip_stats("tilted 60° from the start", held_tilt_clip(60.0));
     assert_shares(&stats, 0.8, 0.8);
 }
 
@@ -381,19 +390,14 @@ fn assert_shares(stats: &ClipStats, with_face: f32, correct: f32) {
 }
 
 /// The default tracker's row on the synthetic clip of `cfg` (faces68 validation faces; 360
-/// frames unless `cfg` has more segments), printed as `what`; `None` (with the reason printed)
-/// without the shared data or under emulation.
-fn tilted_clip_stats(what: &str, cfg: SeqConfig) -> Option<ClipStats> {
-    let data = shared_data_or_skip("track_models")?;
-    if std::env::var_os("MONOTRACK_EMULATED").is_some() {
-        println!("skipped under emulation: 360 frames of tracking");
-        return None;
-    }
+/// frames unless `cfg` has more segments), printed as `what`.
+fn tilted_clip_stats(what: &str, cfg: SeqConfig) -> ClipStats {
+    let data = monotrack_tests::shared_data();
     let faces = load_validation_faces(&data, 24, 100.0).unwrap();
     let clip = synthetic_clip(cfg, faces).unwrap();
     let mut tracker = Tracker::with_default_models(TrackerConfig::default()).unwrap();
     let stats = run_clip(&mut tracker, &clip, CORRECT_NME).unwrap();
     println!("{}", table_header());
     println!("{}", table_row(what, &stats));
-    Some(stats)
+    stats
 }

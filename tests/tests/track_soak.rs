@@ -5,7 +5,6 @@
 
 use monotrack_core::image::GrayImage;
 use monotrack_core::track::{FaceTracker, TrackerConfig};
-use monotrack_tests::shared_data_or_skip;
 use monotrack_tests::synth::{
     FrameTruth, OracleDetector, OracleLandmarks, SeqConfig, Sequence, load_validation_faces,
 };
@@ -23,10 +22,9 @@ fn rss_kib() -> Option<u64> {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn soak_10k_frames_without_memory_growth() {
-    let Some(data) = shared_data_or_skip("track_soak") else {
-        return;
-    };
+    let data = monotrack_tests::shared_data();
     let faces = load_validation_faces(&data, 6, 100.0).unwrap();
     // 3 segments of 40 frames (cuts included), replayed: tracking, losses and re-detections recur.
     let cfg = SeqConfig {

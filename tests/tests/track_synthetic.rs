@@ -10,7 +10,6 @@
 
 use monotrack_core::image::GrayImage;
 use monotrack_core::track::{FaceTracker, FrameState, Mode, TrackerConfig};
-use monotrack_tests::shared_data_or_skip;
 use monotrack_tests::synth::{
     FrameTruth, OracleDetector, OracleLandmarks, SeqConfig, Sequence, jitter,
     load_validation_faces, nme,
@@ -111,10 +110,9 @@ fn report(name: &str, s: &Stats) {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn tracker_on_synthetic_sequences() {
-    let Some(data) = shared_data_or_skip("track_synthetic") else {
-        return;
-    };
+    let data = monotrack_tests::shared_data();
     let faces = load_validation_faces(&data, 16, 100.0).unwrap();
     assert!(faces.len() >= 8, "only {} validation faces", faces.len());
     let cfg = SeqConfig::default();

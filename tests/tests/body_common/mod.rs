@@ -10,6 +10,7 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::Command;
+use std::sync::Mutex;
 
 /// HumanEva-I cameras: world → camera rotation and camera centre.
 #[derive(Deserialize)]
@@ -73,10 +74,17 @@ pub struct H36m {
     pub sequences: Vec<H36mSequence>,
 }
 
-/// Runs the converter (once; it skips up-to-date outputs) and returns the cache folder, or `None`
-/// with a printed `SKIPPED` reason.
-pub fn converted(test: &str) -> Option<PathBuf> {
-    let shared = monotrack_tests::shared_data_or_skip(test)?;
+/// Runs the converter (once per test process; it skips up-to-date outputs) and returns the cache
+/// folder. It needs python3 with numpy and h5py (test-all.sh installs them); without them the test
+/// fails.
+pub fn converted(test: &str) -> PathBuf {
+    // The tests of one binary run in parallel and share the outputs: one conversion at a time.
+    static DONE: Mutex<Option<PathBuf>> = Mutex::new(None);
+    let mut done = DONE.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some(out) = done.as_ref() {
+        return out.clone();
+    }
+    let shared = monotrack_tests::shared_data();
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("body-data");
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scripts/body_data.py");
     let status = Command::new("python3")
@@ -85,14 +93,14 @@ pub fn converted(test: &str) -> Option<PathBuf> {
         .arg(&out)
         .status();
     match status {
-        Ok(s) if s.success() => Some(out),
-        other => {
-            eprintln!(
-                "SKIPPED {test}: {} failed ({other:?}); it needs python3 with numpy and h5py",
-                script.display()
-            );
-            None
+        Ok(s) if s.success() => {
+            *done = Some(out.clone());
+            out
         }
+        other => panic!(
+            "{test}: {} failed ({other:?}); it needs python3 with numpy and h5py",
+            script.display()
+        ),
     }
 }
 

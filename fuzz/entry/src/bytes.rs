@@ -1,12 +1,10 @@
 //! Reads fuzzer bytes as values, so that each target sees structured input without a derive.
 
-// Each target uses a subset of these helpers.
-#![allow(dead_code)]
-
 /// Takes values off the front of the fuzzer's bytes; zeros once they run out.
 pub struct Bytes<'a>(pub &'a [u8]);
 
 impl Bytes<'_> {
+    /// The next byte.
     pub fn u8(&mut self) -> u8 {
         let Some((&b, rest)) = self.0.split_first() else {
             return 0;
@@ -15,6 +13,7 @@ impl Bytes<'_> {
         b
     }
 
+    /// The next four bytes, little-endian.
     pub fn u32(&mut self) -> u32 {
         u32::from_le_bytes([self.u8(), self.u8(), self.u8(), self.u8()])
     }

@@ -1,0 +1,60 @@
+//! What the fuzz targets run on one input, in one place for both of their runners: cargo-fuzz
+//! (`fuzz/fuzz_targets/*.rs`, nightly, AddressSanitizer, coverage-guided; `fuzz/run.sh`) and the
+//! stable test `tests/corpora.rs`, which replays the committed corpora and the seeds on every test
+//! run. Each `run` panics on a contract break (a panic inside the SDK, or an FFI call that returns
+//! `MonotrackError::Internal`); any other outcome of bad input is a pass.
+
+pub mod bytes;
+pub mod fit_inputs;
+pub mod frames;
+pub mod json_inputs;
+pub mod model_bytes;
+
+/// What a target runs on one input.
+pub type Entry = fn(&[u8]);
+
+/// The targets by name, as `fuzz/Cargo.toml` names its binaries.
+pub const TARGETS: [(&str, Entry); 4] = [
+    ("frames", frames::run),
+    ("json_inputs", json_inputs::run),
+    ("fit_inputs", fit_inputs::run),
+    ("model_bytes", model_bytes::run),
+];
+
+/// The inputs `fuzz/run.sh` seeds a target with besides its committed corpus, built from the
+/// shipped files: for `model_bytes` each network's ONNX in its own place (the selector byte picks
+/// the network), for `json_inputs` the shipped face model, pose prior and M3 configuration and the
+/// default configs behind their selector bytes.
+pub fn seeds(target: &str) -> Vec<(String, Vec<u8>)> {
+    let with = |selector: u8, bytes: &[u8]| [&[selector], bytes].concat();
+    match target {
+        "model_bytes" => monotrack_core::landmarks::EMBEDDED_FILES
+            .iter()
+            .filter(|(n, _)| n.ends_with(".onnx"))
+            .enumerate()
+            .map(|(i, (n, b))| (format!("seed-{n}"), with(i as u8, b)))
+            .collect(),
+        "json_inputs" => {
+            let file = |rel: &str| {
+                let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../core");
+                std::fs::read(root.join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+            };
+            let tracker = serde_json::to_vec(&monotrack_core::track::TrackerConfig::default());
+            let detector = serde_json::to_vec(&monotrack_core::detect::DetectorConfig::default());
+            vec![
+                ("seed-tracker-config".into(), with(0, &tracker.unwrap())),
+                ("seed-detector-config".into(), with(1, &detector.unwrap())),
+                (
+                    "seed-face-model".into(),
+                    with(2, &file("models/face_model/face_model.json")),
+                ),
+                (
+                    "seed-pose-prior".into(),
+                    with(3, &file("models/body/pose_prior.json")),
+                ),
+                ("seed-m3".into(), with(4, &file("models/m3/m3.json"))),
+            ]
+        }
+        _ => Vec::new(),
+    }
+}

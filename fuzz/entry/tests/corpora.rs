@@ -1,0 +1,56 @@
+//! Every committed fuzz input (`fuzz/corpus/<target>/`) and every seed through the same entry
+//! point the fuzzer runs, on stable and in every test run: a fixed crash stays fixed, and a change
+//! that breaks the contract on an input the fuzzer once found fails here without nightly.
+
+use monotrack_fuzz_entry::{TARGETS, seeds};
+use std::path::Path;
+
+fn replay(target: &str) -> usize {
+    let run = TARGETS.iter().find(|(n, _)| *n == target).unwrap().1;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../corpus")
+        .join(target);
+    let mut inputs: Vec<(String, Vec<u8>)> = match std::fs::read_dir(&dir) {
+        Ok(entries) => entries
+            .map(|e| {
+                let p = e.unwrap().path();
+                (p.display().to_string(), std::fs::read(&p).unwrap())
+            })
+            .collect(),
+        Err(_) => Vec::new(),
+    };
+    inputs.sort();
+    inputs.extend(seeds(target));
+    for (name, bytes) in &inputs {
+        let r = std::panic::catch_unwind(|| run(bytes));
+        assert!(r.is_ok(), "{target}: the input {name} breaks the contract");
+    }
+    println!("{target}: {} inputs", inputs.len());
+    inputs.len()
+}
+
+#[test]
+fn frames_corpus() {
+    assert!(
+        replay("frames") > 100,
+        "the committed frames corpus is missing"
+    );
+}
+
+#[test]
+fn fit_inputs_corpus() {
+    assert!(
+        replay("fit_inputs") > 100,
+        "the committed fit_inputs corpus is missing"
+    );
+}
+
+#[test]
+fn json_inputs_seeds() {
+    assert_eq!(replay("json_inputs"), 5);
+}
+
+#[test]
+fn model_bytes_seeds() {
+    assert!(replay("model_bytes") >= 5);
+}
