@@ -9,6 +9,9 @@
 # in the code and data (from the unstripped symbol sizes).
 # PROFILE (default release-small, the profile the arm64 builds ship: tract and ndarray built for
 # size; `release` for comparison) picks the cargo profile; extra cargo arguments pass through.
+# Fails when a LOAD segment is aligned below 16 KB (Google Play requires 16 KB pages for apps that
+# target Android 15), and, where MAX_STRIPPED_BYTES / MAX_GZIPPED_BYTES are set (CI), when the
+# library is larger than that budget.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 T=aarch64-unknown-linux-gnu
@@ -39,7 +42,22 @@ gz=$(gzip -9 -c "$out/libmonotrack_ffi.so" | wc -c)
 awk -v p="$PROFILE" -v s="$stripped" -v g="$gz" 'BEGIN {
   printf "aarch64 libmonotrack_ffi.so (%s profile, stripped): %d bytes (%.1f MB), gzipped %d bytes (%.1f MB)\n", p, s, s / 1e6, g, g / 1e6 }'
 echo "LOAD segment alignment:"
-aarch64-linux-gnu-readelf -lW "$out/libmonotrack_ffi.so" | awk '$1 == "LOAD" {print "  " $NF}'
+aligns=$(aarch64-linux-gnu-readelf -lW "$out/libmonotrack_ffi.so" | awk '$1 == "LOAD" {print $NF}')
+echo "$aligns" | sed 's/^/  /'
+status=0
+for a in $aligns; do
+  if [ $((a)) -lt 16384 ]; then echo "FAILED: a LOAD segment aligned to $a, below 16 KB"; status=1; fi
+done
+budget() { # name value limit
+  [ -n "$3" ] || return 0
+  if [ "$2" -gt "$3" ]; then
+    echo "FAILED: $1 $2 bytes, over its budget of $3"; status=1
+  else
+    awk -v n="$1" -v v="$2" -v l="$3" 'BEGIN {printf "%s within its budget: %d of %d bytes (%.1f %% left)\n", n, v, l, 100 * (l - v) / l}'
+  fi
+}
+budget "stripped library" "$stripped" "${MAX_STRIPPED_BYTES:-}"
+budget "gzipped library" "$gz" "${MAX_GZIPPED_BYTES:-}"
 echo "per crate (symbol bytes, unstripped; the rest is ELF tables and unnamed data):"
 aarch64-linux-gnu-nm --size-sort -S -C -t d "$lib" | awk '
   { size = $2 + 0; name = $4; for (i = 5; i <= NF; i++) name = name " " $i
@@ -48,3 +66,4 @@ aarch64-linux-gnu-nm --size-sort -S -C -t d "$lib" | awk '
     if (crate !~ /^[a-z_][a-z0-9_]*$/) crate = "(other)"
     by[crate] += size; total += size }
   END { for (c in by) printf "%12d %5.1f%%  %s\n", by[c], 100 * by[c] / total, c }' | sort -rn | awk 'NR <= 15'
+exit $status
