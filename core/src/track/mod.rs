@@ -1238,6 +1238,9 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         Ok(())
     }
 
+    /// One frame through the pipeline's stages, in order: region (the tracks' template match and
+    /// face check, then the detector where due and its detections checked and assigned to
+    /// tracks), landmarks, flow filter and fit for each face, then the result with gaze.
     /// `camera`: the upright image's intrinsics, `None` for the default.
     fn process_inner(
         &mut self,
@@ -1246,14 +1249,77 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         t0: Instant,
         camera: Option<Intrinsics>,
     ) -> Result<()> {
+        let camera = self.begin_frame(image, timestamp_ns, camera)?;
+        let video = self.config.mode == Mode::Video;
+        let mut timings = StageTimings::default();
+
+        // 1. Region: the tracks' template match, then the detector where due.
+        let t = Instant::now();
+        let lost_now = self.track_regions(image)?;
+        let n_active = self.slots.iter().filter(|s| s.active).count();
+        let (run_detector, verify) = self.detection_due(n_active, lost_now);
+        // A loss this frame (not re-detected at once) triggers the detector on the next frame.
+        self.redetect_next = lost_now && !self.config.redetect_immediately;
+        if run_detector {
+            timings.detect_us = self.detect_and_check(image, verify, n_active)?;
+            self.assign_detections(verify);
+        } else {
+            self.frames_since_detect = self.frames_since_detect.saturating_add(1);
+        }
+        self.end_unseen_faces();
+        timings.region_us = us(t);
+
+        // 2–4. Landmarks, flow filter, fit; then the next frame's region and template.
+        let use_flow = video && self.config.flow_filter;
+        if use_flow {
+            let t = Instant::now();
+            self.build_flow_pyramid(image);
+            timings.flow_us += us(t);
+        }
+        for i in 0..self.slots.len() {
+            if !self.slots[i].active {
+                continue;
+            }
+            let t = Instant::now();
+            self.landmarks(i, image)?;
+            timings.landmarks_us += us(t);
+            let t = Instant::now();
+            self.filter(i, use_flow)?;
+            timings.flow_us += us(t);
+            let t = Instant::now();
+            self.fit(i, image, &camera)?;
+            timings.fit_us += us(t);
+        }
+
+        // 5. Result, with each face's point of gaze.
+        let t = Instant::now();
+        self.report(timestamp_ns);
+        timings.gaze_us = us(t);
+        self.end_frame(use_flow);
+        self.result.timestamp_ns = timestamp_ns;
+        self.result.frame_index = self.frame_index;
+        self.result.detector_ran = run_detector;
+        timings.total_us = us(t0);
+        self.result.timings = timings;
+        self.frame_index += 1;
+        Ok(())
+    }
+
+    /// Checks the frame and its timestamp, forgets the tracks on a new frame size, and gives the
+    /// camera this frame is fitted with.
+    fn begin_frame(
+        &mut self,
+        image: &GrayImage,
+        timestamp_ns: i64,
+        camera: Option<Intrinsics>,
+    ) -> Result<Intrinsics> {
         let (w, h) = (image.width(), image.height());
         if w == 0 || h == 0 || image.data().len() != w * h {
             return Err(Error::InvalidFrame(format!(
                 "empty or inconsistent {w}x{h} image"
             )));
         }
-        let video = self.config.mode == Mode::Video;
-        if video {
+        if self.config.mode == Mode::Video {
             if let Some(last) = self.last_timestamp
                 && timestamp_ns <= last
             {
@@ -1272,86 +1338,93 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             }
         }
         self.frame_size = (w, h);
-        let camera = match camera {
-            Some(c) => c,
-            None => Intrinsics::default_for(w as u32, h as u32)?,
-        };
-        let mut timings = StageTimings::default();
+        match camera {
+            Some(c) => Ok(c),
+            None => Intrinsics::default_for(w as u32, h as u32),
+        }
+    }
 
-        // 1. Region: NCC tracking of the active tracks.
-        let t = Instant::now();
+    /// Video mode: each active track's template matched in this frame and its region checked by
+    /// M3's face confidence; a track that fails ends, leaving its face as the lost one. Returns
+    /// whether a track was lost. Image mode: marks every face unseen.
+    fn track_regions(&mut self, image: &GrayImage) -> Result<bool> {
         let mut lost_now = false;
-        if video {
-            for s in self.slots.iter_mut().filter(|s| s.active) {
-                s.seen = false;
-                let lost = LostFace {
-                    centre: s.rect.center(),
-                    size: s.rect.w.max(s.rect.h),
-                    roll: eye_roll(&s.landmarks),
-                    frames: 0,
-                };
-                let Some(hit) = s.ncc.search(image, self.config.search_margin) else {
-                    s.end();
-                    lost_now = true;
-                    self.lost = Some(lost);
-                    continue;
-                };
-                if hit.score < self.config.min_ncc_score {
-                    s.end();
-                    lost_now = true;
-                    self.lost = Some(lost);
-                    continue;
-                }
-                let region = s.calib.apply(&hit.rect);
-                // The gradient detector keeps its own roll from frame to frame.
-                let m3 = self.config.landmarks != LandmarkMode::Gradient;
-                let turned = m3 && (TURNED_CHECK_FROM..=TURNED_CHECK_TO).contains(&lost.roll.abs());
-                let mut conf = if turned {
-                    self.estimator.face_confidence_turned(
-                        image,
-                        &region,
-                        lost.roll,
-                        &mut s.landmarks,
-                    )?
-                } else {
-                    self.estimator
-                        .face_confidence(image, &region, &mut s.landmarks)?
-                };
-                if conf < self.config.min_face_confidence && turned {
-                    // The last roll may be off (a wrong last frame): upright, as below it, and
-                    // the better of the two.
-                    let turned_out = s.landmarks;
-                    let upright =
-                        self.estimator
-                            .face_confidence(image, &region, &mut s.landmarks)?;
-                    if upright >= conf {
-                        conf = upright;
-                    } else {
-                        s.landmarks = turned_out;
-                    }
-                }
-                if conf < self.config.min_face_confidence {
-                    s.end();
-                    lost_now = true;
-                    self.lost = Some(lost);
-                    continue;
-                }
-                s.seen = true;
-                s.rect = region;
-                s.score = conf;
-                s.state = FaceState::Tracked;
-                s.level1_ready = true;
-            }
-        } else {
+        if self.config.mode != Mode::Video {
             for s in &mut self.slots {
                 s.seen = false;
             }
+            return Ok(lost_now);
         }
-        let n_active = self.slots.iter().filter(|s| s.active).count();
+        for s in self.slots.iter_mut().filter(|s| s.active) {
+            s.seen = false;
+            let lost = LostFace {
+                centre: s.rect.center(),
+                size: s.rect.w.max(s.rect.h),
+                roll: eye_roll(&s.landmarks),
+                frames: 0,
+            };
+            let Some(hit) = s.ncc.search(image, self.config.search_margin) else {
+                s.end();
+                lost_now = true;
+                self.lost = Some(lost);
+                continue;
+            };
+            if hit.score < self.config.min_ncc_score {
+                s.end();
+                lost_now = true;
+                self.lost = Some(lost);
+                continue;
+            }
+            let region = s.calib.apply(&hit.rect);
+            // The gradient detector keeps its own roll from frame to frame.
+            let m3 = self.config.landmarks != LandmarkMode::Gradient;
+            let turned = m3 && (TURNED_CHECK_FROM..=TURNED_CHECK_TO).contains(&lost.roll.abs());
+            let mut conf = if turned {
+                self.estimator.face_confidence_turned(
+                    image,
+                    &region,
+                    lost.roll,
+                    &mut s.landmarks,
+                )?
+            } else {
+                self.estimator
+                    .face_confidence(image, &region, &mut s.landmarks)?
+            };
+            if conf < self.config.min_face_confidence && turned {
+                // The last roll may be off (a wrong last frame): upright, as below it, and
+                // the better of the two.
+                let turned_out = s.landmarks;
+                let upright = self
+                    .estimator
+                    .face_confidence(image, &region, &mut s.landmarks)?;
+                if upright >= conf {
+                    conf = upright;
+                } else {
+                    s.landmarks = turned_out;
+                }
+            }
+            if conf < self.config.min_face_confidence {
+                s.end();
+                lost_now = true;
+                self.lost = Some(lost);
+                continue;
+            }
+            s.seen = true;
+            s.rect = region;
+            s.score = conf;
+            s.state = FaceState::Tracked;
+            s.level1_ready = true;
+        }
+        Ok(lost_now)
+    }
+
+    /// Whether the detector runs on this frame, and whether as the periodic check of the tracks.
+    fn detection_due(&self, n_active: usize, lost_now: bool) -> (bool, bool) {
         // Detect: always in image mode; in video mode when nothing is tracked (first frame, or no
         // face yet) unless the loss happened just now and re-detection waits for the next frame,
         // when a loss asked for it, or periodically while some faces are tracked and there is room
         // for more.
+        let video = self.config.mode == Mode::Video;
         let verify = video
             && n_active > 0
             && self.config.verify_interval > 0
@@ -1365,129 +1438,149 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 && n_active < self.config.max_faces
                 && self.config.new_face_interval > 0
                 && self.frames_since_detect + 1 >= self.config.new_face_interval);
-        // A loss this frame (not re-detected at once) triggers the detector on the next frame.
-        self.redetect_next = lost_now && !self.config.redetect_immediately;
-        if run_detector {
-            let td = Instant::now();
-            self.detector.detect(image, &mut self.detections)?;
-            timings.detect_us = us(td);
-            self.frames_since_detect = 0;
-            self.redetect_next = false;
-            self.detections.retain(|(r, s)| {
-                r.is_valid() && s.is_finite() && *s >= self.config.min_detection_score
-            });
-            if verify {
-                // A check that finds its tracks needs only the detections on them, whose face
-                // check is one search from the track's roll; the others, each checked from
-                // several starting rolls, would cost most of the frame. Where none is on a
-                // track, all are checked: the track has drifted and a new one starts.
-                let on_track = |r: &Rect, slots: &[Slot]| {
-                    slots
-                        .iter()
-                        .any(|s| s.active && s.rect.iou(r) > self.config.match_iou)
-                };
-                if self
-                    .detections
+        (run_detector, verify)
+    }
+
+    /// The detector on the whole frame, its detections face-checked and ranked into
+    /// `self.ranked` (turned where none is upright), and, on a periodic check, the tracks that
+    /// drifted off their faces ended. Returns the detector's microseconds.
+    fn detect_and_check(
+        &mut self,
+        image: &GrayImage,
+        verify: bool,
+        n_active: usize,
+    ) -> Result<u64> {
+        let video = self.config.mode == Mode::Video;
+        let td = Instant::now();
+        self.detector.detect(image, &mut self.detections)?;
+        let detect_us = us(td);
+        self.frames_since_detect = 0;
+        self.redetect_next = false;
+        self.detections.retain(|(r, s)| {
+            r.is_valid() && s.is_finite() && *s >= self.config.min_detection_score
+        });
+        if verify {
+            // A check that finds its tracks needs only the detections on them, whose face
+            // check is one search from the track's roll; the others, each checked from
+            // several starting rolls, would cost most of the frame. Where none is on a
+            // track, all are checked: the track has drifted and a new one starts.
+            let on_track = |r: &Rect, slots: &[Slot]| {
+                slots
                     .iter()
-                    .any(|(r, _)| on_track(r, &self.slots))
-                {
-                    let slots = &self.slots;
-                    self.detections.retain(|(r, _)| on_track(r, slots));
+                    .any(|s| s.active && s.rect.iou(r) > self.config.match_iou)
+            };
+            if self
+                .detections
+                .iter()
+                .any(|(r, _)| on_track(r, &self.slots))
+            {
+                let slots = &self.slots;
+                self.detections.retain(|(r, _)| on_track(r, slots));
+            }
+        }
+        // Every detection must pass the classifier tracked windows are checked with (M3's
+        // face confidence), on the face's own box; ranked by detector score × confidence
+        // (subtitle characters at 20 px pass at 0.99-1.0 while the real face scores 0.95 /
+        // 0.99, so the confidence alone ranks badly).
+        let (min_new, min_again) = (
+            self.config.min_detection_confidence,
+            self.config.redetection_bar(),
+        );
+        let lost = self.lost.filter(|_| video);
+        check_detections_by(
+            &mut self.estimator,
+            image,
+            &mut self.detections,
+            |r, conf| conf >= min_new || (conf >= min_again && lost.is_some_and(|l| l.near(r))),
+            &mut self.checked,
+            &mut self.ranked,
+        )?;
+        if video && self.ranked.is_empty() {
+            // A face found turned starts its track as any other: its level-1 points, found
+            // upright in the turned window and mapped back, place level 2's zones.
+            self.detect_turned(image, n_active == 0)?;
+        }
+        if verify && !self.ranked.is_empty() {
+            // A track no detection overlaps, while the detector found a face, has drifted
+            // off its face (its check was too weak to end it): it ends, and the face found
+            // starts a new one below. Where the detector finds nothing the tracks stay, since
+            // it misses faces the template still follows.
+            for s in &mut self.slots {
+                let overlapped = self
+                    .ranked
+                    .iter()
+                    .any(|(r, ..)| s.rect.iou(r) > self.config.match_iou);
+                if s.active && !overlapped {
+                    s.end();
                 }
             }
-            // Every detection must pass the classifier tracked windows are checked with (M3's
-            // face confidence), on the face's own box; ranked by detector score × confidence
-            // (subtitle characters at 20 px pass at 0.99-1.0 while the real face scores 0.95 /
-            // 0.99, so the confidence alone ranks badly).
-            let (min_new, min_again) = (
-                self.config.min_detection_confidence,
-                self.config.redetection_bar(),
-            );
-            let lost = self.lost.filter(|_| video);
-            check_detections_by(
-                &mut self.estimator,
-                image,
-                &mut self.detections,
-                |r, conf| conf >= min_new || (conf >= min_again && lost.is_some_and(|l| l.near(r))),
-                &mut self.checked,
-                &mut self.ranked,
-            )?;
-            if video && self.ranked.is_empty() {
-                // A face found turned starts its track as any other: its level-1 points, found
-                // upright in the turned window and mapped back, place level 2's zones.
-                self.detect_turned(image, n_active == 0)?;
-            }
-            if verify && !self.ranked.is_empty() {
-                // A track no detection overlaps, while the detector found a face, has drifted
-                // off its face (its check was too weak to end it): it ends, and the face found
-                // starts a new one below. Where the detector finds nothing the tracks stay, since
-                // it misses faces the template still follows.
-                for s in &mut self.slots {
-                    let overlapped = self
-                        .ranked
-                        .iter()
-                        .any(|(r, ..)| s.rect.iou(r) > self.config.match_iou);
-                    if s.active && !overlapped {
-                        s.end();
-                    }
+        }
+        Ok(detect_us)
+    }
+
+    /// Each ranked detection to the track it overlaps most (re-anchoring it on a periodic check;
+    /// in image mode the same face as last call keeps its id), or to a free slot as a new face.
+    fn assign_detections(&mut self, verify: bool) {
+        let video = self.config.mode == Mode::Video;
+        for k in 0..self.ranked.len() {
+            let (rect, score, _, checked) = self.ranked[k];
+            // The track this detection belongs to, by overlap with its region this frame
+            // (video: the tracked window; image: last call's box).
+            let mut best: Option<(usize, f32)> = None;
+            for (i, s) in self.slots.iter().enumerate() {
+                if !s.active {
+                    continue;
+                }
+                let iou = s.rect.iou(&rect);
+                if iou > self.config.match_iou && best.is_none_or(|(_, b)| iou > b) {
+                    best = Some((i, iou));
                 }
             }
-            for k in 0..self.ranked.len() {
-                let (rect, score, _, checked) = self.ranked[k];
-                // The track this detection belongs to, by overlap with its region this frame
-                // (video: the tracked window; image: last call's box).
-                let mut best: Option<(usize, f32)> = None;
-                for (i, s) in self.slots.iter().enumerate() {
-                    if !s.active {
-                        continue;
-                    }
-                    let iou = s.rect.iou(&rect);
-                    if iou > self.config.match_iou && best.is_none_or(|(_, b)| iou > b) {
-                        best = Some((i, iou));
-                    }
+            match best {
+                Some((i, _)) if video && verify => {
+                    // The detector's box re-anchors the track's place and size, with the
+                    // check's landmarks on it; the template is taken from it at the end of
+                    // this frame.
+                    let s = &mut self.slots[i];
+                    s.rect = rect;
+                    s.landmarks = checked;
+                    s.level1_ready = true;
                 }
-                match best {
-                    Some((i, _)) if video && verify => {
-                        // The detector's box re-anchors the track's place and size, with the
-                        // check's landmarks on it; the template is taken from it at the end of
-                        // this frame.
-                        let s = &mut self.slots[i];
+                Some((i, _)) => {
+                    let s = &mut self.slots[i];
+                    if !video && !s.seen {
+                        // Image mode: the same face as last call keeps its id.
+                        s.seen = true;
                         s.rect = rect;
+                        s.score = score;
+                        s.state = FaceState::Detected;
+                        s.fit = None;
                         s.landmarks = checked;
                         s.level1_ready = true;
                     }
-                    Some((i, _)) => {
-                        let s = &mut self.slots[i];
-                        if !video && !s.seen {
-                            // Image mode: the same face as last call keeps its id.
-                            s.seen = true;
-                            s.rect = rect;
-                            s.score = score;
-                            s.state = FaceState::Detected;
-                            s.fit = None;
-                            s.landmarks = checked;
-                            s.level1_ready = true;
-                        }
-                    }
-                    None => {
-                        // A free slot; in image mode also one whose face was not seen this call.
-                        if let Some(s) = self
-                            .slots
-                            .iter_mut()
-                            .find(|s| !s.active || (!video && !s.seen))
-                        {
-                            s.start(self.next_id, rect, score);
-                            s.landmarks = checked;
-                            s.level1_ready = true;
-                            self.next_id += 1;
-                            self.lost = None;
-                        }
+                }
+                None => {
+                    // A free slot; in image mode also one whose face was not seen this call.
+                    if let Some(s) = self
+                        .slots
+                        .iter_mut()
+                        .find(|s| !s.active || (!video && !s.seen))
+                    {
+                        s.start(self.next_id, rect, score);
+                        s.landmarks = checked;
+                        s.level1_ready = true;
+                        self.next_id += 1;
+                        self.lost = None;
                     }
                 }
             }
-        } else {
-            self.frames_since_detect = self.frames_since_detect.saturating_add(1);
         }
+    }
+
+    /// Ages the lost face (forgotten after [`LOST_FRAMES`], and at once in image mode), and in
+    /// image mode ends the faces this call did not find.
+    fn end_unseen_faces(&mut self) {
+        let video = self.config.mode == Mode::Video;
         if let Some(l) = self.lost.as_mut() {
             l.frames += 1;
             if l.frames > LOST_FRAMES || !video {
@@ -1499,117 +1592,122 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                 s.end();
             }
         }
-        timings.region_us = us(t);
+    }
 
-        // Flow pyramid for this frame (kept as the next frame's previous).
-        let use_flow = video && self.config.flow_filter;
+    /// This frame's flow pyramid (kept as the next frame's previous), only around the faces: the
+    /// flow reads windows near their landmarks, in this frame (as the next image) and in the next
+    /// (as the previous one). Without faces nothing is built: a new track resets its filter, so
+    /// no flow reads this frame's pyramid.
+    fn build_flow_pyramid(&mut self, image: &GrayImage) {
+        if let Some(region) = flow_region(&self.slots, &self.config.lk) {
+            self.pyr_cur
+                .build_region(image, self.config.lk.levels, &region);
+        }
+    }
+
+    /// Slot `i`'s 68 landmarks on its region.
+    fn landmarks(&mut self, i: usize, image: &GrayImage) -> Result<()> {
+        let s = &mut self.slots[i];
+        if s.level1_ready {
+            // The face check on this region already ran M3's level 1.
+            self.estimator.complete(image, &s.rect, &mut s.landmarks)?;
+        } else {
+            self.estimator.estimate(image, &s.rect, &mut s.landmarks)?;
+        }
+        s.level1_ready = false;
+        Ok(())
+    }
+
+    /// Slot `i`'s landmarks through the optical-flow filter (video mode with the filter on).
+    fn filter(&mut self, i: usize, use_flow: bool) -> Result<()> {
+        let s = &mut self.slots[i];
+        s.flow_points = 0;
         if use_flow {
-            let t = Instant::now();
-            // Only around the faces: the flow reads windows near their landmarks, in this frame
-            // (as the next image) and in the next (as the previous one). Without faces nothing is
-            // built: a new track resets its filter, so no flow reads this frame's pyramid.
-            if let Some(region) = flow_region(&self.slots, &self.config.lk) {
-                self.pyr_cur
-                    .build_region(image, self.config.lk.levels, &region);
+            if s.state == FaceState::Detected || self.pyr_prev.size() != self.pyr_cur.size() {
+                s.filter.reset();
             }
-            timings.flow_us += us(t);
+            let ref_scale = self.config.flow_threshold_px / FLOW_REFERENCE_FACE_PX;
+            self.points = s.landmarks.points;
+            let size = face_size(&self.points);
+            let used = s.filter.apply(
+                &self.pyr_prev,
+                &self.pyr_cur,
+                &mut self.points,
+                ref_scale * size,
+                self.config.flow_pull,
+            )?;
+            s.landmarks.points = self.points;
+            s.flow_points = used as u32;
         }
+        Ok(())
+    }
 
-        // 2–4. Landmarks, flow filter, fit; then the next frame's region and template.
-        let model = FaceModel::builtin();
-        let ref_scale = self.config.flow_threshold_px / FLOW_REFERENCE_FACE_PX;
-        for s in self.slots.iter_mut().filter(|s| s.active) {
-            let t = Instant::now();
-            if s.level1_ready {
-                // The face check on this region already ran M3's level 1.
-                self.estimator.complete(image, &s.rect, &mut s.landmarks)?;
-            } else {
-                self.estimator.estimate(image, &s.rect, &mut s.landmarks)?;
-            }
-            s.level1_ready = false;
-            timings.landmarks_us += us(t);
-
-            let t = Instant::now();
-            s.flow_points = 0;
-            if use_flow {
-                if s.state == FaceState::Detected || self.pyr_prev.size() != self.pyr_cur.size() {
-                    s.filter.reset();
-                }
-                self.points = s.landmarks.points;
-                let size = face_size(&self.points);
-                let used = s.filter.apply(
-                    &self.pyr_prev,
-                    &self.pyr_cur,
-                    &mut self.points,
-                    ref_scale * size,
-                    self.config.flow_pull,
-                )?;
-                s.landmarks.points = self.points;
-                s.flow_points = used as u32;
-            }
-            timings.flow_us += us(t);
-
-            let t = Instant::now();
-            for (o, p) in self.points64.iter_mut().zip(&s.landmarks.points) {
-                *o = [f64::from(p[0]), f64::from(p[1])];
-            }
-            for (w, c) in self.weights64.iter_mut().zip(&s.landmarks.weights) {
-                *w = f64::from(*c);
-            }
-            let tracking = video && s.state == FaceState::Tracked && s.fit.is_some();
-            let ultra_light = self.config.landmarks == LandmarkMode::Gradient;
-            let fit = if ultra_light {
-                s.ffbp.fit(&self.points64, Some(&self.weights64), &camera)?
-            } else if tracking {
-                s.msbp_track.fit(
-                    &self.points64,
-                    Some(&self.weights64),
-                    &camera,
-                    s.fit.as_ref(),
-                )?
-            } else {
-                s.msbp_init
-                    .fit(&self.points64, Some(&self.weights64), &camera, None)?
-            };
-            if video && !ultra_light && s.msbp_init.fixed_shape().is_none() {
-                s.shape_acc.push(&fit.shape);
-                if s.shape_acc.is_complete() {
-                    let shape = s.shape_acc.median();
-                    s.msbp_init.set_fixed_shape(shape);
-                    s.msbp_track.set_fixed_shape(shape);
-                }
-            }
-            s.fit = Some(fit);
-            if video {
-                model.project_into(
-                    &fit.shape,
-                    &fit.animation,
-                    &fit.pose.rotation,
-                    &fit.pose.translation,
-                    &camera,
-                    &mut self.projected,
-                );
-                s.model_box = bbox64(&self.projected);
-                if ultra_light {
-                    // The gradient points are too coarse to place the next template (a biased
-                    // chin or brow grows the box frame by frame): the region the detector and
-                    // the template match found is the template.
-                    s.model_box = s.rect;
-                    s.calib = BoxCalib::IDENTITY;
-                    s.calib_pending = false;
-                }
-                if s.calib_pending {
-                    s.calib = BoxCalib::between(&s.model_box, &s.rect);
-                    s.calib_pending = false;
-                }
-                // On failure (face off-frame or flat) the track ends after this frame's report.
-                s.ncc.set_template(image, &s.model_box);
-            }
-            timings.fit_us += us(t);
+    /// Slot `i`'s 3D fit (MSBP, or FFBP in the ultra-light mode), its shape held once enough
+    /// frames agree, and in video mode the next frame's template from the fitted model's box.
+    fn fit(&mut self, i: usize, image: &GrayImage, camera: &Intrinsics) -> Result<()> {
+        let video = self.config.mode == Mode::Video;
+        let s = &mut self.slots[i];
+        for (o, p) in self.points64.iter_mut().zip(&s.landmarks.points) {
+            *o = [f64::from(p[0]), f64::from(p[1])];
         }
+        for (w, c) in self.weights64.iter_mut().zip(&s.landmarks.weights) {
+            *w = f64::from(*c);
+        }
+        let tracking = video && s.state == FaceState::Tracked && s.fit.is_some();
+        let ultra_light = self.config.landmarks == LandmarkMode::Gradient;
+        let fit = if ultra_light {
+            s.ffbp.fit(&self.points64, Some(&self.weights64), camera)?
+        } else if tracking {
+            s.msbp_track.fit(
+                &self.points64,
+                Some(&self.weights64),
+                camera,
+                s.fit.as_ref(),
+            )?
+        } else {
+            s.msbp_init
+                .fit(&self.points64, Some(&self.weights64), camera, None)?
+        };
+        if video && !ultra_light && s.msbp_init.fixed_shape().is_none() {
+            s.shape_acc.push(&fit.shape);
+            if s.shape_acc.is_complete() {
+                let shape = s.shape_acc.median();
+                s.msbp_init.set_fixed_shape(shape);
+                s.msbp_track.set_fixed_shape(shape);
+            }
+        }
+        s.fit = Some(fit);
+        if video {
+            FaceModel::builtin().project_into(
+                &fit.shape,
+                &fit.animation,
+                &fit.pose.rotation,
+                &fit.pose.translation,
+                camera,
+                &mut self.projected,
+            );
+            s.model_box = bbox64(&self.projected);
+            if ultra_light {
+                // The gradient points are too coarse to place the next template (a biased
+                // chin or brow grows the box frame by frame): the region the detector and
+                // the template match found is the template.
+                s.model_box = s.rect;
+                s.calib = BoxCalib::IDENTITY;
+                s.calib_pending = false;
+            }
+            if s.calib_pending {
+                s.calib = BoxCalib::between(&s.model_box, &s.rect);
+                s.calib_pending = false;
+            }
+            // On failure (face off-frame or flat) the track ends after this frame's report.
+            s.ncc.set_template(image, &s.model_box);
+        }
+        Ok(())
+    }
 
-        // Result, with each face's point of gaze.
-        let t = Instant::now();
+    /// The frame's result: each fitted face, with its point of gaze where gaze is on; the eye
+    /// rays are recorded for taps.
+    fn report(&mut self, timestamp_ns: i64) {
         self.result.faces.clear();
         let still = GazeRay {
             origin: Vector3::zeros(),
@@ -1658,28 +1756,26 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             }
         }
         self.gaze.record(frame);
-        timings.gaze_us = us(t);
-        if video {
-            // Tracks without a template cannot be followed: end them after reporting this frame.
-            for s in self
-                .slots
-                .iter_mut()
-                .filter(|s| s.active && !s.ncc.has_template())
-            {
-                s.end();
-                self.redetect_next = true;
-            }
-            if use_flow {
-                std::mem::swap(&mut self.pyr_prev, &mut self.pyr_cur);
-            }
+    }
+
+    /// Video mode: ends the tracks left without a template (after reporting them), and keeps
+    /// this frame's pyramid as the next frame's previous.
+    fn end_frame(&mut self, use_flow: bool) {
+        if self.config.mode != Mode::Video {
+            return;
         }
-        self.result.timestamp_ns = timestamp_ns;
-        self.result.frame_index = self.frame_index;
-        self.result.detector_ran = run_detector;
-        timings.total_us = us(t0);
-        self.result.timings = timings;
-        self.frame_index += 1;
-        Ok(())
+        // Tracks without a template cannot be followed: end them after reporting this frame.
+        for s in self
+            .slots
+            .iter_mut()
+            .filter(|s| s.active && !s.ncc.has_template())
+        {
+            s.end();
+            self.redetect_next = true;
+        }
+        if use_flow {
+            std::mem::swap(&mut self.pyr_prev, &mut self.pyr_cur);
+        }
     }
 }
 
