@@ -2150,10 +2150,9 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]
     fn matches_the_definition_with_a_zero_border() {
-        if !crate::cpu::avx2_fma_or_skip() {
-            return;
-        }
+        crate::cpu::assert_avx2_fma_path();
         // Strides 1 and 2, odd and even sides, a partial channel block (24 = 16 + 8), position
         // counts that leave every remainder of six (the 256-bit kernels) and of eight (the
         // 512-bit one), one, two and three blocks (40 = a pair and a partial single for the

@@ -194,18 +194,20 @@ pub(crate) fn has_avx2_fma() -> bool {
         && kernel_path() == KernelPath::Native
 }
 
-/// For the tests of the AVX2 paths: whether the CPU has AVX2 and FMA, printing the skip reason
-/// when it has not.
+/// For the tests of the AVX2 paths, which carry
+/// `#[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]` (build.rs):
+/// fails when they are run where those kernels do not (the portable path: test-all.sh's portable
+/// pass leaves them out with `--skip`).
 #[cfg(test)]
-pub(crate) fn avx2_fma_or_skip() -> bool {
+pub(crate) fn assert_avx2_fma_path() {
     #[cfg(target_arch = "x86_64")]
     let has = has_avx2_fma();
     #[cfg(not(target_arch = "x86_64"))]
     let has = false;
-    if !has {
-        eprintln!("SKIPPED: this CPU runs no AVX2 + FMA kernels");
-    }
-    has
+    assert!(
+        has,
+        "the AVX2 + FMA kernels do not run here (no such CPU, or MONOTRACK_KERNELS=portable)"
+    );
 }
 
 /// Defines a method that runs `$body` — an `#[inline(always)]` method of the same signature —

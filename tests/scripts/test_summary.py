@@ -16,15 +16,18 @@ for path in args:
     c = Counter()
     with open(path, errors="replace") as f:
         for line in f:
-            m = re.search(r"test result: \w+\. (\d+) passed; (\d+) failed; (\d+) ignored", line)
+            m = re.search(r"test result: \w+\. (\d+) passed; (\d+) failed; (\d+) ignored; "
+                          r"\d+ measured; (\d+) filtered out", line)
             if m:
                 c["passed"] += int(m[1]); c["failed"] += int(m[2]); c["ignored"] += int(m[3])
+                c["filtered"] += int(m[4])
                 continue
             m = re.match(r"test .* \.\.\. ignored(?:, (.*))?$", line.rstrip())
             if m:
                 reasons[m[1] or "no reason given (a doc example marked ignore, or #[ignore] alone)"] += 1
     total.update(c)
-    print(f"  {label}: {c['passed']} passed, {c['failed']} failed, {c['ignored']} ignored")
+    filtered = f", {c['filtered']} left out by name" if c["filtered"] else ""
+    print(f"  {label}: {c['passed']} passed, {c['failed']} failed, {c['ignored']} ignored{filtered}")
 print(f"rust total: {total['passed']} passed, {total['failed']} failed, {total['ignored']} ignored")
 for r, n in reasons.most_common():
     print(f"  ignored {n}: {r}")

@@ -904,10 +904,9 @@ mod tests {
 
     #[cfg(target_arch = "x86_64")]
     #[test]
+    #[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]
     fn the_avx2_and_avx512_copies_of_the_clamped_path_give_the_same_bytes() {
-        if !crate::cpu::avx2_fma_or_skip() {
-            return;
-        }
+        crate::cpu::assert_avx2_fma_path();
         let mut rnd = uniform(4242);
         for (iw, ih) in [(97, 61), (2, 2), (3, 5)] {
             let data = (0..iw * ih)

@@ -1606,10 +1606,9 @@ mod tests {
 
     #[cfg(target_arch = "x86_64")]
     #[test]
+    #[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]
     fn the_avx2_copies_and_kernels_give_the_same_pyramid_and_points() {
-        if !crate::cpu::avx2_fma_or_skip() {
-            return;
-        }
+        crate::cpu::assert_avx2_fma_path();
         let id = [[1.0, 0.0], [0.0, 1.0]];
         let (img0, img1) = (
             warped(id, [0.0, 0.0]),

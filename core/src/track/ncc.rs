@@ -1048,10 +1048,9 @@ pub(crate) mod tests {
 
     #[cfg(target_arch = "x86_64")]
     #[test]
+    #[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]
     fn the_avx2_copy_gives_the_same_correlation() {
-        if !crate::cpu::avx2_fma_or_skip() {
-            return;
-        }
+        crate::cpu::assert_avx2_fma_path();
         let (a, b) = (shifted([0.0, 0.0]), shifted([-6.0, 2.5]));
         for px in [32, 12] {
             let mut m = NccMatcher::new(px);
