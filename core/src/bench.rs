@@ -210,9 +210,9 @@ pub fn android_portrait_camera() -> FrameDesc {
 /// What [`run_camera_benchmark`] measured (the CLI's `monotrack bench --json`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct CameraBenchReport {
-    /// Which kernel forms ran (`native` or `portable`, [`crate::cpu::kernel_path`]).
+    /// Which kernel forms ran (`native` or `portable`, [`crate::kernels::kernel_path`]).
     pub path: &'static str,
-    /// The CPU, in words ([`crate::cpu::cpu_name`]).
+    /// The CPU, in words ([`crate::kernels::cpu::cpu_name`]).
     pub cpu: String,
     /// Frames in the clip.
     pub frames: u32,
@@ -284,8 +284,8 @@ pub fn run_camera_benchmark(
         )));
     }
     Ok(CameraBenchReport {
-        path: crate::cpu::kernel_path().as_str(),
-        cpu: crate::cpu::cpu_name(),
+        path: crate::kernels::kernel_path().as_str(),
+        cpu: crate::kernels::cpu::cpu_name(),
         frames,
         model_load_us: model_load_us.round(),
         tracked: FrameStages::of(&tracked),

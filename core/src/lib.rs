@@ -14,20 +14,17 @@
 pub mod bench;
 pub mod body;
 pub mod camera;
-mod conv;
-pub mod cpu;
 pub mod detect;
 pub mod error;
 pub mod fit;
 pub mod gaze;
 pub mod image;
-mod kernels;
+pub mod kernels;
 pub mod landmarks;
 pub mod metrics;
 pub mod model;
+pub mod nn;
 pub mod motion;
-mod onnx;
-mod stem;
 pub mod track;
 
 pub use error::{Error, Result};

@@ -12,23 +12,17 @@
 //! Boxes follow the M3 convention (`models/M3_IO.md`): the tight bounding box of the 68 landmarks,
 //! in image pixels (pixel (i, j) covers `[i, i+1)×[j, j+1)`).
 //!
-//! The network is laid out once per input shape and reused (a video has one shape), with its
-//! buffers held by the detector. Its first layers run in `crate::stem`; what follows runs in
-//! [`tail`] where those layers multiply in the 128-bit form (aarch64, x86-64's portable path), so
-//! a frame there allocates nothing after warm-up; elsewhere in an optimised tract plan, which
-//! allocates its intermediate tensors on each run.
+//! The network runs in the engine (`crate::nn`, a fully convolutional network planned once per
+//! input shape and reused: a video has one shape); this module shrinks the frame into its input
+//! and decodes its heads.
 
 mod resample;
-mod tail;
 
 use crate::image::{GrayImage, Rect};
-use crate::stem::{Stem, StemWeights, with_f32_slice};
+use crate::nn::FullyConvNet;
 use crate::{Error, Result};
 use resample::AreaResampler;
 use serde::{Deserialize, Serialize};
-use std::sync::Arc;
-use tail::{Tail, TailWeights};
-use tract_core::internal::*;
 
 /// The network, embedded (≈ 216 KB: float16 weight storage, float32 compute).
 pub(crate) static MODEL_ONNX: &[u8] = include_bytes!("../../models/detector/detector.onnx");
@@ -45,10 +39,6 @@ const WINDOW_STRIDE: usize = 16;
 
 /// Channels per head cell: face logit, dx, dy, log w, log h.
 const HEAD_CHANNELS: usize = 5;
-
-/// Plans cached per input shape. A video stream needs one; a batch of still images of a few sizes
-/// needs a handful. The least recently used plan is dropped beyond this.
-const MAX_PLANS: usize = 6;
 
 /// When the min-face network input's long side exceeds this, its largest faces outgrow the trained
 /// sizes (training samples faces up to 150 px, `train.py` `SIZE_RANGE`), so the frame is also run
@@ -152,111 +142,15 @@ struct ModelDesc {
     net_min_face_px: f32,
 }
 
-type Plan = Arc<TypedSimplePlan>;
-type State = TypedSimpleState;
-
-/// The network for one input shape, with its reused buffers.
-struct ShapePlan {
-    h: usize,
-    w: usize,
-    /// The network's first layer (`crate::stem`); the body's input is then its output.
-    stem: Option<Stem>,
-    body: Body,
-    last_used: u64,
-}
-
-/// What runs after the first layers.
-enum Body {
-    /// tract's optimised plan, its reused input tensor and the last run's outputs.
-    Tract {
-        state: Box<State>,
-        input: Arc<Tensor>,
-        outputs: TVec<TValue>,
-    },
-    /// The blocks and heads in the library's kernels ([`tail`]).
-    Tail(Box<Tail>),
-}
-
-impl ShapePlan {
-    /// Runs the network on the `h × w` input `fill` writes.
-    fn run(&mut self, fill: impl FnOnce(&mut [f32])) -> Result<()> {
-        match (&mut self.stem, &mut self.body) {
-            (Some(stem), Body::Tail(tail)) => {
-                fill(stem.input_mut());
-                stem.run(tail.input_mut());
-                tail.run();
-                Ok(())
-            }
-            (None, Body::Tail(_)) => Err(Error::Internal("detector tail without a stem".into())),
-            (
-                stem,
-                Body::Tract {
-                    state,
-                    input,
-                    outputs,
-                },
-            ) => {
-                match stem {
-                    Some(stem) => {
-                        fill(stem.input_mut());
-                        with_f32_slice(input, |buf| stem.run(buf))
-                    }
-                    None => with_f32_slice(input, fill),
-                }
-                .map_err(internal)?;
-                let run = state.run(tvec![input.clone().into_tvalue()]);
-                crate::cpu::clear_upper_vector_state();
-                *outputs = run.map_err(internal)?;
-                Ok(())
-            }
-        }
-    }
-
-    /// Head `k` of the last run: its `HEAD_CHANNELS` planes, rows and columns.
-    fn head(&self, k: usize) -> Result<(&[f32], usize, usize)> {
-        let missing = || Error::Internal("detector: missing head output".into());
-        let (data, gh, gw) = match &self.body {
-            Body::Tail(tail) => tail.output(k).ok_or_else(missing)?,
-            Body::Tract { outputs, .. } => {
-                let t = outputs.get(k).ok_or_else(missing)?;
-                let shape = t.shape();
-                if shape.len() != 4 || shape[1] != HEAD_CHANNELS {
-                    return Err(Error::Internal(format!("detector head shape {shape:?}")));
-                }
-                let view = t.try_as_plain_ram().map_err(internal)?;
-                (
-                    view.as_slice::<f32>().map_err(internal)?,
-                    shape[2],
-                    shape[3],
-                )
-            }
-        };
-        if data.len() != HEAD_CHANNELS * gh * gw {
-            return Err(Error::Internal(format!(
-                "detector head of {} values for {gh}x{gw} cells",
-                data.len()
-            )));
-        }
-        Ok((data, gh, gw))
-    }
-}
-
-/// The face detector. Not `Clone`: it owns tract plans; create one per thread.
+/// The face detector. Not `Clone`: it owns the network's plans; create one per thread.
 pub struct FaceDetector {
     config: DetectorConfig,
-    /// The network without its first layer when that runs as a [`Stem`].
-    model: crate::onnx::pb::ModelProto,
-    stem: Option<StemWeights>,
-    /// What follows the first layers, where it has the form [`tail`] computes: read from the
-    /// graph by the first plan that runs it (`None` until then; `Some(None)` where the graph has
-    /// another form), so CPUs whose plans keep these layers in tract never read it.
-    tail: Option<Option<TailWeights>>,
+    /// The network (`crate::nn`), planned per input shape.
+    net: FullyConvNet,
     /// Strides of the network's heads, in network pixels, in the order of its outputs.
     strides: Vec<usize>,
     /// Index of the [`WINDOW_STRIDE`] head among the outputs.
     window_head: usize,
-    plans: Vec<ShapePlan>,
-    tick: u64,
     resampler: AreaResampler,
     candidates: Vec<Detection>,
 }
@@ -265,13 +159,9 @@ impl std::fmt::Debug for FaceDetector {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("FaceDetector")
             .field("config", &self.config)
-            .field("plans", &self.plans.len())
+            .field("plans", &self.net.plans())
             .finish_non_exhaustive()
     }
-}
-
-fn internal(e: impl std::fmt::Display) -> Error {
-    Error::Internal(format!("detector network: {e}"))
 }
 
 impl FaceDetector {
@@ -293,29 +183,12 @@ impl FaceDetector {
         let desc: ModelDesc = serde_json::from_str(MODEL_JSON)
             .map_err(|e| Error::ModelLoad(format!("detector.json: {e}")))?;
         let window_head = check_desc(&desc)?;
-        crate::cpu::select_tract_kernels();
-        let load = |e: TractError| Error::ModelLoad(format!("detector.onnx: {e:#}"));
-        let mut proto = crate::onnx::parse(MODEL_ONNX).map_err(load)?;
-        // The first layer does not depend on the frame size: any shape finds and computes it.
-        let nominal = [vec![1, 1, WINDOW_INPUT, WINDOW_INPUT]];
-        let stem = StemWeights::split_from(&mut proto, &nominal).map_err(load)?;
-        // Wired once now, so a network that does not load fails here rather than on a frame.
-        let shape = stem.as_ref().map_or(nominal[0].clone(), |w| {
-            Stem::new(1, WINDOW_INPUT, WINDOW_INPUT, w)
-                .output_shape()
-                .to_vec()
-        });
-        crate::onnx::typed_model(&proto, &[shape]).map_err(load)?;
-        let model = proto;
+        let net = FullyConvNet::load("detector.onnx", MODEL_ONNX, [WINDOW_INPUT, WINDOW_INPUT])?;
         Ok(Self {
             config,
-            model,
-            stem,
-            tail: None,
+            net,
             strides: desc.strides,
             window_head,
-            plans: Vec::with_capacity(MAX_PLANS),
-            tick: 0,
             resampler: AreaResampler::default(),
             candidates: Vec::new(),
         })
@@ -334,86 +207,6 @@ impl FaceDetector {
         config.validate()?;
         self.config = config;
         Ok(())
-    }
-
-    /// Index of the plan for a `h × w` network input, building and caching it when new.
-    fn plan_for(&mut self, h: usize, w: usize) -> Result<usize> {
-        self.tick += 1;
-        if let Some(i) = self.plans.iter().position(|p| p.h == h && p.w == w) {
-            self.plans[i].last_used = self.tick;
-            return Ok(i);
-        }
-        let mut stem = self
-            .stem
-            .as_ref()
-            .map(|weights| Stem::new(1, h, w, weights));
-        let shape = stem.as_ref().map_or([1, 1, h, w], Stem::output_shape);
-        // The tail in the library's kernels where the first layers run in the same form.
-        let in_kernels = crate::conv::f32x4_products();
-        if in_kernels && self.tail.is_none() {
-            self.tail = Some(match &self.stem {
-                Some(weights) => TailWeights::from_proto(&self.model, shape[1], weights.next_pad)
-                    .map_err(|e| Error::ModelLoad(format!("detector.onnx: {e:#}")))?,
-                None => None,
-            });
-        }
-        let tail = match (&mut stem, self.tail.as_ref().and_then(Option::as_ref)) {
-            (Some(stem), Some(weights)) if in_kernels => {
-                if !stem.interleave_output() {
-                    return Err(Error::Internal(
-                        "detector tail after a first layer that writes planes only".into(),
-                    ));
-                }
-                let tail = Tail::new(weights, shape[2] - 2, shape[3] - 2);
-                if tail.input_len() != stem.output_len() {
-                    return Err(Error::Internal(format!(
-                        "detector tail input {} for a stem output of {}",
-                        tail.input_len(),
-                        stem.output_len()
-                    )));
-                }
-                Some(tail)
-            }
-            _ => None,
-        };
-        let body = match tail {
-            Some(tail) => Body::Tail(Box::new(tail)),
-            None => {
-                let typed = crate::onnx::typed_model(&self.model, &[shape.to_vec()])
-                    .and_then(|m| m.into_optimized())
-                    .map_err(|e| Error::ModelLoad(format!("detector plan {w}x{h}: {e}")))?;
-                let plan: Plan = typed
-                    .into_runnable()
-                    .map_err(|e| Error::ModelLoad(format!("detector plan {w}x{h}: {e}")))?;
-                Body::Tract {
-                    state: Box::new(plan.spawn().map_err(internal)?),
-                    // Zeros: with a stem, the border is the second layer's padding and stays
-                    // zero.
-                    input: Arc::new(Tensor::zero::<f32>(&shape).map_err(internal)?),
-                    outputs: tvec![],
-                }
-            }
-        };
-        let entry = ShapePlan {
-            h,
-            w,
-            stem,
-            body,
-            last_used: self.tick,
-        };
-        if self.plans.len() >= MAX_PLANS {
-            let (oldest, _) = self
-                .plans
-                .iter()
-                .enumerate()
-                .min_by_key(|(_, p)| p.last_used)
-                .ok_or_else(|| Error::Internal("empty plan cache at capacity".into()))?;
-            self.plans[oldest] = entry;
-            Ok(oldest)
-        } else {
-            self.plans.push(entry);
-            Ok(self.plans.len() - 1)
-        }
     }
 
     /// Detects faces in `image`, best first, into `out` (cleared first). No face is an empty list.
@@ -457,12 +250,12 @@ impl FaceDetector {
         let (rx, ry) = (w as f32 / cw as f32, h as f32 / ch as f32);
         self.resampler.xs.build(w, 0.0, rx, cw);
         self.resampler.ys.build(h, 0.0, ry, ch);
-        let idx = self.plan_for(ch, cw)?;
         let resampler = &mut self.resampler;
-        self.plans[idx].run(|buf| resampler.run(image, buf, cw, ch, cw))?;
+        self.net
+            .run(ch, cw, |buf| resampler.run(image, buf, cw, ch, cw))?;
         let logit_thr = logit(self.config.score_threshold);
         for (k, &stride) in self.strides.iter().enumerate() {
-            let (data, gh, gw) = self.plans[idx].head(k)?;
+            let (data, gh, gw) = self.net.output(k, HEAD_CHANNELS)?;
             decode_head(
                 data,
                 gh,
@@ -505,11 +298,10 @@ impl FaceDetector {
         let half = 0.5 * n as f32 * ratio;
         self.resampler.xs.build(w, cx - half, ratio, n);
         self.resampler.ys.build(h, cy - half, ratio, n);
-        let idx = self.plan_for(n, n)?;
         let resampler = &mut self.resampler;
-        self.plans[idx].run(|buf| resampler.run(image, buf, n, n, n))?;
+        self.net.run(n, n, |buf| resampler.run(image, buf, n, n, n))?;
         // Stride-16 head: the patch centre (32, 32) lies between cells 1 and 2 on each axis.
-        let (data, gh, gw) = self.plans[idx].head(self.window_head)?;
+        let (data, gh, gw) = self.net.output(self.window_head, HEAD_CHANNELS)?;
         if gh < 3 || gw < 3 {
             return Err(Error::Internal(format!("detector head of {gh}x{gw} cells")));
         }
@@ -638,7 +430,6 @@ fn nms(cands: &mut [Detection], iou_thr: f32, max_out: usize, out: &mut Vec<Dete
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tract_onnx::prelude::InferenceModelExt;
 
     fn det(x: f32, y: f32, s: f32, score: f32) -> Detection {
         Detection {
@@ -669,7 +460,7 @@ mod tests {
     /// re-export without that pass still loads and gives the same boxes, so only this catches it.
     #[test]
     fn shipped_detector_has_fusable_relus() {
-        let ops = crate::landmarks::onnx_op_types(MODEL_ONNX);
+        let ops = crate::nn::onnx_op_types(MODEL_ONNX);
         assert!(!ops.iter().any(|o| o == "Relu"), "a Relu node");
         assert!(ops.iter().any(|o| o == "LeakyRelu"), "no LeakyRelu");
     }
@@ -760,56 +551,6 @@ mod tests {
     fn logit_inverts_sigmoid() {
         for p in [0.1f32, 0.5, 0.73] {
             assert!((sigmoid(logit(p)) - p).abs() < 1e-6);
-        }
-    }
-
-    /// The shipped network's first layer runs as a [`Stem`], with the heads tract gives for the
-    /// whole graph to float rounding (odd and even sizes).
-    #[test]
-    fn first_layer_runs_as_a_stem_with_the_whole_graphs_outputs() {
-        let whole = tract_onnx::onnx()
-            .model_for_read(&mut std::io::Cursor::new(MODEL_ONNX))
-            .unwrap();
-        // Every form of the layers' products this CPU has (`conv`).
-        for ((h, w), form) in [(96, 128), (75, 101)]
-            .into_iter()
-            .flat_map(|s| crate::conv::product_forms().map(move |f| (s, f)))
-        {
-            let mut det = FaceDetector::new().unwrap();
-            assert!(det.stem.is_some(), "first layer not taken as a stem");
-            let input: Vec<f32> = (0..h * w)
-                .map(|i| ((i * 7919) % 251) as f32 / 250.0)
-                .collect();
-            let idx = crate::conv::building(form, || det.plan_for(h, w).unwrap());
-            // Where `conv` runs, the three full 3×3 layers after the first (the fourth is
-            // depthwise and stays in tract).
-            let after_first = det.plans[idx].stem.as_ref().unwrap().layers_after_first();
-            assert_eq!(after_first, if crate::conv::available() { 3 } else { 0 });
-            // In the 128-bit form the blocks and heads run outside tract too.
-            assert_eq!(
-                matches!(det.plans[idx].body, Body::Tail(_)),
-                form == crate::conv::Products::F32x4,
-                "{form:?}"
-            );
-            det.plans[idx]
-                .run(|buf| buf.copy_from_slice(&input))
-                .unwrap();
-            let plan = whole
-                .clone()
-                .with_input_fact(0, f32::fact([1, 1, h, w]).into())
-                .and_then(|m| m.into_optimized())
-                .and_then(|m| m.into_runnable())
-                .unwrap();
-            let t = Tensor::from_shape(&[1, 1, h, w], &input).unwrap();
-            let theirs = plan.run(tvec![t.into_tvalue()]).unwrap();
-            assert!(det.plans[idx].head(theirs.len()).is_err(), "an extra head");
-            for (k, b) in theirs.iter().enumerate() {
-                let (a, gh, gw) = det.plans[idx].head(k).unwrap();
-                assert_eq!([1, HEAD_CHANNELS, gh, gw], b.shape(), "head {k}");
-                let b = b.try_as_plain_ram().unwrap();
-                let b = b.as_slice::<f32>().unwrap();
-                crate::stem::assert_close_to_whole_graph(&format!("{h}x{w} {form:?}"), a, b, form);
-            }
         }
     }
 

@@ -1,7 +1,7 @@
 //! The library's hand-written pixel kernels that have a form per instruction set, one folder per
 //! kernel: `mod.rs` holds the portable form — plain Rust, the reference — the dispatch and the
 //! tests every form must pass; `arm64.rs` the NEON form (baseline on aarch64: no run-time check);
-//! `x86_64.rs` the x86-64 form where one pays. [`crate::cpu::kernel_path`] decides between them
+//! `x86_64.rs` the x86-64 form where one pays. [`crate::kernels::kernel_path`] decides between them
 //! (`MONOTRACK_KERNELS=portable` runs the portable forms on any CPU, which is what an aarch64 phone
 //! computes, bit for bit).
 //!
@@ -16,5 +16,10 @@
 //! those stages run their portable forms, which the compiler vectorises for NEON. On x86-64's
 //! native path the detector's blocks and heads run in tract.
 
+mod choice;
 pub(crate) mod conv3x3;
+pub(crate) mod cpu;
 pub(crate) mod plane;
+
+pub use choice::{KernelChoice, KernelPath, choice, kernel_path, select};
+pub use cpu::cpu_name;

@@ -85,11 +85,11 @@ impl Bilateral {
         }
         self.pad(src, width, height);
         #[cfg(target_arch = "x86_64")]
-        if crate::cpu::has_avx2_fma() {
+        if crate::kernels::cpu::has_avx2_fma() {
             #[allow(unsafe_code)]
             // SAFETY: the CPU has the features each function is compiled for.
             unsafe {
-                if crate::conv::Products::Avx512.supported() {
+                if crate::nn::conv::Products::Avx512.supported() {
                     self.filter_avx512(width, height, dst)
                 } else {
                     self.filter_avx2(width, height, dst)
@@ -191,7 +191,7 @@ impl Bilateral {
     #[target_feature(enable = "avx2,fma")]
     #[inline]
     fn block8(&self, c: usize, out: &mut [u8]) {
-        use crate::cpu::avx2::{load_u8x8 as load8, store_u8x8};
+        use crate::kernels::cpu::avx2::{load_u8x8 as load8, store_u8x8};
         use std::arch::x86_64::{
             _mm256_abs_epi32, _mm256_add_ps, _mm256_cvtepi32_ps, _mm256_cvttps_epi32,
             _mm256_div_ps, _mm256_i32gather_ps, _mm256_max_ps, _mm256_min_ps, _mm256_mul_ps,
@@ -429,7 +429,7 @@ mod tests {
             assert_eq!(got, want, "{w}x{h}");
             // The AVX2 path too, where `apply` took the 512-bit one.
             #[cfg(target_arch = "x86_64")]
-            if crate::cpu::has_avx2_fma() {
+            if crate::kernels::cpu::has_avx2_fma() {
                 let mut avx2 = vec![0u8; w * h];
                 #[allow(unsafe_code)]
                 // SAFETY: the CPU has AVX2 and FMA; `apply` left `padded` filled for this image.

@@ -2,7 +2,7 @@
 //! `models/M3_IO.md` (level-1 crop → level 1 → zone patches → zone nets → merge into 68 points).
 
 use super::filter::{Bilateral, equalize_hist};
-use super::net::Net;
+use crate::nn::Net;
 use super::prior::{ShapePrior, ShapePriorConfig};
 use super::warp::{Affine, sample};
 use super::{BROW_GESTURES, FaceLandmarks, MIRROR68, MOUTH_GESTURES, N_POINTS, YAW_CLASSES_DEG};

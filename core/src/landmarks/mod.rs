@@ -16,17 +16,14 @@
 //! is built) and every buffer one face needs, so [`M3::estimate`] allocates nothing after its first
 //! call beyond the per-run output tensors tract itself creates. Preprocessing lives in [`warp`]
 //! (affine crop/patch sampling) and [`filter`] (bilateral filter, histogram equalisation); each
-//! network's one-channel first layer runs outside tract (`crate::stem`, found in the graph at load).
+//! network's one-channel first layer runs outside tract (`crate::nn::stem`, found in the graph at load).
 //! One face = one call; run one `M3` per thread (it is `Send`).
 
-mod dense;
 pub mod filter;
 pub mod gradient;
 mod m3;
-mod net;
 mod prior;
 #[cfg(test)]
-pub(crate) use net::onnx_op_types;
 pub mod warp;
 
 pub use gradient::{

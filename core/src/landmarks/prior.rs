@@ -150,7 +150,7 @@ impl ShapePrior {
         })
     }
 
-    crate::cpu::with_avx2_copy! {
+    crate::kernels::cpu::with_avx2_copy! {
         /// Moves each zone's points of `pts` towards its regression. Points whose eye corners
         /// coincide (no frame) or that are not finite are left as they are.
         pub(super) fn apply / apply_avx2 (&mut self, pts: &mut [[f64; 2]; N_POINTS]) => apply_body

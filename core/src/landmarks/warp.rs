@@ -226,12 +226,12 @@ impl<'a> ClampedMap<'a> {
         // The gathers' bounds rest on `data` being the whole iw × ih image: checked here, not
         // assumed, since a violation would be a read out of bounds rather than a panic.
         #[cfg(target_arch = "x86_64")]
-        if data.len() == iw * ih && crate::cpu::has_avx2_fma() {
+        if data.len() == iw * ih && crate::kernels::cpu::has_avx2_fma() {
             #[allow(unsafe_code)]
             // SAFETY: the CPU has the features each function is compiled for (AVX-512F through
             // `Products::Avx512`, which includes AVX2 and FMA).
             unsafe {
-                if crate::conv::Products::Avx512.supported() {
+                if crate::nn::conv::Products::Avx512.supported() {
                     self.sample_gather_avx512(data, iw, ih, width, out)
                 } else {
                     self.sample_gather_avx2(data, iw, ih, width, out)
@@ -242,7 +242,7 @@ impl<'a> ClampedMap<'a> {
         self.sample_scalar(data, iw, ih, width, out);
     }
 
-    crate::cpu::with_avx2_copy! {
+    crate::kernels::cpu::with_avx2_copy! {
         fn sample_scalar / sample_avx2 (&self, data: &[u8], iw: usize, ih: usize, width: usize,
             out: &mut [u8]) => sample_body
     }
@@ -256,7 +256,7 @@ impl<'a> ClampedMap<'a> {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn sample_gather_avx2(&self, data: &[u8], iw: usize, ih: usize, width: usize, out: &mut [u8]) {
-        use crate::cpu::avx2::store_u8x8;
+        use crate::kernels::cpu::avx2::store_u8x8;
         use std::arch::x86_64::{
             __m256, __m256i, _mm256_add_epi32, _mm256_add_ps, _mm256_and_si256, _mm256_cvtepi32_ps,
             _mm256_cvttps_epi32, _mm256_i32gather_epi32, _mm256_max_ps, _mm256_min_epi32,
@@ -534,7 +534,7 @@ fn sample_axis_aligned(image: &GrayImage, m: &[f64; 6], width: usize, out: &mut 
     if width >= AXIS_LANES
         && data.len() == iw * ih
         && i32::try_from(data.len()).is_ok()
-        && crate::conv::Products::Avx512.supported()
+        && crate::nn::conv::Products::Avx512.supported()
     {
         let mut taps = AxisColumns {
             a: [0; AXIS_MAX_SIDE],
@@ -906,7 +906,7 @@ mod tests {
     #[test]
     #[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]
     fn the_avx2_and_avx512_copies_of_the_clamped_path_give_the_same_bytes() {
-        crate::cpu::assert_avx2_fma_path();
+        crate::kernels::cpu::assert_avx2_fma_path();
         let mut rnd = uniform(4242);
         for (iw, ih) in [(97, 61), (2, 2), (3, 5)] {
             let data = (0..iw * ih)
@@ -942,7 +942,7 @@ mod tests {
                     map.sample_gather_avx2(img.data(), iw, ih, w, &mut gathered)
                 };
                 assert_eq!(base, gathered, "gathers, case {case}: {m:?} {w}x{h}");
-                if crate::conv::Products::Avx512.supported() {
+                if crate::nn::conv::Products::Avx512.supported() {
                     let mut wide = vec![3u8; w * h];
                     #[allow(unsafe_code)]
                     // SAFETY: the CPU has AVX-512F (checked just above), AVX2 and FMA.

@@ -201,7 +201,7 @@ impl Pyramid {
         self.halve(image, n, [x0, y0, x1, y1]);
     }
 
-    crate::cpu::with_avx2_copy! {
+    crate::kernels::cpu::with_avx2_copy! {
         /// Copies the frame's `[x0, y0, x1, y1)` into level 0 and halves it `n − 1` times.
         fn halve / halve_avx2 (&mut self, image: &GrayImage, n: usize, roi: [usize; 4]) => halve_body
     }
@@ -359,13 +359,13 @@ impl Kernels {
     /// The widest this CPU has.
     fn widest() -> Self {
         #[cfg(target_arch = "aarch64")]
-        if crate::cpu::neon() {
+        if crate::kernels::cpu::neon() {
             return Kernels::Neon;
         }
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::is_x86_feature_detected as has;
-            if crate::cpu::has_avx2_fma() {
+            if crate::kernels::cpu::has_avx2_fma() {
                 return if has!("avx512f") && has!("avx512bw") && has!("avx512vl") {
                     Kernels::Avx512
                 } else {
@@ -474,7 +474,7 @@ impl PyramidalLk {
         self.track_with(prev, next, from, to, status, error, true)
     }
 
-    crate::cpu::with_avx2_copy! {
+    crate::kernels::cpu::with_avx2_copy! {
         /// [`PyramidalLk::track`], or [`PyramidalLk::track_guided`] if `guided`.
         #[allow(clippy::too_many_arguments)]
         fn track_with / track_with_avx2 (&mut self, prev: &Pyramid, next: &Pyramid,
@@ -919,7 +919,7 @@ fn sample_avx2(
     stride: usize,
     out: &mut [f32],
 ) -> bool {
-    use crate::cpu::avx2::load_u8x8;
+    use crate::kernels::cpu::avx2::load_u8x8;
     use std::arch::x86_64::{
         __m256, _mm256_add_ps, _mm256_and_ps, _mm256_cvtepi32_ps, _mm256_mul_ps, _mm256_set1_ps,
         _mm256_sub_ps,
@@ -1122,7 +1122,7 @@ fn bordered_gradients_avx2(
     st: usize,
     [patch, gx, gy]: [&mut [f32]; 3],
 ) -> Option<[f32; 3]> {
-    use crate::cpu::avx2::load_u8x8;
+    use crate::kernels::cpu::avx2::load_u8x8;
     use std::arch::x86_64::{
         __m256, _mm256_add_ps, _mm256_alignr_epi8, _mm256_and_ps, _mm256_castps_si256,
         _mm256_castsi256_ps, _mm256_cvtepi32_ps, _mm256_mul_ps, _mm256_permute2f128_ps,
@@ -1216,7 +1216,7 @@ fn mismatch_avx2(
     st: usize,
     [patch, gx, gy]: [&[f32]; 3],
 ) -> Option<[f32; 3]> {
-    use crate::cpu::avx2::load_u8x8;
+    use crate::kernels::cpu::avx2::load_u8x8;
     use std::arch::x86_64::{
         __m256, _mm256_add_ps, _mm256_and_ps, _mm256_castsi256_ps, _mm256_cvtepi32_ps,
         _mm256_mul_ps, _mm256_set1_epi32, _mm256_set1_ps, _mm256_setzero_ps, _mm256_sub_ps,
@@ -1608,7 +1608,7 @@ mod tests {
     #[test]
     #[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]
     fn the_avx2_copies_and_kernels_give_the_same_pyramid_and_points() {
-        crate::cpu::assert_avx2_fma_path();
+        crate::kernels::cpu::assert_avx2_fma_path();
         let id = [[1.0, 0.0], [0.0, 1.0]];
         let (img0, img1) = (
             warped(id, [0.0, 0.0]),

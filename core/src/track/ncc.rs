@@ -275,7 +275,7 @@ impl Level {
         best
     }
 
-    crate::cpu::with_avx2_copy! {
+    crate::kernels::cpu::with_avx2_copy! {
         /// Correlates the template with the window at `blocks × BLOCK` offsets along x and `rows`
         /// (a multiple of `ROWS`) along y from offset `at`, into `num` (offset `at + (i, j)` at
         /// `j · nxp + i`). Offsets past the window's last one read its zero padding; their sums
@@ -579,7 +579,7 @@ struct Cells {
 }
 
 impl Bands {
-    crate::cpu::with_avx2_copy! {
+    crate::kernels::cpu::with_avx2_copy! {
         /// The block means of `cells`, laid out as `pad` says.
         fn decimate / decimate_avx2 (&mut self, image: &GrayImage, cells: Cells, pad: Padded,
             out: &mut Vec<f32>) => decimate_body
@@ -1050,7 +1050,7 @@ pub(crate) mod tests {
     #[test]
     #[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]
     fn the_avx2_copy_gives_the_same_correlation() {
-        crate::cpu::assert_avx2_fma_path();
+        crate::kernels::cpu::assert_avx2_fma_path();
         let (a, b) = (shifted([0.0, 0.0]), shifted([-6.0, 2.5]));
         for px in [32, 12] {
             let mut m = NccMatcher::new(px);

@@ -3,7 +3,7 @@
 //! as an aarch64 phone computes the networks: [`Block`] for a full convolution (any list of taps:
 //! the 3×3 layers of the M3 trunks and of the detector, the detector's 1×1 layers; its heads
 //! without the ReLU), [`Depthwise`] for one 3×3 kernel per channel (the detector's blocks).
-//! [`crate::conv`] and `detect::tail` lay the layers out and call these per block.
+//! [`crate::nn::conv`] and `detect::tail` lay the layers out and call these per block.
 //!
 //! Why here and not in tract: tract lowers each such layer to an explicit `Pad` copy, a lazily
 //! gathered im2col matrix and a matrix product, gives each run's every output a new tensor (583
@@ -110,7 +110,7 @@ impl Form {
     /// the x86-64 twin where the CPU has FMA; else the portable form.
     pub(crate) fn for_this_cpu() -> Self {
         #[cfg(target_arch = "aarch64")]
-        if crate::cpu::neon() {
+        if crate::kernels::cpu::neon() {
             return Form::Neon;
         }
         #[cfg(target_arch = "x86_64")]

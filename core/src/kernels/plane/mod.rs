@@ -132,7 +132,7 @@ pub(crate) fn upright(
         return;
     }
     #[cfg(target_arch = "aarch64")]
-    if crate::cpu::neon() {
+    if crate::kernels::cpu::neon() {
         return transpose16_with(src, stride, w, h, o, dst, |rows| {
             #[allow(unsafe_code)]
             // SAFETY: NEON is part of every aarch64 target's baseline.
@@ -142,7 +142,7 @@ pub(crate) fn upright(
         });
     }
     #[cfg(target_arch = "x86_64")]
-    if crate::cpu::kernel_path() == crate::cpu::KernelPath::Native {
+    if crate::kernels::kernel_path() == crate::kernels::KernelPath::Native {
         return transpose16_with(src, stride, w, h, o, dst, |rows| {
             #[allow(unsafe_code)]
             // SAFETY: SSE2 is part of the x86-64 baseline.

@@ -1,5 +1,5 @@
 //! 3×3 convolutions with zero padding 1, stride 1 or 2, a bias and a ReLU: the layers of the M3
-//! trunks and the detector's first ones ([`crate::stem`] finds them in the graphs), computed here
+//! trunks and the detector's first ones ([`crate::nn::stem`] finds them in the graphs), computed here
 //! instead of by tract ([`available`]): on aarch64 in NEON ([`Products::F32x4`], the kernel in
 //! [`crate::kernels::conv3x3`]; x86-64's portable path runs its twin), on x86-64 in the forms
 //! below.
@@ -167,13 +167,13 @@ impl Products {
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::is_x86_feature_detected as has;
-            let avx512 = crate::cpu::has_avx2_fma() && has!("avx512f");
+            let avx512 = crate::kernels::cpu::has_avx2_fma() && has!("avx512f");
             match self {
-                Products::Avx2 => crate::cpu::has_avx2_fma(),
+                Products::Avx2 => crate::kernels::cpu::has_avx2_fma(),
                 Products::Avx512 => avx512,
                 Products::Bf16 => avx512 && has!("avx512vl") && has!("avx512bf16"),
                 Products::Vnni => avx512 && has!("avx512bw") && has!("avx512vnni"),
-                Products::Maddubs => crate::cpu::has_avx2_fma(),
+                Products::Maddubs => crate::kernels::cpu::has_avx2_fma(),
                 // The twin needs FMA (without it the portable form's fused multiply-add is a
                 // library call per product).
                 Products::F32x4 => std::arch::is_x86_feature_detected!("fma"),
@@ -195,12 +195,12 @@ impl Products {
 
     /// How far a network whose 3×3 layers ran in this form may be from tract's f32 run, as a
     /// share of its largest output (at least 1): float rounding for the f32 forms,
-    /// [`crate::stem::BF16_TOLERANCE`] and [`INT8_TOLERANCE`] for the others.
+    /// [`crate::nn::stem::BF16_TOLERANCE`] and [`INT8_TOLERANCE`] for the others.
     #[cfg(test)]
     pub(crate) fn whole_graph_tolerance(self) -> f32 {
         match self {
             Products::Avx2 | Products::Avx512 | Products::F32x4 => 1e-4,
-            Products::Bf16 => crate::stem::BF16_TOLERANCE,
+            Products::Bf16 => crate::nn::stem::BF16_TOLERANCE,
             Products::Vnni => INT8_TOLERANCE,
             Products::Maddubs => INT8_7BIT_TOLERANCE,
         }
@@ -233,12 +233,12 @@ fn chosen_products() -> Products {
         }
         // The phone's form: on aarch64, and on x86-64's portable path (its twin).
         if cfg!(target_arch = "aarch64")
-            || crate::cpu::kernel_path() == crate::cpu::KernelPath::Portable
+            || crate::kernels::kernel_path() == crate::kernels::KernelPath::Portable
         {
             return Products::F32x4;
         }
         #[cfg(target_arch = "x86_64")]
-        let amd = crate::cpu::is_amd().unwrap_or(false);
+        let amd = crate::kernels::cpu::is_amd().unwrap_or(false);
         #[cfg(not(target_arch = "x86_64"))]
         let amd = false;
         products_for(
@@ -810,7 +810,7 @@ impl Conv3x3 {
             return;
         }
         #[cfg(target_arch = "x86_64")]
-        if crate::cpu::has_avx2_fma() {
+        if crate::kernels::cpu::has_avx2_fma() {
             // SAFETY: the CPU has AVX2 and FMA; the lengths were checked above.
             #[allow(unsafe_code)]
             let peak = unsafe { self.run_avx2(input, out) };
@@ -1025,7 +1025,7 @@ impl Conv3x3 {
             Some(peak) => peak.is_finite().then_some(peak),
             // SAFETY: AVX-512F where `vnni` (the contract).
             None if vnni => unsafe { nonnegative_max(input) },
-            // The layers before a 256-bit int8 layer hand their peak over (`crate::stem`), so
+            // The layers before a 256-bit int8 layer hand their peak over (`crate::nn::stem`), so
             // this runs in tests only.
             None => nonnegative_max_portable(input),
         };
@@ -1561,8 +1561,8 @@ fn quantize_interleaved_avx2(
 /// multiply-add, and x86-64 CPUs without FMA) tract keeps the layers.
 pub(crate) fn available() -> bool {
     #[cfg(target_arch = "x86_64")]
-    return crate::cpu::has_avx2_fma()
-        || (crate::cpu::kernel_path() == crate::cpu::KernelPath::Portable
+    return crate::kernels::cpu::has_avx2_fma()
+        || (crate::kernels::kernel_path() == crate::kernels::KernelPath::Portable
             && Products::F32x4.supported());
     #[cfg(not(target_arch = "x86_64"))]
     return Products::F32x4.supported();
@@ -2152,7 +2152,7 @@ mod tests {
     #[test]
     #[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]
     fn matches_the_definition_with_a_zero_border() {
-        crate::cpu::assert_avx2_fma_path();
+        crate::kernels::cpu::assert_avx2_fma_path();
         // Strides 1 and 2, odd and even sides, a partial channel block (24 = 16 + 8), position
         // counts that leave every remainder of six (the 256-bit kernels) and of eight (the
         // 512-bit one), one, two and three blocks (40 = a pair and a partial single for the

@@ -1,6 +1,6 @@
 //! What follows the detector's first layers — its depthwise and pointwise blocks and its 3×3
 //! heads — computed in the 128-bit f32 kernels ([`crate::kernels::conv3x3`]) where the 3×3
-//! layers run in them ([`crate::conv::f32x4_products`]: aarch64, and x86-64's portable path), so
+//! layers run in them ([`crate::nn::conv::f32x4_products`]: aarch64, and x86-64's portable path), so
 //! a phone runs the whole detector outside tract.
 //!
 //! Why: on the phone's path tract ran these layers through its generic depthwise loop and gave
@@ -8,7 +8,7 @@
 //! the only frame work left in tract-core, whose speed depends on building it for speed (the
 //! `release-small` profile builds it for size).
 //!
-//! What the graph may hold after the first layers were cut (`crate::stem`): `Conv` nodes with a
+//! What the graph may hold after the first layers were cut (`crate::nn::stem`): `Conv` nodes with a
 //! bias, group 1 with a 3×3 kernel (stride 1 or 2, padding 1) or a 1×1 kernel (stride 1, padding
 //! 0), or depthwise (group = channels, 3×3, stride 1 or 2, padding 1); each followed by a ReLU
 //! (`Relu`, `LeakyRelu` with α = 0) that is its only reader, except the graph's outputs, which are
@@ -20,10 +20,10 @@
 //! — with a zero border of one position, the padding of the 3×3 layers that read it; the outputs
 //! are planes without a border, as tract gives them (`1 × channels × rows × columns`).
 
-use crate::conv::{BLOCK, pack};
+use crate::nn::conv::{BLOCK, pack};
 use crate::kernels::conv3x3::{Depthwise, Form, FullLayer, POSITIONS};
-use crate::onnx::pb::{ModelProto, NodeProto};
-use crate::stem::{attr, is_relu, values_by_name};
+use crate::nn::onnx::pb::{ModelProto, NodeProto};
+use crate::nn::stem::{attr, is_relu, values_by_name};
 use tract_core::internal::*;
 
 /// The kinds of layer the tail computes.
@@ -69,7 +69,7 @@ fn ints(node: &NodeProto, name: &str) -> Option<Vec<i64>> {
 }
 
 impl TailWeights {
-    /// The tail of `proto`, the detector's graph after [`crate::stem`] cut its first layers: its
+    /// The tail of `proto`, the detector's graph after [`crate::nn::stem`] cut its first layers: its
     /// one input holds their output, `channels` deep, with a border of `input_pad` (the padding
     /// of the node that reads it, which the cut set to zero). `Ok(None)` where a node has a form
     /// the module notes do not list.
@@ -440,12 +440,12 @@ impl Tail {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::stem::{Stem, StemWeights};
+    use crate::nn::stem::{Stem, StemWeights};
 
     /// The shipped detector's graph with its first layers cut, and their output's channels and
     /// border.
     fn cut_detector() -> (ModelProto, usize, usize) {
-        let mut proto = crate::onnx::parse(super::super::MODEL_ONNX).unwrap();
+        let mut proto = crate::nn::onnx::parse(crate::detect::MODEL_ONNX).unwrap();
         let weights = StemWeights::split_from(&mut proto, &[vec![1, 1, 64, 64]])
             .unwrap()
             .expect("a stem");
@@ -463,7 +463,7 @@ mod tests {
     )]
     fn the_shipped_detectors_blocks_and_heads_are_read_whole() {
         assert!(
-            crate::conv::available(),
+            crate::nn::conv::available(),
             "this CPU leaves the detector's first layers to tract"
         );
         let (proto, channels, pad) = cut_detector();
@@ -502,7 +502,7 @@ mod tests {
     )]
     fn a_node_of_another_form_leaves_the_graph_to_tract() {
         assert!(
-            crate::conv::available(),
+            crate::nn::conv::available(),
             "this CPU leaves the detector's first layers to tract"
         );
         let (proto, channels, pad) = cut_detector();

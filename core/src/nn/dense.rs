@@ -1,12 +1,12 @@
 //! The fully connected heads of the M3 networks, computed here instead of by tract where the
-//! trunk already runs outside it ([`crate::stem`]).
+//! trunk already runs outside it ([`crate::nn::stem`]).
 //!
-//! Why: after the trunks moved to [`crate::conv`], tract's part of `m3_per_face` was the heads —
+//! Why: after the trunks moved to [`crate::nn::conv`], tract's part of `m3_per_face` was the heads —
 //! `perf` on an Intel Xeon put its matrix–vector kernels at 12 % of the per-face time and
 //! its per-run bookkeeping (plan walk, tensor allocation, copies) at several % more, for 0.38 M
 //! multiply-adds per face (counted from the shipped graphs). Here each layer is one pass over its
 //! weights, stored input-major so the outputs are the vector lanes, in buffers allocated once.
-//! Where the trunks multiply in int8 ([`crate::conv::int8_products`]: AVX-512 VNNI), int8 layers
+//! Where the trunks multiply in int8 ([`crate::nn::conv::int8_products`]: AVX-512 VNNI), int8 layers
 //! do too ([`int8_product`]): their input rounded per run to 16-bit steps (two u8 digits), the
 //! same weights; on an Intel Xeon with AVX-512 VNNI `m3_per_face` 162.6–164.1 → 151.5–155.1 µs in
 //! alternating runs with one digit, the second digit then +4.8 µs in one pair of runs and none in the other (noisy).
@@ -17,8 +17,8 @@
 //! (`DequantizeLinear`, `Cast` and `Constant` of weights, initializers); anything else leaves the
 //! graph to tract.
 
-use crate::onnx::pb::{ModelProto, NodeProto};
-use crate::stem::{attr, is_relu, values_by_name};
+use crate::nn::onnx::pb::{ModelProto, NodeProto};
+use crate::nn::stem::{attr, is_relu, values_by_name};
 use tract_core::internal::*;
 
 /// Outputs of a layer accumulated together: four 256-bit registers, which stay in registers
@@ -38,7 +38,7 @@ enum Weights {
     I8 {
         q: Vec<i8>,
         scale: Vec<f32>,
-        /// Where the heads multiply in int8 ([`crate::conv::int8_products`]): the same weights
+        /// Where the heads multiply in int8 ([`crate::nn::conv::int8_products`]): the same weights
         /// for `vpdpbusd`, per four inputs (zero rows past `k`) the `n'` columns' words, byte `b`
         /// the weight of input `4r + b`.
         quads: Option<Vec<u32>>,
@@ -50,12 +50,12 @@ impl Weights {
     /// within 1e-6 of its column's largest magnitude, else as it is.
     fn compact(w: Vec<f32>, np: usize) -> Self {
         let k = w.len() / np.max(1);
-        if let Some((q, scale)) = crate::conv::int8_per_output(&w, np, |t| t % np) {
-            let quads = crate::conv::int8_products().then(|| {
+        if let Some((q, scale)) = crate::nn::conv::int8_per_output(&w, np, |t| t % np) {
+            let quads = crate::nn::conv::int8_products().then(|| {
                 (0..k.div_ceil(4) * np)
                     .map(|t| {
                         let (r, o) = (t / np, t % np);
-                        crate::conv::int8_word(|b| {
+                        crate::nn::conv::int8_word(|b| {
                             let row = 4 * r + b;
                             if row < k { q[row * np + o] } else { 0 }
                         })
@@ -106,7 +106,7 @@ pub(crate) struct Dense {
 /// The names of the values that are weights — initializers, and the outputs of `Constant`,
 /// `DequantizeLinear` and `Cast` nodes fed by weights alone (evaluated by tract once, at load) —
 /// and whether each node is such a weight maker.
-fn weights_of(graph: &crate::onnx::pb::GraphProto) -> (Vec<String>, Vec<bool>) {
+fn weights_of(graph: &crate::nn::onnx::pb::GraphProto) -> (Vec<String>, Vec<bool>) {
     let mut names: Vec<String> = graph.initializer.iter().map(|t| t.name.clone()).collect();
     let mut makers = Vec::with_capacity(graph.node.len());
     for n in &graph.node {
@@ -465,7 +465,7 @@ fn int8_product(
     out: &mut [f32],
 ) -> bool {
     #[cfg(target_arch = "x86_64")]
-    if crate::conv::Products::Vnni.supported() {
+    if crate::nn::conv::Products::Vnni.supported() {
         #[allow(unsafe_code)]
         // SAFETY: the CPU has AVX-512F, BW and VNNI (`Products::supported`).
         return unsafe { int8_product_avx512(x, quads, scale, bias, relu, quantised, out) };
@@ -499,7 +499,7 @@ fn int8_product_avx512(
             && quantised.len() >= 2 * kq
             && out.len() <= np
     );
-    let Some(max) = crate::conv::nonnegative_max(x) else {
+    let Some(max) = crate::nn::conv::nonnegative_max(x) else {
         return false;
     };
     let per_step = if max > 0.0 { 65535.0 / max } else { 0.0 };
@@ -641,7 +641,7 @@ struct Product<'a, W> {
 }
 
 impl<W: Weight> Product<'_, W> {
-    crate::cpu::with_avx2_copy! {
+    crate::kernels::cpu::with_avx2_copy! {
         /// `out = scale ⊙ (weights · x) + bias` (`out` the first of the columns' outputs).
         fn run_plain / run_avx2 (&self, out: &mut [f32]) => run_body
     }
@@ -652,7 +652,7 @@ impl<W: Weight> Product<'_, W> {
     /// library routine for each one.
     fn run(&self, out: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
-        if !crate::cpu::has_avx2_fma() && std::arch::is_x86_feature_detected!("fma") {
+        if !crate::kernels::cpu::has_avx2_fma() && std::arch::is_x86_feature_detected!("fma") {
             #[allow(unsafe_code)]
             // SAFETY: the CPU has FMA (and so AVX), the features the copy is compiled for.
             return unsafe { self.run_fma(out) };
@@ -780,7 +780,7 @@ mod tests {
     /// are left to the f32 kernel.
     #[test]
     fn int8_products_match_the_f32_kernel_within_the_input_quantisation() {
-        let vnni = crate::conv::Products::Vnni.supported();
+        let vnni = crate::nn::conv::Products::Vnni.supported();
         if !vnni {
             eprintln!("skipped: this CPU has no AVX-512 VNNI");
             return;
@@ -793,7 +793,7 @@ mod tests {
             let weights: Vec<f32> = (0..k * np)
                 .map(|t| {
                     let (row, o) = (t / np, t % np);
-                    let q = crate::conv::int8_test_code(t, row == o % k);
+                    let q = crate::nn::conv::int8_test_code(t, row == o % k);
                     if o < n {
                         q as f32 * 0.002 * (1 + o % 7) as f32
                     } else {
@@ -801,7 +801,7 @@ mod tests {
                     }
                 })
                 .collect();
-            let compact = crate::conv::building(crate::conv::Products::Vnni, || {
+            let compact = crate::nn::conv::building(crate::nn::conv::Products::Vnni, || {
                 Weights::compact(weights.clone(), np)
             });
             let Weights::I8 { q, scale, quads } = compact else {

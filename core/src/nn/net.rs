@@ -6,7 +6,7 @@
 
 use super::dense::Dense;
 use crate::error::{Error, Result};
-use crate::stem::{Stem, StemWeights, with_f32_slice};
+use crate::nn::stem::{Stem, StemWeights, with_f32_slice};
 use std::sync::Arc;
 use tract_core::internal::*;
 
@@ -66,8 +66,8 @@ impl Net {
         use_stem: bool,
         use_dense: bool,
     ) -> Result<Self> {
-        crate::cpu::select_tract_kernels();
-        let mut proto = crate::onnx::parse(bytes).map_err(load_err(what))?;
+        crate::nn::tract::select_tract_kernels();
+        let mut proto = crate::nn::onnx::parse(bytes).map_err(load_err(what))?;
         let mut shapes: Vec<Vec<usize>> = inputs.iter().map(|(_, s)| s.to_vec()).collect();
         let weights = if use_stem {
             StemWeights::split_from(&mut proto, &shapes).map_err(load_err(what))?
@@ -108,7 +108,7 @@ impl Net {
                 output_slots,
             });
         }
-        let model = crate::onnx::typed_model(&proto, &shapes).map_err(load_err(what))?;
+        let model = crate::nn::onnx::typed_model(&proto, &shapes).map_err(load_err(what))?;
         let names: Vec<String> = model
             .input_outlets()
             .map_err(load_err(what))?
@@ -196,7 +196,7 @@ impl Net {
         let run = state
             .run(values)
             .map_err(|e| Error::Internal(format!("network run: {e:#}")));
-        crate::cpu::clear_upper_vector_state();
+        crate::nn::tract::clear_upper_vector_state();
         *outputs = run?;
         Ok(())
     }
@@ -232,8 +232,8 @@ fn with_input_slice(t: &mut Arc<Tensor>, f: impl FnOnce(&mut [f32])) -> Result<(
 
 /// The graph of an ONNX file (for the tests that check how the shipped networks are written).
 #[cfg(test)]
-fn onnx_graph(bytes: &[u8]) -> crate::onnx::pb::GraphProto {
-    crate::onnx::parse(bytes).unwrap().graph.unwrap()
+fn onnx_graph(bytes: &[u8]) -> crate::nn::onnx::pb::GraphProto {
+    crate::nn::onnx::parse(bytes).unwrap().graph.unwrap()
 }
 
 /// The graph output names of an ONNX file, in order.
@@ -261,7 +261,7 @@ mod tests {
     use super::onnx_op_types as op_types;
     use super::*;
     use crate::landmarks::EMBEDDED_FILES;
-    use crate::stem::{StemLayer, assert_close_to_whole_graph};
+    use crate::nn::stem::{StemLayer, assert_close_to_whole_graph};
 
     /// Input shapes of the shipped networks as `M3` runs them (one patch per run, the eyes too).
     fn shipped_inputs(name: &str) -> Vec<(&'static str, Vec<usize>)> {
@@ -283,18 +283,18 @@ mod tests {
     #[test]
     fn shipped_networks_run_their_first_layer_as_a_stem_with_the_same_outputs() {
         // Every form of the layers' products this CPU has (`conv`).
-        for form in crate::conv::product_forms() {
+        for form in crate::nn::conv::product_forms() {
             for (name, bytes) in EMBEDDED_FILES.iter().filter(|(n, _)| n.ends_with(".onnx")) {
                 let shapes = shipped_inputs(name);
                 let inputs: Vec<(&str, &[usize])> =
                     shapes.iter().map(|(n, s)| (*n, s.as_slice())).collect();
                 let names = onnx_output_names(bytes);
                 let outputs: Vec<&str> = names.iter().map(String::as_str).collect();
-                let mut with = crate::conv::building(form, || {
+                let mut with = crate::nn::conv::building(form, || {
                     Net::load(name, bytes, &inputs, &outputs).unwrap()
                 });
                 // The stem, with the heads left to tract.
-                let mut tract_heads = crate::conv::building(form, || {
+                let mut tract_heads = crate::nn::conv::building(form, || {
                     Net::load_with(name, bytes, &inputs, &outputs, true, false).unwrap()
                 });
                 let mut without =
@@ -308,7 +308,7 @@ mod tests {
                 // nodes are of `Dense`'s forms).
                 assert_eq!(
                     with.dense().is_some(),
-                    crate::conv::available(),
+                    crate::nn::conv::available(),
                     "{name}: heads outside tract"
                 );
                 assert!(tract_heads.dense().is_none() && without.dense().is_none());
@@ -320,7 +320,7 @@ mod tests {
                         "{name}: {int8} of {layers} int8"
                     );
                     // And multiplied in int8 where the trunks are.
-                    let products = if form == crate::conv::Products::Vnni {
+                    let products = if form == crate::nn::conv::Products::Vnni {
                         layers
                     } else {
                         0
@@ -330,7 +330,7 @@ mod tests {
                 // Where `conv` runs, every 3×3 layer after the first (all the shipped trunks' layers).
                 let convs = op_types(bytes).iter().filter(|o| *o == "Conv").count();
                 let after_first = with.stem.as_ref().map_or(0, Stem::layers_after_first);
-                let want = if crate::conv::available() {
+                let want = if crate::nn::conv::available() {
                     convs - 1
                 } else {
                     0
@@ -373,7 +373,7 @@ mod tests {
     #[test]
     fn a_first_layer_of_another_form_is_left_to_tract() {
         let mut proto =
-            crate::onnx::parse(crate::landmarks::embedded_file("nose.onnx").unwrap()).unwrap();
+            crate::nn::onnx::parse(crate::landmarks::embedded_file("nose.onnx").unwrap()).unwrap();
         let shapes = vec![vec![1, 1, 40, 24], vec![1, 5]];
         assert!(StemLayer::find(&proto, &shapes, false).is_some());
         assert!(StemLayer::find(&proto, &shapes, true).is_some());
@@ -386,7 +386,7 @@ mod tests {
             .iter_mut()
             .find(|n| n.op_type == "Flatten")
             .unwrap();
-        flatten.attribute.push(crate::onnx::pb::AttributeProto {
+        flatten.attribute.push(crate::nn::onnx::pb::AttributeProto {
             name: "pads".into(),
             ints: vec![1, 1, 1, 1],
             ..Default::default()

@@ -2,7 +2,7 @@
 //! `Add`, `Div` by constants), a 3×3, stride-2, zero-padded convolution and a ReLU — computed here
 //! instead of by tract: [`StemLayer`] finds the layer in the ONNX graph, takes its weights from it
 //! and cuts it out, and [`Stem`] computes it before tract runs the rest (`landmarks::net`, and
-//! `detect`). Where [`crate::conv`] runs ([`crate::conv::available`]: aarch64, x86-64 with AVX2 +
+//! `detect`). Where [`crate::nn::conv`] runs ([`crate::nn::conv::available`]: aarch64, x86-64 with AVX2 +
 //! FMA), the layer goes through its kernel, and so do the plain 3×3 layers that follow it, cut
 //! from the graph the same way: what comes after them then runs in `landmarks::dense` (M3's fully
 //! connected heads) and, for the detector, in `detect::tail` where the layers multiply in the
@@ -18,8 +18,8 @@
 //! registers for all channels, and the output is written straight into the second layer's padded
 //! input (its border stays zero), so tract's second convolution pads nothing.
 
-use crate::conv::{Conv3x3, ConvWeights};
-use crate::onnx::pb::{AttributeProto, ModelProto, NodeProto, TensorProto};
+use crate::nn::conv::{Conv3x3, ConvWeights};
+use crate::nn::onnx::pb::{AttributeProto, ModelProto, NodeProto, TensorProto};
 use tract_core::internal::*;
 
 /// The first layer of one network and its buffers. Shapes: input `batch × in_h × in_w` (what the
@@ -34,7 +34,7 @@ pub(crate) struct Stem {
     out_w: usize,
     /// Border of zeros around each plane the first layer writes: the second layer's padding.
     pad: usize,
-    /// The 3×3 layers after the first one computed here too ([`crate::conv`]; empty where tract
+    /// The 3×3 layers after the first one computed here too ([`crate::nn::conv`]; empty where tract
     /// computes them), each with the buffer of its input: the previous layer's output.
     layers: Vec<(Conv3x3, Vec<f32>)>,
     /// How the layer itself is computed, with that path's weights and buffers.
@@ -49,7 +49,7 @@ pub(crate) struct Stem {
 /// The two ways of computing the first layer.
 #[derive(Debug, Clone)]
 enum First {
-    /// Where [`crate::conv::available`]: a [`Conv3x3`] of one input channel, with its
+    /// Where [`crate::nn::conv::available`]: a [`Conv3x3`] of one input channel, with its
     /// zero-bordered input.
     Direct(Box<Conv3x3>, Vec<f32>),
     /// The portable path ([`first_lanes`]).
@@ -67,7 +67,7 @@ impl Stem {
     /// A stem for a `batch × 1 × in_h × in_w` input with `layer`'s weights, writing planes with
     /// its zero border.
     pub(crate) fn new(batch: usize, in_h: usize, in_w: usize, layer: &StemWeights) -> Self {
-        Self::with_path(batch, in_h, in_w, layer, crate::conv::available())
+        Self::with_path(batch, in_h, in_w, layer, crate::nn::conv::available())
     }
 
     /// [`Self::new`], the first layer through [`Conv3x3`] if `direct`, else the lane loop.
@@ -122,7 +122,7 @@ impl Stem {
             }
         };
         // A layer that quantises its input reads it interleaved, so the layer before it stores
-        // each position's channels as they lie in its registers (`crate::conv::Layout`).
+        // each position's channels as they lie in its registers (`crate::nn::conv::Layout`).
         for i in 0..layers.len() {
             if !layers[i].0.takes_interleaved_input() {
                 continue;
@@ -217,7 +217,7 @@ impl Stem {
         conv.output_peak()
     }
 
-    /// Makes the last layer write its output interleaved ([`crate::conv::Layout::Interleaved`]:
+    /// Makes the last layer write its output interleaved ([`crate::nn::conv::Layout::Interleaved`]:
     /// position after position, the channels rounded up to a whole block), for a reader that
     /// takes it so (`detect::tail`); false, changing nothing, where the last layer is the lane
     /// loop, which writes planes only.
@@ -359,7 +359,7 @@ pub(crate) struct StemWeights {
     /// The input affine before the convolution: `v · scale + shift`.
     pub(crate) scale: f32,
     pub(crate) shift: f32,
-    /// The 3×3 layers after the first one that run here too ([`crate::conv`]), in order.
+    /// The 3×3 layers after the first one that run here too ([`crate::nn::conv`]), in order.
     pub(crate) chain: Vec<ConvWeights>,
     /// The padding of the convolution after the layers taken (0 for another node), now the
     /// border of the last one's output.
@@ -368,13 +368,13 @@ pub(crate) struct StemWeights {
 
 impl StemWeights {
     /// Finds the first layer of `proto` ([`StemLayer::find`], inputs of `shapes`) — and, where
-    /// [`crate::conv::available`], the 3×3 layers after it — takes their weights and cuts them
+    /// [`crate::nn::conv::available`], the 3×3 layers after it — takes their weights and cuts them
     /// from the graph; `None` (and `proto` untouched) when the first layer has another form.
     pub(crate) fn split_from(
         proto: &mut ModelProto,
         shapes: &[Vec<usize>],
     ) -> TractResult<Option<Self>> {
-        let Some(layer) = StemLayer::find(proto, shapes, crate::conv::available()) else {
+        let Some(layer) = StemLayer::find(proto, shapes, crate::nn::conv::available()) else {
             return Ok(None);
         };
         let weights = layer.weights(proto)?;
@@ -399,7 +399,7 @@ pub(crate) fn with_f32_slice(
 /// (possibly empty), which feeds only a 3×3, stride-2, padding-1 `Conv` with a bias, whose output
 /// feeds only a ReLU (`Relu`, or `LeakyRelu` with α = 0), whose output feeds only a `Conv` with the
 /// same padding on every side. When asked, also the chain of layers after it that
-/// [`crate::conv`] computes: a 3×3, stride 1 or 2, padding-1 `Conv` (group 1) with a bias on the
+/// [`crate::nn::conv`] computes: a 3×3, stride 1 or 2, padding-1 `Conv` (group 1) with a bias on the
 /// previous ReLU's output alone, feeding only a ReLU; the node after the chain is then a `Conv`
 /// with the same padding on every side or a node without padding.
 #[derive(Debug)]
@@ -437,7 +437,7 @@ pub(crate) fn values_by_name(proto: &ModelProto, names: &[&str]) -> TractResult<
     let Some(graph) = proto.graph.as_ref() else {
         tract_core::internal::bail!("no graph");
     };
-    let constants = crate::onnx::constants(graph)?;
+    let constants = crate::nn::onnx::constants(graph)?;
     names
         .iter()
         .map(|n| {
@@ -690,7 +690,7 @@ pub(crate) fn assert_close_to_whole_graph(
     what: &str,
     got: &[f32],
     want: &[f32],
-    form: crate::conv::Products,
+    form: crate::nn::conv::Products,
 ) {
     assert_eq!(got.len(), want.len(), "{what}: lengths");
     let scale = want.iter().fold(1f32, |m, v| m.max(v.abs()));
