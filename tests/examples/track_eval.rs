@@ -307,8 +307,8 @@ fn main() -> Result<(), String> {
          {} kernels on {} (MONOTRACK_KERNELS=portable: the phone's)",
         opt.mirror_average,
         opt.input,
-        monotrack_core::cpu::kernel_path().as_str(),
-        monotrack_core::cpu::cpu_name()
+        monotrack_core::kernels::kernel_path().as_str(),
+        monotrack_core::kernels::cpu_name()
     );
     if let Some(data) = shared_data_if_present() {
         let faces = load_validation_faces(&data, 24, 100.0)?;

@@ -9,7 +9,7 @@
 //! Recorded on x86-64 with `MONOTRACK_KERNELS=portable MONOTRACK_RECORD_GOLDEN=1 cargo test -p
 //! monotrack-tests --test m3_golden` (again whenever the models are retrained).
 
-use monotrack_core::cpu::{KernelPath, kernel_path};
+use monotrack_core::kernels::{KernelPath, kernel_path};
 use monotrack_core::image::{Frame, FrameDesc, GrayImage, PixelFormat, Rect};
 use monotrack_core::landmarks::{FaceLandmarks, M3};
 use serde::{Deserialize, Serialize};

@@ -1,5 +1,5 @@
 //! What the network-timing examples (`time_nets`, `profile_net`) share: a network loaded the way
-//! `core::landmarks` loads it (with the library's kernel choice, `monotrack_core::cpu`) and inputs
+//! `core::landmarks` loads it (with the library's kernel choice, `monotrack_core::nn::tract`) and inputs
 //! that look like real patches.
 
 use tract_onnx::prelude::*;
@@ -10,7 +10,7 @@ pub fn load_plan(
     path: &str,
     shapes: &[Vec<usize>],
 ) -> TractResult<std::sync::Arc<TypedRunnableModel>> {
-    monotrack_core::cpu::select_tract_kernels();
+    monotrack_core::nn::tract::select_tract_kernels();
     let mut model = tract_onnx::onnx().model_for_path(path)?;
     for (i, s) in shapes.iter().enumerate() {
         model = model.with_input_fact(i, f32::fact(s.as_slice()).into())?;

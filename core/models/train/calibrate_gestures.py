@@ -14,7 +14,7 @@ are a set to fit that on: each class's logit gets an offset (neutral's stays 0) 
 offsets are added to the gesture layer's bias and recorded in the file's metadata
 (`gesture_logit_offsets`, beside the bias as trained), so a second run starts from the trained
 bias and fits again: the same file comes out. Landmarks do not change; the probabilities apps read do (softmax of the
-shifted logits). MODEL_CARD.md gives the validation figures.
+shifted logits). RESEARCH_LOG.md gives the validation figures.
 
 Needs the teacher's cache (`teacher_genki.py`); without it the script says so and changes nothing.
 """

@@ -10,14 +10,14 @@ faces, 0.9 px on the validation faces; y has no such offset, as no augmentation 
 offset is in the validation labels and presumably in any test set annotated the same way (300-W), so
 the inference adds it back: x += x_offset_iod * |p36 - p45| on every output point (M3_IO.md). Measured
 and chosen on the training split only (landmark boxes jittered as eval_m3.py does), never on the
-validation split: MODEL_CARD.md has the validation figures with and without it.
+validation split: RESEARCH_LOG.md has the validation figures with and without it.
 
 The shape prior (M3_IO.md): for each zone a ridge regression that predicts the zone's points from
 every other point, fitted on the same training predictions (with the offset) against the annotated
 points, in the outer-eye-corner frame. The nets' training-face points are better than their unseen
 ones (NME 3.06 vs 4.13 %), so how far inference moves towards the regression (PRIOR_ZONES' weights)
 cannot be chosen on the training faces (they say 0 for the jaw): the weights were chosen on the
-validation split, on a grid, and checked by choosing on one half and scoring the other (MODEL_CARD.md).
+validation split, on a grid, and checked by choosing on one half and scoring the other (RESEARCH_LOG.md).
 
     python3 core/models/train/calibrate_m3.py [MODEL_DIR]   # default core/models/m3 ($MONOTRACK_M3_OUT)
 

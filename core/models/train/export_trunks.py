@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Exports M3 nets with given trunks and random weights, for timing them with tract
-(`cargo run --release -p monotrack-core --example time_nets -- DIR`; MODEL_CARD.md's
-"Architecture for tract" table). The time of a net does not depend on its weights.
+(`cargo run --release -p monotrack-core --example time_nets -- DIR`; RESEARCH_LOG.md's
+"Trunk design" table). The time of a net does not depend on its weights.
 
     python3 core/models/train/export_trunks.py DIR level1=16s-32s-48s-48c-64s face=16s-32s-48s-48c-96s \
         brows=8s-16s-32s-32c-48s mouth=16s-32s-48s-48c-64s eye=8s-16s-16c-32s

@@ -25,7 +25,7 @@ MOUTH_GESTURES = ["smile", "frown", "kiss", "neutral"]
 BROW_GESTURES = ["raise", "frown", "neutral"]
 
 # Teacher thresholds on MediaPipe blendshapes (values 0..1). Chosen from their distribution on
-# faces68 (see MODEL_CARD.md): mean mouthSmile > 0.5 holds for 35 % of faces (visibly smiling in the
+# faces68 (see RESEARCH_LOG.md): mean mouthSmile > 0.5 holds for 35 % of faces (visibly smiling in the
 # images); mouthFrown is rare (99th percentile 0.12) so 0.1 keeps only clear frowns; mouthPucker > 0.5
 # with little smile marks kisses (the 95th percentile is 0.73); browInnerUp / browOuterUp above 0.4
 # (90th percentile) marks raised brows and mean browDown above 0.45 frowning brows.
@@ -69,7 +69,7 @@ ZONES = {
     # Level 2 for the jaw contour and the nose (an addition to the thesis' three zones): level 1 sees
     # the face at any roll and scale; this patch is aligned on the outer eye corners. Its points are
     # averaged with level 1's (level1_weight, M3_IO.md): on the validation split the zone alone gives
-    # jaw 7.68 / nose 4.05 %, level 1 alone 7.31 / 4.14 %, the blend 6.91 / 3.77 % (MODEL_CARD.md);
+    # jaw 7.68 / nose 4.05 %, level 1 alone 7.31 / 4.14 %, the blend 6.91 / 3.77 % (RESEARCH_LOG.md);
     # blended, 48x48 is as accurate as 64x64 and cheaper.
     "face": {"width": 48, "height": 48, "ref68": [36, 45], "template": [[0.32, 0.3], [0.68, 0.3]],
              "indices68": list(range(0, 17)) + list(range(27, 36)), "bilateral": None, "equalize": False,
@@ -78,7 +78,7 @@ ZONES = {
     # 31 and 35 ("refs": "merged"; it runs after the face zone by name), about 44 px per outer-eye
     # distance against the face zone's 17, reaching up to the bridge between the eyes. Its points
     # replace the face zone's. On the validation split the nose NME falls 2.82 -> 2.48 % against a
-    # 32x32 patch on the outer eye corners at the same cost (MODEL_CARD.md). Trained on the
+    # 32x32 patch on the outer eye corners at the same cost (RESEARCH_LOG.md). Trained on the
     # annotated nostril corners jittered like every zone's references.
     "nose": {"width": 24, "height": 40, "ref68": [31, 35], "template": [[0.1875, 0.85], [0.8125, 0.85]],
              "indices68": list(range(27, 36)), "refs": "merged", "bilateral": None, "equalize": False},
@@ -86,7 +86,7 @@ ZONES = {
     # 54 ("refs": "merged"; it runs after the mouth zone by name), blended 0.7 / 0.3 with the mouth
     # zone's points (prior_weight). Trained on the annotated corners jittered like every zone's
     # references. On the validation split the mouth NME falls 3.74 -> 3.16 % (the zone alone 3.25 %;
-    # MODEL_CARD.md). No bilateral filter: with it 0.03 % better in one run (within the run-to-run
+    # RESEARCH_LOG.md). No bilateral filter: with it 0.03 % better in one run (within the run-to-run
     # spread) at more time per face.
     "mouth_fine": {"width": 48, "height": 40, "ref68": [48, 54], "template": [[0.1, 0.4], [0.9, 0.4]],
                    "indices68": list(range(48, 68)), "refs": "merged", "bilateral": None, "equalize": False,
@@ -96,7 +96,7 @@ LEVEL1 = {"input_size": 64, "crop_scale": 1.3}
 
 # The nets that run a second time on their mirrored input in mirror-average mode (M3_IO.md), written
 # into m3.json as `"mirror_average": true`: level 1 and zones but the eye (mirrored per side
-# already). Validation NME (MODEL_CARD.md): 3.98 % in the default mode; 3.875 % with level 1 and
+# already). Validation NME (RESEARCH_LOG.md): 3.98 % in the default mode; 3.875 % with level 1 and
 # all five other zones; 3.890 % with level 1, brows, mouth and mouth_fine; 3.925 % with the five
 # zones without level 1. Over eight box-jitter seeds (Python reference): 3.9074 % with all six, 3.9066 % without mouth_fine's second run (the set below: it
 # gains nothing; in two warm per-face timing runs it cost 14 µs in one and nothing measurable in the
@@ -321,7 +321,7 @@ def text_negative(img, rng):
     one or two glyphs. Why: news video captions (white CJK or Latin glyphs of about 20 px, often
     outlined, on a dark band) reach the face check as detector candidates, and level 1 passes some at
     0.97-1.0 (eval_face_check.py measures it; training level 1 with them was tried and not kept,
-    MODEL_CARD.md). The background is a region of `img`, darkened or under a flat band; glyph size,
+    RESEARCH_LOG.md). The background is a region of `img`, darkened or under a flat band; glyph size,
     colour, outline, characters and the square are drawn from `rng`."""
     from PIL import Image, ImageDraw, ImageFont
     if not os.path.exists(TEXT_FONT):

@@ -6,7 +6,7 @@ The shipped face models share a 1.5 MB budget; int8 storage halves what float16 
 onnxruntime) fold the DequantizeLinear of a constant when the model is optimised at load, so
 inference still runs in float32 on the dequantised weights. Symmetric quantisation (zero point 0,
 scale = max |w| / 127 per output channel) rounds every weight by at most half a step, 0.4 % of its
-channel's largest weight; eval_m3.py measures what that costs (MODEL_CARD.md).
+channel's largest weight; eval_m3.py measures what that costs (RESEARCH_LOG.md).
 
 Reads float32 weights, or float16 ones behind onnx_f16.py's Cast (the quantised values then come
 from the float16 weights, so converting a float16 file gives the same bytes as converting its

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Teacher landmarks for GENKI-4K faces: PFLD (../shared/data/peers/pfld, a peer model never shipped)
 labels the 68 iBUG points of every GENKI-4K training-split crop, as extra landmark data for the
-face zone net (jaw + nose), which overfits the 1,079 faces68 training faces (MODEL_CARD.md).
+face zone net (jaw + nose), which overfits the 1,079 faces68 training faces (RESEARCH_LOG.md).
 
 usage: python3 core/models/train/pseudo_genki.py [OUT.jsonl]
   (default $XDG_CACHE_HOME or ~/.cache /monotrack/genki_pfld.jsonl; train_m3.py calls it when missing)

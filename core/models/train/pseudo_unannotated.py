@@ -16,7 +16,7 @@ teacher's misses (a HOG box on another face, a PFLD crop that slid) become label
 validation images are left out. The output holds the GENKI-4K teacher faces, then the kept faces
 `--repeat` times (each is one line of 2,240 otherwise). Peers are teachers only, never shipped.
 
-Measured and not adopted (MODEL_CARD.md, "Measured and not adopted").
+Measured and not adopted (RESEARCH_LOG.md, "Measured and not adopted").
 """
 import argparse
 import json

@@ -4,7 +4,7 @@ teacher only, never shipped) reads the 52 blendshapes of every GENKI-4K crop, la
 faces68's are (m3data.gestures_from_teacher, the same thresholds). The held-out crops (file number
 % 5 == 0) give eval_m3.py a second gesture validation set with enough examples of every class
 (faces68's validation faces hold no mouth frown); the training split's crops can train the mouth
-and brow nets' gesture heads (train_m3.py --genki-gesture-nets, off by default: MODEL_CARD.md).
+and brow nets' gesture heads (train_m3.py --genki-gesture-nets, off by default: RESEARCH_LOG.md).
 
 usage: python3 core/models/train/teacher_genki.py [OUT.jsonl]
   (default $XDG_CACHE_HOME or ~/.cache /monotrack/genki_mediapipe.jsonl)

@@ -54,7 +54,7 @@ BATCH = 64
 # Nets that also learn from GENKI-4K crops labelled by the PFLD teacher (pseudo_genki.py), and their
 # share of those nets' batches. The face zone (jaw + nose) overfits faces68 (training-split NME: jaw
 # 3.4 % against 7.9 % on validation); with the teacher's faces its validation jaw NME fell 7.93 ->
-# 7.70 % (the 64x64 zone, before the level-1 blend; MODEL_CARD.md).
+# 7.70 % (the 64x64 zone, before the level-1 blend; RESEARCH_LOG.md).
 PSEUDO_NETS = ("face",)
 PSEUDO_SHARE = 0.4
 # Nets that also learn from faces turned in yaw by the face model (rotate_faces.py: two per training
@@ -63,7 +63,7 @@ PSEUDO_SHARE = 0.4
 # on turned validation faces (past 60°: 25 of 39 and 23 of 32, against none) at the same NME on the
 # real ones (3.98 %), but it put 8 of the 9 real validation faces the teacher sees at 30–60° into
 # the frontal class (the shipped level 1: 3); share 0.2 and the face zone with them at 0.25 cost
-# real-face NME (4.02 and 4.09 %). MODEL_CARD.md, "Turned faces".
+# real-face NME (4.02 and 4.09 %). RESEARCH_LOG.md, "Turned faces".
 TURNED_NETS = ()
 TURNED_SHARE = 0.1
 # Gesture nets that also learn from GENKI-4K crops labelled by the MediaPipe teacher
@@ -71,7 +71,7 @@ TURNED_SHARE = 0.1
 # landmark truth. The mouth's crops keep the teacher's class only where it agrees with GENKI's own
 # smile label (smile against not-smile). None by default: the brow net gained gesture F1 with them
 # on two seeds but the tracker with it lost correct frames, the mouth gained nothing consistent
-# (MODEL_CARD.md, "Measured and not adopted").
+# (RESEARCH_LOG.md, "Measured and not adopted").
 GENKI_GESTURE_NETS = ()
 # Gesture nets that also regress the teacher's continuous scores behind their classes
 # (m3data.gesture_scores) from the features the gesture head reads, weighted by SCORE_WEIGHT (mean
@@ -79,7 +79,7 @@ GENKI_GESTURE_NETS = ()
 # thresholds on these scores, so a face near a threshold teaches the features as much as one far
 # from it. The mouth gained gesture F1 on two seeds (0.680 -> 0.754, 0.646 -> 0.735 on the
 # validation faces); the brow net gained less and, retrained so, cost the tracker correct frames
-# (MODEL_CARD.md, "Measured and not adopted").
+# (RESEARCH_LOG.md, "Measured and not adopted").
 SCORE_NETS = ("mouth",)
 SCORE_WEIGHT = 10.0
 # Zone nets that regress the teacher's head yaw and pitch (/ 60°) the same way (SCORE_WEIGHT, a
@@ -92,7 +92,7 @@ AUX_POINT_NETS = ()
 AUX_POINT_WEIGHT = 0.5
 # Share of training patches smeared by a motion blur (motion_blur) whose length is drawn up to
 # 2 × MOTION_BLUR_MAX_PX image pixels: a phone frame of a fast face. 0 in the shipped nets: at 0.3
-# fewer blurred faces were lost in tracking but sharp faces' NME rose (MODEL_CARD.md, "Measured
+# fewer blurred faces were lost in tracking but sharp faces' NME rose (RESEARCH_LOG.md, "Measured
 # and not adopted").
 MOTION_BLUR_P = 0.0
 MOTION_BLUR_MAX_PX = 4.0
@@ -122,7 +122,7 @@ ZONE_TRUNK = {"eye": "8s-16s-16c-32s", "face": "16s-32s-48s-48c-96s", "mouth_fin
 STEPS = {"level1": 15000, "brows": 10000, "eye": 10000, "mouth": 12500, "face": 15000, "nose": 10000,
          "mouth_fine": 10000}
 # The mouth's 5 (20261127) is the second of the two seeds its score head was trained with, the one
-# with the lower validation NME (MODEL_CARD.md, "Teacher scores for the gesture features").
+# with the lower validation NME (RESEARCH_LOG.md, "Teacher scores for the gesture features").
 ZONE_SEED = {"brows": 2, "eye": 3, "mouth": 5, "face": 5, "nose": 6, "mouth_fine": 7}
 # Standard deviation of the Gaussian jitter of a zone's two reference points in training, in units of
 # the outer-eye-corner distance (zone_sample): the size of the reference errors the net must absorb.

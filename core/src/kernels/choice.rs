@@ -56,7 +56,8 @@ impl KernelChoice {
     };
 
     /// Reads a choice written as `native` or `portable`, optionally followed by `,conv=FORM` and
-    /// `,flow=FORM` (for example `native,conv=avx2`). An empty string is the native path.
+    /// `,flow=FORM` (for example `native,conv=avx2`; a form alone keeps the native path). An empty
+    /// string is the native path.
     ///
     /// # Errors
     /// [`Error::InvalidConfig`] for a path, kernel or form it does not know.
@@ -149,7 +150,10 @@ mod tests {
         assert_eq!(forms.flow.as_deref(), Some("portable"));
         assert_eq!(forms.to_string(), "native,conv=avx2,flow=portable");
         assert_eq!(KernelChoice::parse(&forms.to_string()).unwrap(), forms);
-        for bad in ["fast", "native,conv=maddubs", "portable,tile=8", "conv=avx2"] {
+        // A form alone keeps the native path.
+        let alone = KernelChoice::parse("conv=bf16").unwrap();
+        assert_eq!((alone.path, alone.conv.as_deref()), (KernelPath::Native, Some("bf16")));
+        for bad in ["fast", "native,conv=maddubs", "portable,tile=8", "native,portable"] {
             assert!(
                 matches!(KernelChoice::parse(bad), Err(Error::InvalidConfig(_))),
                 "{bad}"

@@ -112,6 +112,42 @@ pub(crate) fn has_avx2_fma() -> bool {
         && kernel_path() == KernelPath::Native
 }
 
+/// The x86-64 features beyond AVX2 + FMA that the native path's forms use, each `false` on the
+/// portable path or where [`has_avx2_fma`] is (every form that uses them also uses AVX2 + FMA).
+#[cfg(target_arch = "x86_64")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Avx512 {
+    /// AVX-512F.
+    F,
+    /// AVX-512F, BW and VL.
+    BwVl,
+    /// AVX-512F, VL and BF16.
+    Bf16,
+    /// AVX-512F, BW and VNNI.
+    Vnni,
+}
+
+/// Whether the native path runs the AVX-512 forms that need `features`.
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn has_avx512(features: Avx512) -> bool {
+    use std::arch::is_x86_feature_detected as has;
+    has_avx2_fma()
+        && has!("avx512f")
+        && match features {
+            Avx512::F => true,
+            Avx512::BwVl => has!("avx512bw") && has!("avx512vl"),
+            Avx512::Bf16 => has!("avx512vl") && has!("avx512bf16"),
+            Avx512::Vnni => has!("avx512bw") && has!("avx512vnni"),
+        }
+}
+
+/// Whether the CPU has FMA, on either path (x86-64's portable path runs the NEON forms' 128-bit
+/// twins, which need it).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn has_fma() -> bool {
+    std::arch::is_x86_feature_detected!("fma")
+}
+
 /// For the tests of the AVX2 paths, which carry
 /// `#[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]` (build.rs):
 /// fails when they are run where those kernels do not (the portable path: test-all.sh's portable

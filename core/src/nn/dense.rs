@@ -1,15 +1,13 @@
 //! The fully connected heads of the M3 networks, computed here instead of by tract where the
 //! trunk already runs outside it ([`crate::nn::stem`]).
 //!
-//! Why: after the trunks moved to [`crate::nn::conv`], tract's part of `m3_per_face` was the heads —
-//! `perf` on an Intel Xeon put its matrix–vector kernels at 12 % of the per-face time and
-//! its per-run bookkeeping (plan walk, tensor allocation, copies) at several % more, for 0.38 M
-//! multiply-adds per face (counted from the shipped graphs). Here each layer is one pass over its
-//! weights, stored input-major so the outputs are the vector lanes, in buffers allocated once.
-//! Where the trunks multiply in int8 ([`crate::nn::conv::int8_products`]: AVX-512 VNNI), int8 layers
-//! do too ([`int8_product`]): their input rounded per run to 16-bit steps (two u8 digits), the
-//! same weights; on an Intel Xeon with AVX-512 VNNI `m3_per_face` 162.6–164.1 → 151.5–155.1 µs in
-//! alternating runs with one digit, the second digit then +4.8 µs in one pair of runs and none in the other (noisy).
+//! Why: once the trunks run in [`crate::nn::conv`], what tract would still run per face is the
+//! heads, whose few multiply-adds cost less than tract's per-run bookkeeping (plan walk, tensor
+//! allocation, copies). Here each layer is one pass over its weights, stored input-major so the
+//! outputs are the vector lanes, in buffers allocated once ([`crate::kernels::dense`] computes the
+//! products). Where the trunks multiply in int8 ([`crate::nn::conv::int8_products`]: AVX-512
+//! VNNI), int8 layers do too: their input rounded per run to 16-bit steps (two u8 digits), the
+//! same weights.
 //!
 //! What a graph may hold after its trunk was cut: `Flatten` of the trunk's output, `Gemm` (α = β =
 //! 1, `transA` 0, either `transB`) with a bias, `Relu` or `LeakyRelu` with α = 0, `Concat` along
@@ -21,10 +19,7 @@ use crate::nn::onnx::pb::{ModelProto, NodeProto};
 use crate::nn::stem::{attr, is_relu, values_by_name};
 use tract_core::internal::*;
 
-/// Outputs of a layer accumulated together: four 256-bit registers, which stay in registers
-/// over the whole input (accumulating in the output buffer instead made every product a load and
-/// a store: the heads took 17 % of `m3_per_face_mirror_average`).
-const CHUNK: usize = 32;
+use crate::kernels::dense::{CHUNK, Product, int8_product};
 
 /// A layer's weights as stored here.
 #[derive(Debug, Clone)]
@@ -443,280 +438,6 @@ impl Dense {
     }
 }
 
-/// `out = scale ⊙ (weights · x) + bias` (through a ReLU with `relu`) in int8 products: `x`
-/// rounded to 16-bit steps of 1/65535 of its largest value, held as two u8 digits in `quantised`
-/// (the high digits' words, then the low digits'), each digit's four u8 × i8 products summed in
-/// an i32 lane by `vpdpbusd` (`quads` as [`Weights::I8`] holds them) and the two sums joined as
-/// `256·high + low`. False, with nothing written, where the CPU lacks AVX-512 VNNI or `x` has a
-/// negative or non-finite value.
-///
-/// Why: the f32 kernel widens each int8 weight to f32 before its multiply-add (four instructions
-/// per eight weights before the FMA); here one instruction takes sixty-four. Why two digits: with
-/// one (u8 inputs, as the 3×3 layers take) a brow gesture probability of the `m3_golden` cases
-/// moved 0.027 from the Python reference, over the test's 0.02; the second digit costs a second
-/// product per weight, still a fraction of the f32 kernel's work.
-fn int8_product(
-    x: &[f32],
-    quads: &[u32],
-    scale: &[f32],
-    bias: &[f32],
-    relu: bool,
-    quantised: &mut [u32],
-    out: &mut [f32],
-) -> bool {
-    #[cfg(target_arch = "x86_64")]
-    if crate::nn::conv::Products::Vnni.supported() {
-        #[allow(unsafe_code)]
-        // SAFETY: the CPU has AVX-512F, BW and VNNI (`Products::supported`).
-        return unsafe { int8_product_avx512(x, quads, scale, bias, relu, quantised, out) };
-    }
-    let _ = (x, quads, scale, bias, relu, quantised, out);
-    false
-}
-
-/// [`int8_product`]'s body.
-///
-/// # Safety
-/// The CPU has AVX-512F, BW and VNNI.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
-#[allow(unsafe_code)]
-fn int8_product_avx512(
-    x: &[f32],
-    quads: &[u32],
-    scale: &[f32],
-    bias: &[f32],
-    relu: bool,
-    quantised: &mut [u32],
-    out: &mut [f32],
-) -> bool {
-    use std::arch::x86_64::*;
-    let (np, kq) = (bias.len(), x.len().div_ceil(4));
-    assert!(
-        np.is_multiple_of(2 * LANES)
-            && scale.len() == np
-            && quads.len() == kq * np
-            && quantised.len() >= 2 * kq
-            && out.len() <= np
-    );
-    let Some(max) = crate::nn::conv::nonnegative_max(x) else {
-        return false;
-    };
-    let per_step = if max > 0.0 { 65535.0 / max } else { 0.0 };
-    let step = _mm512_set1_ps(max / 65535.0);
-    // Bytes of `x`'s digits in order are the words' bytes in order (little-endian), zero past `x`.
-    let (high, low) = quantised[..2 * kq].split_at_mut(kq);
-    for digits in [&mut *high, &mut *low] {
-        if let Some(last) = digits.last_mut() {
-            *last = 0;
-        }
-    }
-    let (hi, lo) = (
-        high.as_mut_ptr().cast::<u8>(),
-        low.as_mut_ptr().cast::<u8>(),
-    );
-    let (f, top, byte) = (
-        _mm512_set1_ps(per_step),
-        _mm512_set1_epi32(65535),
-        _mm512_set1_epi32(255),
-    );
-    let mut i = 0;
-    while i < x.len() {
-        let mask = (1u32 << (x.len() - i).min(LANES)).wrapping_sub(1) as u16;
-        // SAFETY: the mask's lanes are positions below `x.len() <= 4·kq`: inside `x` and both
-        // digit arrays.
-        unsafe {
-            let v = _mm512_maskz_loadu_ps(mask, x.as_ptr().add(i));
-            let q = _mm512_min_epi32(_mm512_cvtps_epi32(_mm512_mul_ps(v, f)), top);
-            _mm512_mask_cvtepi32_storeu_epi8(hi.add(i).cast(), mask, _mm512_srli_epi32::<8>(q));
-            _mm512_mask_cvtepi32_storeu_epi8(lo.add(i).cast(), mask, _mm512_and_si512(q, byte));
-        }
-        i += LANES;
-    }
-    let (high, low) = (&*high, &*low);
-    let mut o = 0;
-    while o < np {
-        if np - o >= 4 * LANES {
-            // SAFETY: columns o..o + 64 exist (`np` is checked above).
-            unsafe { int8_columns::<4>([high, low], quads, np, o, step, scale, bias, relu, out) };
-            o += 4 * LANES;
-        } else {
-            // SAFETY: `np - o` is a positive multiple of 32 (asserted above).
-            unsafe { int8_columns::<2>([high, low], quads, np, o, step, scale, bias, relu, out) };
-            o += 2 * LANES;
-        }
-    }
-    true
-}
-
-/// f32 lanes of a 512-bit register.
-#[cfg(target_arch = "x86_64")]
-const LANES: usize = 16;
-
-/// Columns `o..o + 16·NJ` of [`int8_product`]: a sum per register and digit, the two chains
-/// independent (each waits on its own latency).
-///
-/// # Safety
-/// AVX-512F, BW and VNNI; `o + 16·NJ <= np`, `quads` holds `kq × np` words for the `kq` words of
-/// each digit and `scale` and `bias` `np` values.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
-#[allow(unsafe_code, clippy::too_many_arguments)]
-unsafe fn int8_columns<const NJ: usize>(
-    [high, low]: [&[u32]; 2],
-    quads: &[u32],
-    np: usize,
-    o: usize,
-    step: std::arch::x86_64::__m512,
-    scale: &[f32],
-    bias: &[f32],
-    relu: bool,
-    out: &mut [f32],
-) {
-    use std::arch::x86_64::*;
-    let w = quads.as_ptr();
-    let (mut hs, mut ls) = ([_mm512_setzero_si512(); NJ], [_mm512_setzero_si512(); NJ]);
-    for (r, (&h, &l)) in high.iter().zip(low).enumerate() {
-        let (h, l) = (_mm512_set1_epi32(h as i32), _mm512_set1_epi32(l as i32));
-        for j in 0..NJ {
-            // SAFETY: word r's columns o + 16j.. lie inside `quads` (the contract).
-            let wt = unsafe { _mm512_loadu_si512(w.add(r * np + o + j * LANES).cast()) };
-            hs[j] = _mm512_dpbusd_epi32(hs[j], h, wt);
-            ls[j] = _mm512_dpbusd_epi32(ls[j], l, wt);
-        }
-    }
-    let radix = _mm512_set1_ps(256.0);
-    for j in 0..NJ {
-        let c = o + j * LANES;
-        if c >= out.len() {
-            break;
-        }
-        // SAFETY: columns c..c + 16 lie inside `scale` and `bias` (the contract).
-        let (s, b) = unsafe {
-            (
-                _mm512_loadu_ps(scale.as_ptr().add(c)),
-                _mm512_loadu_ps(bias.as_ptr().add(c)),
-            )
-        };
-        // Each digit's sum is at most 255 · 127 · k: exact in i32; joined in f32.
-        let sum = _mm512_fmadd_ps(_mm512_cvtepi32_ps(hs[j]), radix, _mm512_cvtepi32_ps(ls[j]));
-        let mut v = _mm512_fmadd_ps(sum, _mm512_mul_ps(s, step), b);
-        if relu {
-            v = _mm512_max_ps(v, _mm512_setzero_ps());
-        }
-        let n = (out.len() - c).min(LANES);
-        // SAFETY: the mask writes the first n lanes, all inside `out`.
-        unsafe { _mm512_mask_storeu_ps(out.as_mut_ptr().add(c), ((1u32 << n) - 1) as u16, v) };
-    }
-}
-
-/// A weight as the kernel multiplies it.
-trait Weight: Copy {
-    fn value(self) -> f32;
-}
-
-impl Weight for f32 {
-    #[inline(always)]
-    fn value(self) -> f32 {
-        self
-    }
-}
-
-impl Weight for i8 {
-    #[inline(always)]
-    fn value(self) -> f32 {
-        f32::from(self)
-    }
-}
-
-/// One layer's product as [`Op::Linear`] runs it: `x`, `weights` input-major (`x.len()` rows of
-/// `bias.len()`, a whole number of [`CHUNK`]s), `scale` per column (1 without), the bias, and
-/// whether a ReLU follows.
-struct Product<'a, W> {
-    x: &'a [f32],
-    weights: &'a [W],
-    scale: Option<&'a [f32]>,
-    bias: &'a [f32],
-    relu: bool,
-}
-
-impl<W: Weight> Product<'_, W> {
-    crate::kernels::cpu::with_avx2_copy! {
-        /// `out = scale ⊙ (weights · x) + bias` (`out` the first of the columns' outputs).
-        fn run_plain / run_avx2 (&self, out: &mut [f32]) => run_body
-    }
-
-    /// `out = scale ⊙ (weights · x) + bias` (`out` the first of the columns' outputs): on an
-    /// x86-64 CPU with FMA that runs the portable path, through a copy compiled for FMA — the same
-    /// fused multiply-adds as everywhere, so the same bits, where the portable build calls a
-    /// library routine for each one.
-    fn run(&self, out: &mut [f32]) {
-        #[cfg(target_arch = "x86_64")]
-        if !crate::kernels::cpu::has_avx2_fma() && std::arch::is_x86_feature_detected!("fma") {
-            #[allow(unsafe_code)]
-            // SAFETY: the CPU has FMA (and so AVX), the features the copy is compiled for.
-            return unsafe { self.run_fma(out) };
-        }
-        self.run_plain(out)
-    }
-
-    /// [`Self::run_body`] compiled for FMA.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx,fma")]
-    fn run_fma(&self, out: &mut [f32]) {
-        self.run_body(out)
-    }
-
-    #[inline(always)]
-    fn run_body(&self, out: &mut [f32]) {
-        let Self {
-            x,
-            weights,
-            scale,
-            bias,
-            relu,
-        } = *self;
-        let np = bias.len();
-        debug_assert!(np.is_multiple_of(CHUNK) && weights.len() == x.len() * np && out.len() <= np);
-        let chunk = |row: &[W], c: usize| -> [W; CHUNK] {
-            row[c * CHUNK..][..CHUNK]
-                .try_into()
-                .expect("a chunk of weights")
-        };
-        for (c, (b, dst)) in bias
-            .chunks_exact(CHUNK)
-            .zip(out.chunks_mut(CHUNK))
-            .enumerate()
-        {
-            // Two sums over alternate inputs: each register's chain of fused multiply-adds then
-            // waits on itself every other input, so the adds overlap (one sum was bound by the
-            // add latency, 4 cycles per input).
-            let mut even = [0f32; CHUNK];
-            let mut odd = [0f32; CHUNK];
-            let mut rows = x.iter().zip(weights.chunks_exact(np));
-            while let (Some((&v0, r0)), Some((&v1, r1))) = (rows.next(), rows.next()) {
-                let (w0, w1) = (chunk(r0, c), chunk(r1, c));
-                for j in 0..CHUNK {
-                    even[j] = v0.mul_add(w0[j].value(), even[j]);
-                    odd[j] = v1.mul_add(w1[j].value(), odd[j]);
-                }
-            }
-            if x.len() % 2 == 1 {
-                let (v, w) = (x[x.len() - 1], chunk(&weights[(x.len() - 1) * np..], c));
-                for j in 0..CHUNK {
-                    even[j] = v.mul_add(w[j].value(), even[j]);
-                }
-            }
-            let s = scale.map(|s| &s[c * CHUNK..][..CHUNK]);
-            for (j, d) in dst.iter_mut().enumerate() {
-                let sum = even[j] + odd[j];
-                let a = s.map_or(sum, |s| sum * s[j]) + b[j];
-                *d = if relu { a.max(0.0) } else { a };
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -779,12 +500,12 @@ mod tests {
     /// f32 product (the weights are the same int8); inputs with a negative or non-finite value
     /// are left to the f32 kernel.
     #[test]
-    fn int8_products_match_the_f32_kernel_within_the_input_quantisation() {
-        let vnni = crate::nn::conv::Products::Vnni.supported();
-        if !vnni {
-            eprintln!("skipped: this CPU has no AVX-512 VNNI");
-            return;
-        }
+    #[cfg_attr(not(host_avx512_vnni), ignore = "this CPU runs no AVX-512 VNNI kernels")]
+    fn the_avx512_vnni_int8_products_match_the_f32_kernel_within_the_input_quantisation() {
+        assert!(
+            crate::nn::conv::Products::Vnni.supported(),
+            "the AVX-512 VNNI kernels do not run here (no such CPU, or the portable path)"
+        );
         // Column counts of one, two and five registers' worth past whole groups of four (96 =
         // 64 + 32, 160 = 2·64 + 32), inputs not a multiple of four or of sixteen, outputs fewer
         // than the columns.

@@ -1,8 +1,6 @@
-//! The one place tract is used: an ONNX network loaded from bytes with fixed input shapes,
-//! optimised once, and run through a reused plan state with reused input tensors.
-//!
-//! tract runs single-threaded unless its `multithread-mm` feature is enabled and an executor is
-//! installed; the core enables neither, so each network runs on the calling thread.
+//! A network of fixed input shapes loaded from ONNX bytes: its leading 3×3 layers and, after
+//! them, its fully connected heads in the library's kernels where they have those forms, the rest
+//! optimised once by tract and run through a reused plan state with reused input tensors.
 
 use super::dense::Dense;
 use crate::error::{Error, Result};
@@ -425,8 +423,8 @@ mod tests {
     }
 
     /// The export's storage passes (`models/train/train_m3.py`) ran on every shipped network: a
-    /// re-export without them still loads and gives the same points, so only this catches it —
-    /// twice the bytes without `onnx_q8.py`, 6–7 % slower networks without `onnx_tract.py`.
+    /// re-export without them still loads and gives the same points, so only this catches it
+    /// (without `onnx_q8.py` the files double; without `onnx_tract.py` the networks run slower).
     #[test]
     fn shipped_networks_have_int8_weights_and_fusable_relus() {
         let nets: Vec<_> = EMBEDDED_FILES

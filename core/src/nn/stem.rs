@@ -1,19 +1,17 @@
 //! A network's first layer — an optional scalar affine of the one-channel input (`Sub`, `Mul`,
 //! `Add`, `Div` by constants), a 3×3, stride-2, zero-padded convolution and a ReLU — computed here
 //! instead of by tract: [`StemLayer`] finds the layer in the ONNX graph, takes its weights from it
-//! and cuts it out, and [`Stem`] computes it before tract runs the rest (`landmarks::net`, and
-//! `detect`). Where [`crate::nn::conv`] runs ([`crate::nn::conv::available`]: aarch64, x86-64 with AVX2 +
+//! and cuts it out, and [`Stem`] computes it before the rest runs (`nn::net`, `nn::fcn`). Where [`crate::nn::conv`] runs ([`crate::nn::conv::available`]: aarch64, x86-64 with AVX2 +
 //! FMA), the layer goes through its kernel, and so do the plain 3×3 layers that follow it, cut
 //! from the graph the same way: what comes after them then runs in `landmarks::dense` (M3's fully
-//! connected heads) and, for the detector, in `detect::tail` where the layers multiply in the
+//! connected heads) and, for the detector, in `nn::tail` where the layers multiply in the
 //! 128-bit form (aarch64, x86-64's portable path), else in tract. The ONNX files stay whole: training, the Python references and `M3_IO.md` see the
 //! same networks, and the tests hold the outputs to tract's run of the whole graph.
 //!
 //! Why: tract lowers every convolution to a matrix product over an im2col matrix; with one input
-//! channel that matrix has nine rows and gathering it, not the arithmetic, is the cost — 36 µs of M3
-//! level 1's 155 µs for 1.6 % of its multiply-adds (`core/examples/profile_net.rs`), and its explicit
-//! `Pad` passes (of the input, and of the first layer's output for the second layer: 368 µs of the
-//! detector's 2.66 ms at 267×200) cost more. In the portable path the input rows are split into
+//! channel that matrix has nine rows and gathering it, not the arithmetic, is the cost
+//! (`core/examples/profile_net.rs` shows it per layer), and its explicit `Pad` passes (of the
+//! input, and of the first layer's output for the second layer) cost more. In the portable path the input rows are split into
 //! even and odd columns so every tap is a contiguous run, each output block keeps its nine taps in
 //! registers for all channels, and the output is written straight into the second layer's padded
 //! input (its border stays zero), so tract's second convolution pads nothing.
@@ -319,8 +317,7 @@ fn first_lanes(
 const LANES: usize = 8;
 
 /// Channels computed together: independent sums the CPU overlaps, where one channel's nine
-/// dependent additions serialised (`m3_per_face` 626 / 615 → 618 / 599 µs in alternating runs;
-/// `detect_640x480` the same within its noise; Intel Xeon).
+/// dependent additions serialise.
 const GROUP: usize = 4;
 
 /// `G` channels of one output block: each channel's bias plus its nine taps in kernel order (so

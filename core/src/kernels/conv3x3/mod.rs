@@ -32,6 +32,10 @@
 mod arm64;
 #[cfg(target_arch = "x86_64")]
 mod x86_64;
+#[cfg(target_arch = "x86_64")]
+mod avx;
+#[cfg(target_arch = "x86_64")]
+pub(crate) use avx::nonnegative_max;
 
 /// Output channels of a block: four vectors of four lanes.
 pub(crate) const BLOCK: usize = 16;
