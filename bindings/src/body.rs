@@ -255,7 +255,8 @@ pub struct BodyTrackerConfig {
     /// 2D joints. 5 suits keypoint detectors and annotations; exact synthetic joints want ≤ 1.
     pub prior_weight_px: f64,
     /// Refine each frame in the full 21-joint, 54-DoF model (clavicles, pelvis girdle, three-joint
-    /// spine free): about 1 mm more accurate on HumanEva-I, 2.4 times the pose-only time.
+    /// spine free): a little more accurate on HumanEva-I, for a longer pose fit (BENCHMARKS.md,
+    /// "Body (CLFBA)").
     pub full_model: bool,
 }
 
@@ -372,8 +373,8 @@ impl BodyTracker {
     /// Fits one frame's observed joints (at least the torso: pelvis or both hips, thorax or both
     /// shoulders). On the `dimension_frames`-th frame the dimensions are estimated over the frames
     /// so far (pose + dimensions, thesis Alg. 10) and held afterwards. Each frame is refined from
-    /// the previous frame's pose, and fitted from scratch as well when that fit is poor (HumanEva-I:
-    /// 68.3 mm after Procrustes vs 79.8 with every frame from scratch).
+    /// the previous frame's pose, and fitted from scratch as well when that fit is poor (more
+    /// accurate on HumanEva-I than every frame from scratch; BENCHMARKS.md, "Body (CLFBA)").
     ///
     /// # Errors
     /// `InvalidConfig` for a joint given twice, non-finite positions, or too few joints to place

@@ -37,7 +37,8 @@ pub struct TrackerConfig {
     pub camera: Option<CameraIntrinsics>,
     /// Smallest face the detector looks for, pixels of the upright image (16..=4096). Default 24;
     /// 16 with `min_detection_score` 0.25 is the small-faces operating point (faces down to ~17 px,
-    /// about twice the detection time; `core/models/MODEL_CARD.md`).
+    /// more false positives and a longer detection; `core/models/MODEL_CARD.md`, "Face detector";
+    /// BENCHMARKS.md, "Face detector").
     pub min_face_size_px: u32,
     /// Detector candidates scoring below this (0..=1) are not checked as faces. Default 0.4;
     /// 0.25 at the small-faces operating point.
@@ -63,10 +64,11 @@ pub struct TrackerConfig {
     pub gaze_filter: bool,
     /// Frames over which a new track's shape units are estimated before being held (1..=1000).
     pub shape_frames: u32,
-    /// Landmarks in M3's mirror-average mode: more accurate on still images, slower (the
-    /// landmark nets but the eyes' run twice; `core/models/MODEL_CARD.md`). `None` (the
-    /// default): on for stills (`process_image`, image running mode), off in video mode, where it
-    /// gains nothing.
+    /// Landmarks in M3's mirror-average mode: more accurate on still images, slower (five nets —
+    /// level 1 and the brows, mouth, face and nose zones — also run on their mirrored input;
+    /// `core/models/MODEL_CARD.md`). `None` (the default): on for stills (`process_image`, image
+    /// running mode), off in video mode, where it would run on every frame (the mode in the
+    /// tracker: BENCHMARKS.md, "Tracking").
     pub mirror_average: Option<bool>,
     /// The ultra-light mode: the learning-free gradient landmark detector (no landmark network
     /// loaded; 32 points, 27 of them in `landmarks`, the others placed by the mean face with
@@ -712,7 +714,8 @@ pub struct FrameStageTimes {
 /// What `run_camera_benchmark` measured (the JSON of `monotrack bench --json`).
 #[derive(Debug, Clone, PartialEq, uniffi::Record)]
 pub struct CameraBenchReport {
-    /// Which kernel forms ran: `native` or `portable` (`MONOTRACK_KERNELS=portable`).
+    /// Which kernel forms ran: `native` or `portable` (the process's kernel choice,
+    /// `monotrack_core::kernels::choice`).
     pub path: String,
     /// The CPU, in words.
     pub cpu: String,

@@ -1,5 +1,6 @@
 //! Times ONNX networks the way `core::landmarks` runs them (tract, fixed input shapes,
-//! `into_optimized`, one thread): the harness behind MODEL_CARD.md's "Architecture for tract" table.
+//! `into_optimized`, one thread): the harness behind `core/models/train/RESEARCH_LOG.md`'s "Trunk
+//! design (tract time per net)".
 //!
 //! ```text
 //! python3 core/models/train/export_trunks.py /tmp/trunks level1=16s-32s-48s-48c-64s face=...

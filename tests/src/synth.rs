@@ -527,7 +527,7 @@ fn similarity(seg: &Segment, t: f32) -> ([f32; 2], f32, f32) {
         // where the detector first meets the face) and the still part joins the motion without a
         // jump; and within ±amplitude, as `SeqConfig` states and the face's placement margin
         // assumes. (A wave a·(sin(ωt + φ) − sin φ) reached twice its amplitude: a "±35°" roll
-        // turned the head by up to 76°.) The phase only picks the direction.
+        // turned the head by up to about twice that.) The phase only picks the direction.
         let dir = if ph < std::f32::consts::PI { 1.0 } else { -1.0 };
         dir * a * (om * t).sin()
     };

@@ -9,7 +9,8 @@
 //!
 //! Run: `cargo test -p monotrack-tests --test body_h36m -- --nocapture`; `BODY_PRIOR=shipped` starts
 //! from the shipped (in-sample) table instead, `BODY_PRIOR_WEIGHT=W` sets the dimension search's
-//! proportion-prior weight, `POSE_PRIOR_WEIGHT=W` the pose prior's (BENCHMARKS.md's body experiments).
+//! proportion-prior weight, `POSE_PRIOR_WEIGHT=W` the pose prior's (the experiments of
+//! `core/models/train/RESEARCH_LOG.md`, "Body defaults").
 
 mod body_common;
 
@@ -93,7 +94,7 @@ fn human36m_synthetic_projections() {
     let mut scale_err = vec![];
     let mut len_abs = 0.0;
     let mut len_n = 0.0;
-    // Every fifth action keeps the test under a minute; the camera rotates through the four.
+    // Every fifth action keeps the test short; the camera rotates through the four.
     for (si, seq) in h.sequences.iter().enumerate().step_by(5) {
         let cams = &h.cameras[&seq.subject];
         let fitter = &fitters[&seq.subject];
@@ -198,10 +199,11 @@ fn human36m_synthetic_projections() {
         "estimated body-part lengths vs truth: mean |error| {:.1} mm",
         len_abs / len_n
     );
-    // Regression bounds around what was measured (BENCHMARKS.md): the absolute error is dominated by depth
-    // (the floor fixes it only through the assumed foot contact, wrong when sitting or mid-step).
-    // Measured with the leave-one-subject-out pose prior: 135 mm absolute, 62.9 / 67.0 mm after
-    // Procrustes (true / estimated dimensions); the full model 61.7 / 66.5 mm.
+    // Regression bounds around what was measured with the leave-one-subject-out pose prior, the
+    // reduced and the full model (BENCHMARKS.md, "Body (CLFBA)"; how the defaults were chosen:
+    // `core/models/train/RESEARCH_LOG.md`, "Body defaults"): the absolute error is dominated by
+    // depth (the floor fixes it only through the assumed foot contact, wrong when sitting or
+    // mid-step).
     assert!(
         mt < 200.0,
         "mean joint error {mt:.1} mm with true dimensions"

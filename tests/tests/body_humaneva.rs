@@ -135,15 +135,16 @@ fn humaneva_train_with_ground_truth_2d() {
         he.sequences.len()
     );
     r.print();
-    // The thesis' CLFBA reaches 5.96 px and 110.2 mm.
+    // The bound is below the thesis' CLFBA (BENCHMARKS.md, "Body (CLFBA)", its "thesis" column).
     assert!(r.reproj < 8.0, "reprojection {:.2} px", r.reproj);
-    // Regression bounds around what was measured, frames tracked (`fit_tracked`): 68.3 mm, 60.2
-    // with the mocap dimensions (BENCHMARKS.md; every frame from scratch: 79.8 and 71.2; the target
-    // is 80 mm; the isotropic pose prior reaches 102.0 from scratch).
+    // Regression bounds around what was measured, frames tracked (`fit_tracked`), with estimated
+    // and with the mocap dimensions (BENCHMARKS.md, "Body (CLFBA)", which also has every frame
+    // from scratch; the target is 80 mm; the isotropic pose prior:
+    // `core/models/train/RESEARCH_LOG.md`, "Body defaults").
     assert!(r.pa < 71.0, "PA error {:.1} mm", r.pa);
     assert!(r.pa_true.unwrap() < 63.0, "PA error with mocap dimensions");
 
-    // The same refined in the full 54-DoF model (67.9 mm measured; mocap dimensions 58.6).
+    // The same refined in the full 54-DoF model (BENCHMARKS.md, "Body (CLFBA)").
     let full = run(&BodyFitter::new(monotrack_core::body::BodyFitConfig {
         full_model: true,
         ..Default::default()
@@ -168,7 +169,7 @@ fn check_calibration(he: &HumanEva, refs: &BTreeMap<(String, usize), (BodyCamera
             k.cx,
             k.cy
         );
-        // A pinhole leaves HumanEva's lens distortion unmodelled: up to about 3 px.
+        // A pinhole leaves HumanEva's lens distortion unmodelled: a few pixels.
         assert!(*rms < 5.0, "reference camera {s} C{} fits badly", c + 1);
     }
 
@@ -268,8 +269,8 @@ fn check_calibration(he: &HumanEva, refs: &BTreeMap<(String, usize), (BodyCamera
     }
 }
 
-/// The dimension-search experiments behind BENCHMARKS.md's body table (not run in CI: each row is a full pass
-/// over HumanEva Train). Run:
+/// The dimension-search experiments behind `core/models/train/RESEARCH_LOG.md`'s "Body defaults"
+/// (not run in CI: each row is a full pass over HumanEva Train). Run:
 /// `cargo test --release -p monotrack-tests --test body_humaneva -- --ignored --nocapture`.
 #[test]
 #[ignore = "experiment table, about a minute per row in release"]
@@ -590,11 +591,12 @@ fn evaluate(
     }
 }
 
-/// The pose-prior experiments behind BENCHMARKS.md's body table (not run in CI). With the mocap's own
-/// dimensions, for each prior: the 2D fit, the model fitted to the mocap joints themselves (what
-/// the 27-DoF model can represent) and the 2D fit started at that pose (what the objective itself
-/// costs, with no wrong depth branch); then full passes (leave-one-out dimensions) over prior
-/// weights. The learnt prior here is the shipped one (Human3.6M: no HumanEva data in it). Run:
+/// The pose-prior experiments behind `core/models/train/RESEARCH_LOG.md`'s "Body defaults" (not
+/// run in CI). With the mocap's own dimensions, for each prior: the 2D fit, the model fitted to
+/// the mocap joints themselves (what the 27-DoF model can represent) and the 2D fit started at
+/// that pose (what the objective itself costs, with no wrong depth branch); then full passes
+/// (leave-one-out dimensions) over prior weights. The learnt prior here is the shipped one
+/// (Human3.6M: no HumanEva data in it). Run:
 /// `cargo test --release -p monotrack-tests --test body_humaneva -- --ignored pose_prior --nocapture`
 /// (`W=1,3,5` sets the weights).
 #[test]

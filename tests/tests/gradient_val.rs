@@ -10,14 +10,15 @@ use monotrack_core::image::Rect;
 use monotrack_core::landmarks::{GRADIENT_TO_68, GradientDetector, GradientPoints};
 use monotrack_tests::synth::load_validation_faces;
 
-/// Bound on the detector's mean NME as a fraction of the mean face's: measured 0.75 here (13.1 %
-/// against 17.4 %, 106 faces); a detector whose points stay near the mean face, as with the
-/// mean face's own geometry in place of the eyes', measures 1.00.
+/// Bound on the detector's mean NME as a fraction of the mean face's, with margin above what the
+/// shipped detector gives here; a detector whose points stay near the mean face, as with the mean
+/// face's own geometry in place of the eyes', sits at 1.
 const MAX_NME_RATIO: f64 = 0.85;
-/// Fewest faces, as a fraction, where the detector must beat the mean face: measured 0.90.
+/// Fewest faces, as a fraction, where the detector must beat the mean face (with margin below
+/// what the shipped detector gives).
 const MIN_BETTER: f64 = 0.75;
-/// Bound on the median eye-centre error, fraction of the outer eye-corner distance: measured
-/// 0.046 (the mean face in the box: 0.14).
+/// Bound on the median eye-centre error, fraction of the outer eye-corner distance: above what
+/// the shipped detector gives, far below the mean face in the box.
 const MAX_MEDIAN_EYE_ERROR: f64 = 0.07;
 
 fn dist(a: [f32; 2], b: [f32; 2]) -> f64 {

@@ -9,8 +9,8 @@
 //! Recorded on x86-64 with `MONOTRACK_KERNELS=portable MONOTRACK_RECORD_GOLDEN=1 cargo test -p
 //! monotrack-tests --test m3_golden` (again whenever the models are retrained).
 
-use monotrack_core::kernels::{KernelPath, kernel_path};
 use monotrack_core::image::{Frame, FrameDesc, GrayImage, PixelFormat, Rect};
+use monotrack_core::kernels::{KernelPath, kernel_path};
 use monotrack_core::landmarks::{FaceLandmarks, M3};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -24,9 +24,9 @@ const GAZE_TOL: f64 = 0.02;
 /// How far the portable path on another CPU may be from the recorded x86-64 portable outputs. M3
 /// runs there in the library's own kernels, whose every form computes each value as the same chain
 /// of fused multiply-adds (`core/src/kernels/conv3x3`), so the values are the same; what is left
-/// is the record's decimal rounding and the platform's maths library. Measured under qemu (aarch64
-/// against the record of an Intel Xeon with AVX-512): points 3.2e-14 px, probabilities and gaze
-/// 1.1e-16.
+/// is the record's decimal rounding and the platform's maths library (the differences under qemu,
+/// aarch64 against the record of an Intel Xeon: BENCHMARKS.md, "Tests on the phone's instruction
+/// set").
 const CROSS_ISA_POINT_TOL_PX: f64 = 1e-5;
 /// The probability and gaze counterpart of [`CROSS_ISA_POINT_TOL_PX`].
 const CROSS_ISA_VALUE_TOL: f64 = 1e-6;
@@ -306,7 +306,7 @@ fn level1_turned_reads_a_tilted_face_as_an_upright_one() {
             turned_conf > 0.9,
             "{deg}°: turned face confidence {turned_conf}"
         );
-        // Upright, on the untouched image: 0.029.
+        // A little above what level 1 gives upright on the untouched image.
         assert!(turned_nme < 0.04, "{deg}°: turned level-1 NME {turned_nme}");
         assert!(
             turned_nme < upright,

@@ -14,7 +14,7 @@ use monotrack_tests::synth::{SeqConfig, load_validation_faces};
 use monotrack_tests::trackeval::{ClipStats, run_clip, synthetic_clip, table_header, table_row};
 
 /// A frame is correct when its landmarks' NME (inter-ocular) is below this: well above M3's mean
-/// validation NME (`core/models/MODEL_CARD.md`), far below a wrong or missed face (> 30 %). The test
+/// validation NME (`core/models/MODEL_CARD.md`), far below a wrong or missed face's. The test
 /// then bounds: re-detecting every frame is correct on more than 80 % of frames, tracking within 2
 /// frames of it, the detector runs only at the start, the cuts and a few more times, and the flow
 /// filter lowers still-segment jitter.
@@ -29,8 +29,8 @@ fn run(clip: &[monotrack_tests::trackeval::ClipFrame], cfg: TrackerConfig) -> Cl
 #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn shipped_models_track_synthetic_sequences() {
     let data = monotrack_tests::shared_data();
-    // Under emulation (tests/aarch64.sh sets MONOTRACK_EMULATED: qemu runs the networks about a
-    // thousand times slower than the host) a shorter clip, without the filter-off pass: the flow
+    // Under emulation (tests/aarch64.sh sets MONOTRACK_EMULATED: qemu runs the networks far
+    // slower than the host) a shorter clip, without the filter-off pass: the flow
     // filter's kernels are checked against their portable forms by the unit tests there.
     let emulated = cfg!(emulated);
     let faces = load_validation_faces(&data, if emulated { 6 } else { 16 }, 100.0).unwrap();
@@ -140,8 +140,8 @@ fn tracked_frames_reuse_the_level1_check_exactly() {
 /// cuts and every `verify_interval` frames (and a few more times), and its mean NME over all 68
 /// points stays under 50 % (41 of them are placed by the gradient detector's geometry alone).
 /// Against the same mode without the periodic check, which re-anchors the region on the
-/// detector's box and ends tracks that drifted off the face: measured box IoU 0.84 against 0.71
-/// and 94 correct frames of 240 against 34.
+/// detector's box and ends tracks that drifted off the face: the check gives the higher box IoU
+/// and more correct frames.
 #[test]
 #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn ultra_light_mode_tracks_without_landmark_networks() {
@@ -204,8 +204,8 @@ fn ultra_light_mode_tracks_without_landmark_networks() {
 /// turned past what the upright detector finds (about 25°); the tracker then searches a window
 /// around the face's last place turned by its last roll and ±30° (`FaceTracker`'s lost-face
 /// search), and its level-1 points found upright there place level 2's zones. While tracked, a face
-/// turned 15–75° is checked and read by level 1 on a crop turned by its last roll. Measured (AMD
-/// EPYC Zen 4, native): a face on 360 of 360 frames and 360 correct.
+/// turned 15–75° is checked and read by level 1 on a crop turned by its last roll (figures:
+/// BENCHMARKS.md, "Tracking", tilted heads).
 #[test]
 #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 #[cfg_attr(
@@ -227,9 +227,8 @@ fn a_lost_tilted_face_is_found_again_turned() {
 
 /// The same fast, tilted heads with a phone camera's degradations: scale ±35 %, brightness
 /// swinging ±30 % and fast frames box-blurred by their motion (`track_eval --roll 35 --scale 0.35
-/// --brightness 0.3 --blur --translation 100 --period 20`). Measured (AMD EPYC Zen 4, native and
-/// portable path): a face on 360 of 360 frames and 360 correct; over 30 segments (1,800 frames)
-/// 1,799 and 1,583 (BENCHMARKS.md).
+/// --brightness 0.3 --blur --translation 100 --period 20`; figures for 360 and 1,800 frames, native
+/// and portable path: BENCHMARKS.md, "Tracking", blur and changing light).
 #[test]
 #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 #[cfg_attr(
@@ -243,10 +242,10 @@ fn a_fast_tilted_head_stays_tracked_through_blur_and_light() {
 
 /// The same over 30 segments (1,800 frames): a face lost on a blurred frame is looked for where
 /// it was, and a detection there and of its size is accepted at the re-detection bar
-/// (`TrackerConfig::min_redetection_confidence`, 0.8) rather than a new face's 0.95. Measured
-/// (AMD EPYC Zen 4, native): a face on 1,799 of the 1,800 frames and 1,583 correct; with the new
-/// face's bar throughout (and the earlier nose zone), 9 frames without a face while it is wholly
-/// in the frame (one small face, blurred) and 1,592 correct.
+/// (`TrackerConfig::min_redetection_confidence`, 0.8) rather than a new face's 0.95: with the new
+/// face's bar throughout, one small, blurred face went unfound for frames while it was wholly in
+/// the frame (figures: BENCHMARKS.md, "Tracking"; before the re-detection bar:
+/// `core/models/train/RESEARCH_LOG.md`, "Tracking").
 #[test]
 #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 #[cfg_attr(
@@ -269,11 +268,11 @@ fn a_blurred_face_is_found_again_where_it_was_lost() {
 }
 
 /// Changing light (brightness ±30 % over 90 frames, a phone's exposure) on the default clip: the
-/// flow filter must keep the landmarks as accurate as no filter and steadier. Measured (AMD EPYC
-/// Zen 4, native): the default 3.28 % and 0.163 px still jitter, no filter 3.29 % and 0.225 px.
-/// With plain Lucas–Kanade (`LkConfig::offset_invariant` off) the default pull is level with no
-/// filter in accuracy and no steadier (3.34 %, 0.229 px) and the thesis' filter (`flow_pull` 0)
-/// worse on both (3.79 %, 0.599 px): the exposure change reads as motion.
+/// flow filter must keep the landmarks as accurate as no filter and steadier. With plain
+/// Lucas–Kanade (`LkConfig::offset_invariant` off) the default pull is level with no filter in
+/// accuracy and no steadier, and the thesis' filter (`flow_pull` 0) worse on both: the exposure
+/// change reads as motion (figures: BENCHMARKS.md, "Tracking", the flow filter under changing
+/// light).
 #[test]
 #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 #[cfg_attr(
@@ -320,11 +319,11 @@ fn the_flow_filter_holds_under_changing_light() {
 /// segment), with no track to have lost: the whole frame is searched turned, and the faces found
 /// are tracked with level 1 reading them turned by their roll. After each cut the last face's
 /// loss is still being searched for around its place; from its 4th frame every other frame
-/// searches the whole frame turned too. Measured on this clip (AMD EPYC Zen 4, native and
-/// portable path): a face on 349 of 360 frames and 349 correct (each segment's tilt is drawn
-/// within ±8.6° of 40°, so up to 54°); with the window alone for the 30 frames of a loss, 238 and
-/// 235. The clip moves by a few frames with the last bits of the arithmetic and by tens with a
-/// retrained net, hence the margin.
+/// searches the whole frame turned too; with the window alone for the 30 frames of a loss, far
+/// fewer frames had a face (each segment's tilt is drawn within ±8.6° of 40°, so up to 54°;
+/// figures: BENCHMARKS.md, "Tracking", tilted heads; `core/models/train/RESEARCH_LOG.md`,
+/// "Tracking"). The clip moves by a few frames with the last bits of the arithmetic and by tens
+/// with a retrained net, hence the margin.
 #[test]
 #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 #[cfg_attr(
@@ -337,9 +336,9 @@ fn a_head_tilted_from_the_start_is_found_turned() {
 }
 
 /// A head held at 60° (each segment's tilt drawn within ±8.6° of it): past what the ±30° turns
-/// of the whole frame reach, so the whole-frame search turns by ±60° too. Measured (AMD EPYC Zen
-/// 4): a face on 331 of 360 frames and 310 correct natively, 332 and 309 on the portable path
-/// (326 correct with the earlier nose zone); with the ±30° turns alone 159 correct.
+/// of the whole frame reach, so the whole-frame search turns by ±60° too; with the ±30° turns
+/// alone far fewer frames were correct (figures: BENCHMARKS.md, "Tracking", tilted heads;
+/// `core/models/train/RESEARCH_LOG.md`, "Tracking").
 #[test]
 #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 #[cfg_attr(

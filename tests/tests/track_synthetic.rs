@@ -19,7 +19,7 @@ use std::rc::Rc;
 
 /// A frame is correct when its landmarks' NME (inter-ocular, CONTRACT) is below this: 5 % is the
 /// usual 300-W "success" level, well above the oracle's 1 px noise (≈ 1.5 % on these faces) and
-/// far below a wrong face (> 30 %).
+/// far below a wrong face's.
 const CORRECT_NME: f32 = 0.05;
 
 /// Oracle landmark noise, pixels per coordinate: about M3-level accuracy on a 150 px face.

@@ -87,9 +87,10 @@ impl Default for BodyFitConfig {
 /// Default of [`BodyFitConfig::prior_weight_px`].
 pub const DEFAULT_PRIOR_WEIGHT_PX: f64 = 5.0;
 
-/// Default of [`BodyFitConfig::refit_cost_px2`]. HumanEva-I Train (README): 10 / 20 / 40 / 80 / 160
-/// → 68.6 / 68.6 / 68.3 / 70.9 / 73.5 mm after Procrustes; at 40, 174 of the 1,362 frames that
-/// have a previous one (13 %) are also fitted from scratch.
+/// Default of [`BodyFitConfig::refit_cost_px2`], chosen on HumanEva-I Train: lower thresholds
+/// refit more frames from scratch for no gain after Procrustes, higher ones lose accuracy; at this
+/// one a minority of the frames that have a previous one are also fitted from scratch
+/// (`models/train/RESEARCH_LOG.md`, "Body defaults").
 pub const DEFAULT_REFIT_COST_PX2: f64 = 40.0;
 
 /// One frame's fit.
@@ -339,7 +340,8 @@ impl BodyFitter {
     /// [`BodyFit::pose`]) when there is one, and also from scratch ([`BodyFitter::fit`]) when that
     /// fit's objective exceeds [`BodyFitConfig::refit_cost_px2`] — the lower objective wins. The
     /// previous pose keeps each limb on its depth branch from frame to frame, which a single view
-    /// cannot tell (HumanEva-I Train: 79.8 → 68.3 mm after Procrustes, README); the fallback
+    /// cannot tell (HumanEva-I Train, frames tracked against every frame from scratch:
+    /// BENCHMARKS.md, "Body (CLFBA)"); the fallback
     /// recovers from a fast move or a wrong branch.
     ///
     /// # Errors
@@ -686,8 +688,8 @@ fn limb_spec(left: bool, arm: bool, skel: &Skeleton) -> (usize, Joint, Joint, Jo
 /// whose viewing ray meets the floor (at ankle height) closest to its hip, relative to the leg's
 /// length. A foot in the air meets the floor beyond its true place, farther than the leg reaches;
 /// the initial pose's lower ankle, used before, depends on the IK's depth guesses and picked the
-/// lifted foot more often (HumanEva Train Procrustes 112.2 → 106.1 mm, with the true dimensions
-/// 88.1 → 84.4 mm; Human3.6M synthetic 85.8 → 83.8 mm).
+/// lifted foot more often (a larger Procrustes error on HumanEva Train, with estimated and with
+/// the true dimensions, and on Human3.6M synthetic).
 fn contact_ankle(
     x: &[Vector3<f64>; N_JOINTS],
     obs: &Joints2d,
@@ -764,9 +766,9 @@ pub struct DimensionEstimator {
     /// Weight (px² per joint) of the squared log-ratio of each length to its scaled starting value:
     /// lengths longer than needed always fit, so without a prior they drift upwards. The starting
     /// value's proportions should be the convention's ([`Dimensions::mean`]). Measured with
-    /// leave-one-subject-out proportions (README), PA error for 0 / 50 / 100 / 200 / 400 / 1000:
-    /// HumanEva 113.2 / 103.1 / 102.8 / 102.0 / 102.2 / 102.2 mm, Human3.6M synthetic
-    /// 103.6 / 91.4 / 88.3 / 89.7 / 90.2 / 90.1 mm; flat from 100 up, so 200 stays.
+    /// leave-one-subject-out proportions on HumanEva and Human3.6M synthetic: without it the PA
+    /// error is far larger, and from 100 up it is flat, so 200 stays
+    /// (`models/train/RESEARCH_LOG.md`, "Body defaults").
     pub proportion_prior_px2: f64,
     /// Refine the separate lengths (pose + dimensions) or stop after the scale (pose + scale).
     pub separate_dimensions: bool,
@@ -774,7 +776,7 @@ pub struct DimensionEstimator {
 
 /// Alg. 10's cost threshold, px² per joint. Not applied by default (the searches' `stop_value`s are
 /// −∞): on exact synthetic 2D the objective is flat well below it on the too-large side (a body 8 %
-/// too large still fits at 0.7 px², measured in this module's tests), so stopping there returns
+/// too large still fits far below it, in this module's tests), so stopping there returns
 /// whichever scale DIRECT-L happens to try first. The 0.01-change and iteration criteria stop the
 /// searches instead.
 pub const DIMENSION_STOP_PX2: f64 = 5.0;
@@ -789,8 +791,8 @@ impl Default for DimensionEstimator {
                 improvement_tolerance: 0.01,
                 patience: 3,
                 // Alg. 10's "0.01 change" read on the scale: stop once the best interval is 1 % of
-                // the scale range (±0.3 % of scale). The finer 1e-3 ran to the evaluation cap (61
-                // evaluations vs 29) for 0.7 mm of HumanEva Procrustes error (111.5 vs 112.2 mm).
+                // the scale range (±0.3 % of scale). The finer 1e-3 ran to the evaluation cap for
+                // a negligible gain in HumanEva Procrustes error.
                 size_tolerance: 1e-2,
                 epsilon: 1e-4,
             },
@@ -1113,9 +1115,10 @@ mod tests {
     fn exact_projections_of_the_model_are_fitted_to_millimetres() {
         let (skel, cam, _, x, obs) = exact_scene();
         // The prior weight is the 2D noise the fit expects (px per standard deviation of the
-        // prior): the default, made for real keypoints, trades 1.5 px of reprojection for a pose
-        // nearer Human3.6M's mean, ~0.1 m off in the world frame (the same basin: the joint angles
-        // stay within 0.4 rad); a weight for exact input recovers the pose to millimetres.
+        // prior): the default, made for real keypoints, trades some reprojection for a pose
+        // nearer Human3.6M's mean, off in the world frame by up to the bound below (the same
+        // basin: the joint angles stay close); a weight for exact input recovers the pose to
+        // millimetres.
         for (weight, max_px, max_mm) in [(DEFAULT_PRIOR_WEIGHT_PX, 2.0, 120.0), (0.3, 0.5, 30.0)] {
             let fitter = BodyFitter::new(BodyFitConfig {
                 prior_weight_px: weight,

@@ -4,9 +4,10 @@
 //!
 //! Why: from one view the 2D joints leave directions almost free (a limb turning towards the
 //! camera, the torso's lean in depth). A single-frame fit started at the *true* pose drifts along
-//! them to fit the 2D noise (HumanEva-I Train, mocap dimensions: the model fitted to the mocap 3D
-//! is 8.2 mm off it, the 2D fit started there 58.4 mm with the isotropic prior, 53.5 mm with this
-//! one; `humaneva_pose_prior_experiments`). An isotropic pull towards one neutral pose decides those
+//! them to fit the 2D noise (HumanEva-I Train, mocap dimensions: the model fits the mocap 3D
+//! closely, while the 2D fit started there ends far from it, less far with this prior than with
+//! the isotropic one; `humaneva_pose_prior_experiments`, `models/train/RESEARCH_LOG.md`, "Body
+//! defaults"). An isotropic pull towards one neutral pose decides those
 //! directions arbitrarily; the Gaussian decides them the way people move (its covariance knows,
 //! for instance, that a flexed knee comes with a flexed hip).
 //!

@@ -172,7 +172,7 @@ impl Convention {
     /// HumanEva's shoulder points sit 1.19 upper arms apart (Human3.6M 0.98), its hip points 93 mm
     /// apart (271), its "head" 319 mm above the thorax (178), and its legs are 1.43 times its arms
     /// (Human3.6M 1.69). With Human3.6M's proportions as the prior for HumanEva, the estimated
-    /// shins came out 51–63 mm too long and the shoulders 63 mm too narrow (README).
+    /// shins came out far too long and the shoulders too narrow.
     ///
     /// HumanEva-I: Train subjects S1–S3 (every 10th mocap frame of every chunk; `body_humaneva`
     /// recomputes and checks this table, and evaluates with leave-one-subject-out tables instead,

@@ -70,10 +70,11 @@ pub struct DetectorConfig {
     pub nms_iou: f32,
     /// Smallest face to find (max side of the tight landmark box, image pixels). Sets the
     /// downscale: the frame is shrunk by `NET_MIN_FACE_PX / min_face_px` (never enlarged). Default
-    /// 24 px: a 640×480 frame runs at 267×200 plus the 128×96 second pass, within the 5 ms budget
-    /// (16 px, 400×300, is not); faces within ~1.5× of the minimum (10–16 network pixels) are the
-    /// ones the network misses most, and 19 of the 128 faces68 validation faces are 17–39 px
-    /// (`models/MODEL_CARD.md`).
+    /// 24 px: a 640×480 frame runs at 267×200 plus the 128×96 second pass, well within the
+    /// detector's time budget (16 px runs at 400×300; BENCHMARKS.md, "Face detector"); faces within
+    /// ~1.5× of the minimum (10–16 network pixels) are the ones the network misses most, and 19 of
+    /// the 128 faces68 validation faces are 17–39 px (`models/train/RESEARCH_LOG.md`, "Face
+    /// detector").
     pub min_face_px: f32,
     /// At most this many detections are returned (best first).
     pub max_faces: usize,
@@ -272,11 +273,11 @@ impl FaceDetector {
 
     /// Face probability of one window: the network run on a small patch (64×64) around `rect`
     /// scaled so the face has the size its stride-16 head knows best, reading the heatmap at the
-    /// patch centre. Cheap (one small fixed-size plan). Measured as a tracked-window validator it
-    /// is far weaker than M3 level 1's face probability, which the tracker uses: on the faces68
-    /// validation split (`models/train/detector/eval_window.py`, 128 face and 1,312 shifted or
-    /// background windows) AUC 0.929 against 0.999, and at 0.9 it passes 84 % of the faces and
-    /// 13 % of the other windows (level 1: 100 % and 0.2 %). No threshold is recommended for it.
+    /// patch centre. Cheap (one small fixed-size plan). As a tracked-window validator it is far
+    /// weaker than M3 level 1's face probability, which the tracker uses: at any threshold it
+    /// passes fewer faces and more shifted or background windows on the faces68 validation split
+    /// (`models/train/detector/eval_window.py`; `models/MODEL_CARD.md`, "Face check"). No
+    /// threshold is recommended for it.
     ///
     /// # Errors
     /// [`Error::InvalidFrame`] for an empty image, [`Error::InvalidInput`] for a non-finite or empty
@@ -299,7 +300,8 @@ impl FaceDetector {
         self.resampler.xs.build(w, cx - half, ratio, n);
         self.resampler.ys.build(h, cy - half, ratio, n);
         let resampler = &mut self.resampler;
-        self.net.run(n, n, |buf| resampler.run(image, buf, n, n, n))?;
+        self.net
+            .run(n, n, |buf| resampler.run(image, buf, n, n, n))?;
         // Stride-16 head: the patch centre (32, 32) lies between cells 1 and 2 on each axis.
         let (data, gh, gw) = self.net.output(self.window_head, HEAD_CHANNELS)?;
         if gh < 3 || gw < 3 {

@@ -377,20 +377,7 @@ impl Msbp {
             Some(f) => {
                 space.normalise(&f.pose.translation, &angles_from_rotation(&f.pose.rotation))
             }
-            None => {
-                let t0 = initial_translation(&g, landmarks, &w, camera, &cfg);
-                let mut best: Option<(f64, SVector<f64, 6>)> = None;
-                for &yaw in &cfg.yaw_seeds_deg {
-                    let mut x = space.normalise(&t0, &Vector3::new(0.0, yaw.to_radians(), 0.0));
-                    let problem = space.problem(&g, landmarks, &w, camera);
-                    let rep = cfg.lm.minimize(&problem, &mut x);
-                    iterations += rep.iterations;
-                    if best.is_none_or(|(c, _)| rep.cost < c) {
-                        best = Some((rep.cost, x));
-                    }
-                }
-                best.map(|(_, x)| x).unwrap_or_default()
-            }
+            None => seeded_pose(&space, &g, landmarks, &w, camera, &cfg, &mut iterations),
         };
 
         let h_cam = camera;
@@ -403,55 +390,29 @@ impl Msbp {
             let r = super::pose::rotation_from_angles(&th);
             let h0 = bfgs_h0(h_cam, t.z);
 
+            let units = UnitSteps {
+                model,
+                cfg: &cfg,
+                obs: landmarks,
+                w: &w,
+                cam: camera,
+                r,
+                t,
+                h0,
+            };
             // Step 2: all shape units, shape pairs only.
             if self.fixed_shape.is_none() {
-                let mut base = [Vector3::zeros(); N_LANDMARKS];
-                model.shape_into(&[0.0; N_SHAPE], &anim, &mut base);
-                let units: [&Unit; N_SHAPE] = std::array::from_fn(|k| &model.shape_units()[k]);
-                let problem = UnitsProblem {
-                    base: &base,
-                    units,
-                    pairs: model.shape_landmarks(),
-                    obs: landmarks,
-                    w: &w,
-                    cam: camera,
-                    r,
-                    t,
-                    prior: cfg.shape_prior,
-                };
-                let mut tau = SVector::<f64, N_SHAPE>::from(shape);
-                let rep = cfg.bfgs.minimize(&problem, &mut tau, h0);
-                iterations += rep.iterations;
-                shape = tau.into();
+                iterations += units.fit_shape(&mut shape, &anim);
             }
-
             // Step 3: each animation unit in turn, its own pairs only.
-            for k in (0..N_ANIM).filter(|_| cfg.animation_units) {
-                let mut others = anim;
-                others[k] = 0.0;
-                let mut base = [Vector3::zeros(); N_LANDMARKS];
-                model.shape_into(&shape, &others, &mut base);
-                let unit = &model.animation_units()[k];
-                let problem = UnitsProblem {
-                    base: &base,
-                    units: [unit],
-                    pairs: &unit.landmarks,
-                    obs: landmarks,
-                    w: &w,
-                    cam: camera,
-                    r,
-                    t,
-                    prior: cfg.animation_prior,
-                };
-                let mut a = SVector::<f64, 1>::new(anim[k]);
-                let rep = cfg.bfgs.minimize(&problem, &mut a, h0);
-                iterations += rep.iterations;
-                anim[k] = a[0];
+            if cfg.animation_units {
+                iterations += units.fit_animation(&shape, &mut anim);
             }
             model.shape_into(&shape, &anim, &mut g);
         }
         // Final pose refinement with the final deformation, so pose and units agree. Skipped when
-        // tracking: the next frame's step 1 does it, and it would cost a third of the frame's fit.
+        // tracking: the next frame's step 1 does it, and it would add a pose solve to every
+        // tracked frame's fit.
         if init.is_none() {
             let problem = space.problem(&g, landmarks, &w, camera);
             last = cfg.lm.minimize(&problem, &mut x);
@@ -479,6 +440,99 @@ impl Msbp {
                 converged: termination.converged(),
             },
         })
+    }
+}
+
+/// The pose of a first fit (no previous frame): LM from each of the config's yaw seeds, the
+/// lowest cost kept; adds the solver's iterations to `iterations`.
+fn seeded_pose(
+    space: &PoseSpace,
+    g: &[Vector3<f64>; N_LANDMARKS],
+    obs: &[[f64; 2]; N_LANDMARKS],
+    w: &[f64; N_LANDMARKS],
+    camera: &Intrinsics,
+    cfg: &MsbpConfig,
+    iterations: &mut u32,
+) -> SVector<f64, 6> {
+    let t0 = initial_translation(g, obs, w, camera, cfg);
+    let mut best: Option<(f64, SVector<f64, 6>)> = None;
+    for &yaw in &cfg.yaw_seeds_deg {
+        let mut x = space.normalise(&t0, &Vector3::new(0.0, yaw.to_radians(), 0.0));
+        let problem = space.problem(g, obs, w, camera);
+        let rep = cfg.lm.minimize(&problem, &mut x);
+        *iterations += rep.iterations;
+        if best.is_none_or(|(c, _)| rep.cost < c) {
+            best = Some((rep.cost, x));
+        }
+    }
+    best.map(|(_, x)| x).unwrap_or_default()
+}
+
+/// Steps 2 and 3 of a round: the deformation units fitted at the round's pose.
+struct UnitSteps<'a> {
+    model: &'static FaceModel,
+    cfg: &'a MsbpConfig,
+    obs: &'a [[f64; 2]; N_LANDMARKS],
+    w: &'a [f64; N_LANDMARKS],
+    cam: &'a Intrinsics,
+    r: Matrix3<f64>,
+    t: Vector3<f64>,
+    /// BFGS's initial inverse Hessian scale at this depth.
+    h0: f64,
+}
+
+impl UnitSteps<'_> {
+    /// Step 2: all shape units together on the shape pairs; returns the solver's iterations.
+    fn fit_shape(&self, shape: &mut [f64; N_SHAPE], anim: &[f64; N_ANIM]) -> u32 {
+        let model = self.model;
+        let mut base = [Vector3::zeros(); N_LANDMARKS];
+        model.shape_into(&[0.0; N_SHAPE], anim, &mut base);
+        let units: [&Unit; N_SHAPE] = std::array::from_fn(|k| &model.shape_units()[k]);
+        let problem = UnitsProblem {
+            base: &base,
+            units,
+            pairs: model.shape_landmarks(),
+            obs: self.obs,
+            w: self.w,
+            cam: self.cam,
+            r: self.r,
+            t: self.t,
+            prior: self.cfg.shape_prior,
+        };
+        let mut tau = SVector::<f64, N_SHAPE>::from(*shape);
+        let rep = self.cfg.bfgs.minimize(&problem, &mut tau, self.h0);
+        *shape = tau.into();
+        rep.iterations
+    }
+
+    /// Step 3: each animation unit in turn on its own pairs, the others held; returns the
+    /// solver's iterations.
+    fn fit_animation(&self, shape: &[f64; N_SHAPE], anim: &mut [f64; N_ANIM]) -> u32 {
+        let model = self.model;
+        let mut iterations = 0;
+        for k in 0..N_ANIM {
+            let mut others = *anim;
+            others[k] = 0.0;
+            let mut base = [Vector3::zeros(); N_LANDMARKS];
+            model.shape_into(shape, &others, &mut base);
+            let unit = &model.animation_units()[k];
+            let problem = UnitsProblem {
+                base: &base,
+                units: [unit],
+                pairs: &unit.landmarks,
+                obs: self.obs,
+                w: self.w,
+                cam: self.cam,
+                r: self.r,
+                t: self.t,
+                prior: self.cfg.animation_prior,
+            };
+            let mut a = SVector::<f64, 1>::new(anim[k]);
+            let rep = self.cfg.bfgs.minimize(&problem, &mut a, self.h0);
+            iterations += rep.iterations;
+            anim[k] = a[0];
+        }
+        iterations
     }
 }
 

@@ -469,8 +469,8 @@ pub struct GazeConfig {
     pub filter: Option<GazeFilter>,
     /// Eye aspect ratio ([`eye_openness`]) at or below which an eye counts as closed: the eyes'
     /// confidence is 0 there, and rises to its other terms' value at [`Self::open_eye_ratio`].
-    /// Of the 1,207 faces68 faces, 4.7 % have an eye at or below 0.10 (closed: most near 0) and
-    /// 90 % have both above 0.165.
+    /// On faces68 the few faces with an eye at or below the default are closed eyes (most near
+    /// 0), and most faces have both eyes well above it.
     pub closed_eye_ratio: f64,
     /// Eye aspect ratio from which an eye counts as fully open.
     pub open_eye_ratio: f64,
@@ -482,11 +482,10 @@ pub struct GazeConfig {
 /// The thesis' correction of each eye's gaze by the head pose (eq. 6.4): the eye-in-head angles
 /// shifted by `K_x (yaw − r_x0)` and `K_y (pitch − r_y0)`, and the eye nearer the camera weighted
 /// more in the combined direction as the head turns. The default leaves M3's gaze as it is:
-/// fitted on the faces68 training split (949 faces, `core/models/train/eval_gaze.py
-/// --fit-correction`: K_x −1.01, K_y 0.68), the correction made the validation error worse
-/// (12.95° → 14.12° mean with equal eye weights, 14.26–14.49° with a dominant eye weighted
-/// 0.7–1.0; `core/models/m3/gaze_metrics.json`), as M3's eye network already sees the head's turn
-/// in its patches.
+/// fitted on the faces68 training split (`core/models/train/eval_gaze.py --fit-correction`), the
+/// correction made the validation error worse, with equal eye weights and with a dominant eye
+/// (`core/models/m3/gaze_metrics.json`; `core/models/train/RESEARCH_LOG.md`, "Gaze against an
+/// iris teacher"), as M3's eye network already sees the head's turn in its patches.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HeadCorrection {
     /// K_x: degrees of eye-in-head yaw added per degree of head yaw away from `ref_yaw_deg`.

@@ -274,8 +274,8 @@ impl<'a> Frame<'a> {
         let stride = d.row_stride;
         if o.transposes() {
             // Each source row's luma written down an upright column. (Through the plane's 8×8
-            // tiles, with the luma of eight pixels packed per word, it measured 390-400 against
-            // 310 µs for a 640×480 RGBA frame: the packing does not vectorise.)
+            // tiles, with the luma of eight pixels packed per word, it was slower for an RGBA
+            // frame: the packing does not vectorise.)
             for y in 0..h {
                 let row = &self.data[y * stride..y * stride + w * bpp];
                 for (x, px) in row.chunks_exact(bpp).enumerate() {

@@ -15,8 +15,8 @@ pub use frame::{Frame, FrameDesc, PixelFormat};
 pub fn contract_luma(r: u8, g: u8, b: u8) -> u8 {
     let v = 0.299 * f32::from(r) + 0.587 * f32::from(g) + 0.114 * f32::from(b);
     // `round` for v ≥ 0 on every one of the 2^24 inputs (unit test), without its libm call (x86-64's
-    // baseline has no rounding instruction): 29 % of `monotrack landmarks`' samples went to that
-    // call and its loop before. The saturating cast truncates, i.e. floors.
+    // baseline has no rounding instruction): that call and its loop were a large share of
+    // `monotrack landmarks`' profile before. The saturating cast truncates, i.e. floors.
     (v + 0.5) as u8
 }
 

@@ -193,8 +193,9 @@ const SETTLED_PARTS: f32 = 0.6;
 const SAME_ROLL_DEG: f32 = 3.0;
 
 /// How much more clearly (mean confidence) another start's parts must be found to replace the
-/// hint's answer. A head tilted 20–30° found from a level start leads the level answer by
-/// 0.10–0.11 on the synthetic faces; on faces68 tuning faces 0.09–0.12 change one face of 131.
+/// hint's answer. On the synthetic faces a head tilted beyond the level start's reach, found from
+/// a turned start, leads the level answer by more than this; on faces68 tuning faces margins near
+/// it change hardly any face.
 const FALLBACK_MARGIN: f32 = 0.09;
 
 /// The starting rolls tried, relative to the hint, when the hint's own start finds no pair:
@@ -465,7 +466,7 @@ impl Frame {
     /// This frame with a box-derived size made exact for its roll: the upright size whose mean
     /// face, turned by the roll, has `face` as its axis-aligned box (two fixed-point rounds: the
     /// extreme points depend a little on the aspect). The half shrink of [`Frame::of_box`]
-    /// left the box 5–10 % too large at 10° of roll, and the expected contour inside the face.
+    /// left the box too large once the face is turned, and the expected contour inside the face.
     /// A frame placed on the eyes is kept.
     fn fitted(self, face: &Rect) -> Self {
         if !self.from_box {
@@ -744,9 +745,9 @@ impl GradientDetector {
         // Each point moves from where the eyes' geometry expects it towards what its evidence
         // says, by its confidence squared: weak evidence cannot pull a point far from the
         // geometry. On real faces the parts' own evidence is weak next to the eyes' geometry:
-        // on faces68 tuning faces the geometry alone measured 12.1 % NME, the evidence alone
-        // 16.2 %, this blend 12.2 %; it is what finds the parts of faces unlike the average
-        // (the synthetic faces' wide jaw and high brows).
+        // on faces68 tuning faces the evidence alone is well behind the geometry alone, and
+        // this blend about level with it; it is what finds the parts of faces unlike the
+        // average (the synthetic faces' wide jaw and high brows).
         for (i, p) in pts.iter_mut().enumerate() {
             let prior = self.expected[i];
             // The eyes' own evidence is their centres, which the expected geometry already
@@ -790,7 +791,7 @@ impl GradientDetector {
         let (pts, conf) = (&mut out.points, &mut out.confidence);
         let mut score = 0.0;
         // Up to three rounds (a tilted face needs them; on faces68 validation three rounds and
-        // two measured within 0.4 % NME).
+        // two are about as accurate).
         for _ in 0..3 {
             // Only the rows the eye search reads: a third of the patch.
             let map = self.sample_rows(image, &frame, EYE_ROWS)?;
@@ -824,8 +825,8 @@ impl GradientDetector {
         // Where the eyes end nearly level the detector's box measures the face's place and size
         // better than two eye centres do; a tilted face's axis-aligned box does not. The roll
         // settles on frames placed on the eyes throughout: switching to the box's frame inside
-        // the loop let a 30° head settle at 11°, below the switch (on faces68 tuning faces
-        // 12.3 % NME against 12.6 %).
+        // the loop let a tilted head settle below the switch, short of its roll (and was less
+        // accurate on faces68 tuning faces).
         if !frame.from_box && frame.roll.abs() < 12f32.to_radians() {
             frame = Frame::of_box(face, frame.roll);
         }
@@ -1116,7 +1117,7 @@ impl GradientDetector {
             // The eye's centre: where the most image gradients point away from (the iris and
             // the lids' dark outline are closed curves round it), darker places preferred.
             // Settling the roll needs only a rough centre: there the darkest blob near the row
-            // found, by a centroid re-centred on itself, at a fifth of the cost.
+            // found, by a centroid re-centred on itself, at a fraction of the cost.
             let c = if precise {
                 self.gradient_centre(r, [cx, cy])
             } else {
@@ -1185,7 +1186,8 @@ impl GradientDetector {
     /// map of [`geometry::GIVEN_EYES`] from the eyes' midpoint and distance in the patch, which
     /// the roll has levelled. A yawed or nodding face moves its eyes in its box, and every other
     /// part with them, so this places the parts far better than the mean face does (on faces68
-    /// training faces kept out of the map's fit, 12 % NME against 17 %).
+    /// training faces kept out of the map's fit; `models/MODEL_CARD.md`, "Gradient landmark
+    /// detector", compares the two on the validation split).
     fn given_eyes(&self) -> [[f32; 2]; N_GRADIENT] {
         let [r, l] = self.eye_centres;
         let s = SCALE as f32;
@@ -1455,8 +1457,8 @@ impl GradientDetector {
             }
         }
         // The sides: binarised Ex over the face's sides, short clusters removed. (Two bands,
-        // one per side, leaving out the middle, were measured no faster and 0.2 % less accurate
-        // on the contour.)
+        // one per side, leaving out the middle, were no faster and less accurate on the
+        // contour.)
         let r = Region::new(cx - 1.3 * d, ey, cx + 1.3 * d, pts[7][1] + 0.1 * d);
         self.prepare(r);
         let mut max = 0f32;

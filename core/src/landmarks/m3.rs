@@ -2,13 +2,13 @@
 //! `models/M3_IO.md` (level-1 crop → level 1 → zone patches → zone nets → merge into 68 points).
 
 use super::filter::{Bilateral, equalize_hist};
-use crate::nn::Net;
 use super::prior::{ShapePrior, ShapePriorConfig};
 use super::warp::{Affine, sample};
 use super::{BROW_GESTURES, FaceLandmarks, MIRROR68, MOUTH_GESTURES, N_POINTS, YAW_CLASSES_DEG};
 use crate::error::{Error, Result};
 use crate::image::{GrayImage, Rect};
 use crate::metrics::outer_eye_distance;
+use crate::nn::Net;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 
@@ -490,8 +490,8 @@ impl Zone {
             sizes.push(3);
         }
         // One patch per run, the eyes too: tract gathers a batch of one lazily inside its matrix
-        // products but a batch of two into an im2col buffer first, which measured slower (stop
-        // 24, `profile_net` on the eye net: 77.8 µs for a batch of two, 36.6 µs for one).
+        // products but a batch of two into an im2col buffer first, which was slower than two
+        // runs of one (`profile_net` on the eye net).
         let mut net = Net::load(
             name,
             bytes,
@@ -894,8 +894,8 @@ impl M3 {
     /// `roll` (radians, image y down) turns the crop so that a face turned by it stands upright.
     /// The crop keeps the box's side: the tight box of a face's points grows little as the face
     /// turns (the outline is round), and shrinking the crop by the `|cos| + |sin|` a turned square
-    /// grows by cost level 1 more than it saved (the astronaut at ±40°: level-1 NME 0.06–0.07
-    /// shrunk against 0.024–0.027 not, and 0.029 upright).
+    /// grows by cost level 1 more than it saved (the astronaut turned by ±40° read worse shrunk
+    /// than not).
     fn run_level1(
         &mut self,
         image: &GrayImage,
@@ -999,7 +999,7 @@ impl M3 {
     /// [`LEVEL1_BOX_TOP`] of its height for the brows level 1 does not give. `None` when a point is
     /// not finite or the box is empty. The detection cascade (`crate::track`) checks a detection
     /// again on this box: the detector's boxes of small faces are off by enough to cost the
-    /// face check and the IoU (`models/MODEL_CARD.md`).
+    /// face check and the IoU (`models/train/RESEARCH_LOG.md`, "Face detector").
     pub fn level1_box(&self, out: &FaceLandmarks) -> Option<Rect> {
         let (mut x0, mut y0) = (f32::INFINITY, f32::INFINITY);
         let (mut x1, mut y1) = (f32::NEG_INFINITY, f32::NEG_INFINITY);

@@ -273,7 +273,7 @@ pub(crate) struct Quads {
 /// `w` as int8 times a scale per output (`output_of(t)` the output of value `t`, below
 /// `outputs`), where every value is one to within 1e-6 of its output's largest magnitude — the
 /// form `models/train/onnx_q8.py` stores; `None` otherwise. The 3×3 layers here and the fully
-/// connected heads (`landmarks::dense`) keep their weights so.
+/// connected heads (`nn::dense`) keep their weights so.
 pub(crate) fn int8_per_output(
     w: &[f32],
     outputs: usize,
@@ -622,7 +622,6 @@ impl Conv3x3 {
             .run(form, &mut out[b * out_slot..][..out_slot]);
         }
     }
-
 }
 
 impl Conv3x3 {
@@ -637,7 +636,6 @@ impl Conv3x3 {
     pub(crate) fn is_bf16(&self) -> bool {
         self.pairs.is_some()
     }
-
 }
 
 /// Weights packed for the kernel: per block of [`BLOCK`] output channels, for each of the `k`
@@ -704,13 +702,13 @@ pub(crate) fn building<R>(form: Products, f: impl FnOnce() -> R) -> R {
 
 /// Whether layers built now multiply in f32 on 128-bit registers ([`Products::F32x4`]: aarch64,
 /// x86-64's portable path): the detector's tail then runs in the same kernels
-/// (`detect::tail`).
+/// (`nn::tail`).
 pub(crate) fn f32x4_products() -> bool {
     available() && products() == Products::F32x4
 }
 
 /// Whether layers built now multiply in int8 where their weights allow ([`Products::Vnni`]):
-/// also the fully connected heads' choice (`landmarks::dense`).
+/// also the fully connected heads' choice (`nn::dense`).
 pub(crate) fn int8_products() -> bool {
     products() == Products::Vnni
 }
@@ -750,7 +748,6 @@ pub(crate) fn available() -> bool {
     #[cfg(not(target_arch = "x86_64"))]
     return Products::F32x4.supported();
 }
-
 
 /// Test weights' int8 codes: 127 where `peak` (each output's largest, so its scale is exercised
 /// to the full range), else a spread over −127..=127 from the weight's index `i`.
@@ -918,7 +915,10 @@ mod tests {
     /// the definition (the weights are exact); the others, and inputs with a negative value,
     /// as in f32.
     #[test]
-    #[cfg_attr(not(host_avx512_vnni), ignore = "this CPU runs no AVX-512 VNNI kernels")]
+    #[cfg_attr(
+        not(host_avx512_vnni),
+        ignore = "this CPU runs no AVX-512 VNNI kernels"
+    )]
     fn int8_layers_match_the_definition_within_the_input_quantisation() {
         assert!(
             Products::Vnni.supported(),
@@ -1168,5 +1168,4 @@ mod tests {
             }
         }
     }
-
 }

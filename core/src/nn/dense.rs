@@ -500,7 +500,10 @@ mod tests {
     /// f32 product (the weights are the same int8); inputs with a negative or non-finite value
     /// are left to the f32 kernel.
     #[test]
-    #[cfg_attr(not(host_avx512_vnni), ignore = "this CPU runs no AVX-512 VNNI kernels")]
+    #[cfg_attr(
+        not(host_avx512_vnni),
+        ignore = "this CPU runs no AVX-512 VNNI kernels"
+    )]
     fn the_avx512_vnni_int8_products_match_the_f32_kernel_within_the_input_quantisation() {
         assert!(
             crate::nn::conv::Products::Vnni.supported(),

@@ -291,7 +291,14 @@ mod tests {
             // Where `conv` runs, the three full 3×3 layers after the first (the fourth is
             // depthwise and stays in tract).
             let after_first = det.plans[idx].stem.as_ref().unwrap().layers_after_first();
-            assert_eq!(after_first, if super::super::conv::available() { 3 } else { 0 });
+            assert_eq!(
+                after_first,
+                if super::super::conv::available() {
+                    3
+                } else {
+                    0
+                }
+            );
             // In the 128-bit form the blocks and heads run outside tract too.
             assert_eq!(
                 matches!(det.plans[idx].body, Body::Tail(_)),
@@ -309,13 +316,21 @@ mod tests {
                 .unwrap();
             let t = Tensor::from_shape(&[1, 1, h, w], &input).unwrap();
             let theirs = plan.run(tvec![t.into_tvalue()]).unwrap();
-            assert!(det.plans[idx].output(theirs.len(), 5).is_err(), "an extra head");
+            assert!(
+                det.plans[idx].output(theirs.len(), 5).is_err(),
+                "an extra head"
+            );
             for (k, b) in theirs.iter().enumerate() {
                 let (a, gh, gw) = det.plans[idx].output(k, 5).unwrap();
                 assert_eq!([1, 5, gh, gw], b.shape(), "head {k}");
                 let b = b.try_as_plain_ram().unwrap();
                 let b = b.as_slice::<f32>().unwrap();
-                super::super::stem::assert_close_to_whole_graph(&format!("{h}x{w} {form:?}"), a, b, form);
+                super::super::stem::assert_close_to_whole_graph(
+                    &format!("{h}x{w} {form:?}"),
+                    a,
+                    b,
+                    form,
+                );
             }
         }
     }

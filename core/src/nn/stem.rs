@@ -3,7 +3,7 @@
 //! instead of by tract: [`StemLayer`] finds the layer in the ONNX graph, takes its weights from it
 //! and cuts it out, and [`Stem`] computes it before the rest runs (`nn::net`, `nn::fcn`). Where [`crate::nn::conv`] runs ([`crate::nn::conv::available`]: aarch64, x86-64 with AVX2 +
 //! FMA), the layer goes through its kernel, and so do the plain 3×3 layers that follow it, cut
-//! from the graph the same way: what comes after them then runs in `landmarks::dense` (M3's fully
+//! from the graph the same way: what comes after them then runs in `nn::dense` (M3's fully
 //! connected heads) and, for the detector, in `nn::tail` where the layers multiply in the
 //! 128-bit form (aarch64, x86-64's portable path), else in tract. The ONNX files stay whole: training, the Python references and `M3_IO.md` see the
 //! same networks, and the tests hold the outputs to tract's run of the whole graph.
@@ -217,7 +217,7 @@ impl Stem {
 
     /// Makes the last layer write its output interleaved ([`crate::nn::conv::Layout::Interleaved`]:
     /// position after position, the channels rounded up to a whole block), for a reader that
-    /// takes it so (`detect::tail`); false, changing nothing, where the last layer is the lane
+    /// takes it so (`nn::tail`); false, changing nothing, where the last layer is the lane
     /// loop, which writes planes only.
     pub(crate) fn interleave_output(&mut self) -> bool {
         match (self.layers.last_mut(), &mut self.first) {

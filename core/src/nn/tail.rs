@@ -20,8 +20,8 @@
 //! — with a zero border of one position, the padding of the 3×3 layers that read it; the outputs
 //! are planes without a border, as tract gives them (`1 × channels × rows × columns`).
 
-use crate::nn::conv::{BLOCK, pack};
 use crate::kernels::conv3x3::{Depthwise, Form, FullLayer, POSITIONS};
+use crate::nn::conv::{BLOCK, pack};
 use crate::nn::onnx::pb::{ModelProto, NodeProto};
 use crate::nn::stem::{attr, is_relu, values_by_name};
 use tract_core::internal::*;
@@ -84,7 +84,7 @@ impl TailWeights {
         if graph.input.len() != 1 || input_pad != 1 {
             return Ok(None);
         }
-        // Nodes that only make weights (as `landmarks::dense` reads them) and the others.
+        // Nodes that only make weights (as `nn::dense` reads them) and the others.
         let mut made: Vec<String> = graph.initializer.iter().map(|t| t.name.clone()).collect();
         let mut work: Vec<&NodeProto> = Vec::new();
         for n in &graph.node {

@@ -39,7 +39,9 @@ pub fn select_tract_kernels() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         #[cfg(target_arch = "x86_64")]
-        if let Some(edit) = crate::kernels::cpu::x86::cpu_id().and_then(|(v, f, avx512)| isa_edit(&v, f, avx512)) {
+        if let Some(edit) =
+            crate::kernels::cpu::x86::cpu_id().and_then(|(v, f, avx512)| isa_edit(&v, f, avx512))
+        {
             // A refusal (another component of the process set the knob differently) leaves that
             // setting: the kernels differ in speed and in float rounding only.
             let _ = tract_core::knobs::set_config_global("TRACT_CPU_ISA", edit);

@@ -51,21 +51,21 @@ pub const MAX_FACES_LIMIT: usize = 16;
 
 /// Default [`TrackerConfig::min_detection_score`]: detector candidates down to this go to M3's
 /// face check ([`check_detections`]). With [`DEFAULT_MIN_DETECTION_CONFIDENCE`] and the detector's
-/// default min face: 123 of the 128 faces68 validation faces at 0.009 false positives per image;
-/// 0.25 finds one more (124) at 0.019 for about 1.5× the face checks
-/// (`models/train/detector/eval_peers.py`, `models/MODEL_CARD.md`).
+/// default min face it is the operating point with the fewest false positives; a lower score finds
+/// hardly more faces for more false positives and face checks
+/// (`models/train/detector/eval_peers.py`; figures: `models/MODEL_CARD.md`, "Face detector"; how
+/// the point was chosen: `models/train/RESEARCH_LOG.md`, "Face detector").
 pub const DEFAULT_MIN_DETECTION_SCORE: f32 = 0.4;
 
 /// The small-faces operating point: detector min face (pixels) at which the SDK's detection
 /// ([`check_detections`] with [`SMALL_FACES_MIN_DETECTION_SCORE`] and
-/// [`DEFAULT_MIN_DETECTION_CONFIDENCE`]) finds 127 of the 128 faces68 validation faces at 0.038
-/// false positives per image (`models/MODEL_CARD.md`, face detector), against 123 at 0.009 for the
-/// default min face, which skips the 17–23 px faces of group photos. A 640×480 frame runs at
-/// 400×300, and more candidates get face checks: the whole detection took 4.6–5.0 ms against
-/// 3.1–3.2 ms at the default (criterion, an Intel Xeon with AVX-512). The defaults keep the
-/// point with fewer false positives and less clutter; `monotrack landmarks --small-faces` detects
-/// at this one. Apps choose it through `DetectorConfig::min_face_px` and
-/// [`TrackerConfig::min_detection_score`].
+/// [`DEFAULT_MIN_DETECTION_CONFIDENCE`]) also finds the 17–23 px faces of group photos, which the
+/// default min face skips, at more false positives per image (`models/MODEL_CARD.md`, "Face
+/// detector"; `models/train/RESEARCH_LOG.md`, "Face detector"). A 640×480 frame runs at 400×300,
+/// and more candidates get face checks, so the whole detection takes longer (BENCHMARKS.md, "Face
+/// detector"). The defaults keep the point with fewer false positives and less clutter;
+/// `monotrack landmarks --small-faces` detects at this one. Apps choose it through
+/// `DetectorConfig::min_face_px` and [`TrackerConfig::min_detection_score`].
 pub const SMALL_FACES_MIN_FACE_PX: f32 = 16.0;
 
 /// The detector score of the small-faces operating point (see [`SMALL_FACES_MIN_FACE_PX`]).
@@ -77,9 +77,9 @@ pub const DEFAULT_MIN_DETECTION_CONFIDENCE: f32 = 0.95;
 /// Default [`TrackerConfig::min_redetection_confidence`]: a lost face's place and size are
 /// evidence for a detection that matches them, so it needs less of the classifier than a guess
 /// anywhere in the frame. On `track_eval --roll 35 --scale 0.35 --brightness 0.3 --blur
-/// --translation 100 --period 20 --segments 30` (1,800 frames) the one face left unfound for 9
-/// frames (a small face, heavily blurred, whose detections scored below 0.95) is found at once at
-/// 0.8 (and at 0.5); tracked windows keep 0.5.
+/// --translation 100 --period 20 --segments 30` a small, heavily blurred face whose detections
+/// scored below a new face's bar went unfound for frames at that bar and is found at once at this
+/// one (`models/train/RESEARCH_LOG.md`, "Tracking"); tracked windows keep 0.5.
 pub const DEFAULT_MIN_REDETECTION_CONFIDENCE: f32 = 0.8;
 
 /// Face width (pixels) at which the flow threshold applies unscaled: the thesis' 5 px were set on
@@ -163,9 +163,8 @@ pub trait LandmarkEstimator {
 
 /// A detection whose face check on the detector's box is below this is rejected without the
 /// second check on [`LandmarkEstimator::face_box`]: on the faces68 validation split the cascade
-/// finds the same faces with or without this gate, while 26 % (min face 24 px, score 0.4) to 60 %
-/// (16 px, 0.25) of the candidates score below it and skip their second run
-/// (`models/MODEL_CARD.md`, face detector).
+/// finds the same faces with or without this gate, while many of the candidates score below it
+/// and skip their second run (`models/train/RESEARCH_LOG.md`, "Face detector").
 pub const MIN_CONFIDENCE_TO_REFINE: f32 = 0.2;
 
 /// Two accepted detections overlapping by more than this are one face (the better-ranked one
@@ -179,7 +178,8 @@ pub const CASCADE_NMS_IOU: f32 = 0.4;
 /// [`MIN_CONFIDENCE_TO_REFINE`], the face is checked again on that box, which becomes the
 /// detection's box: the compact detector's boxes of small faces are too small and off-centre, which
 /// costs both the face check and the box's overlap with the face (on the faces68 validation split,
-/// `models/MODEL_CARD.md`). Detections whose (last) check reaches `min_confidence` go to `out` as
+/// `models/train/RESEARCH_LOG.md`, "Face detector"). Detections whose (last) check reaches
+/// `min_confidence` go to `out` as
 /// (box, detector score, face confidence, what the check left for
 /// [`LandmarkEstimator::complete`]), ranked by detector score × confidence (the compact detector
 /// scores some face-like clutter and oversized boxes above the real face, and the confidence alone
@@ -293,13 +293,15 @@ pub struct TrackerConfig {
     /// Detections scoring below this are ignored. The detector proposes, M3's face check decides
     /// ([`Self::min_detection_confidence`]), so this sits below the detector's standalone operating
     /// point to keep small faces: with [`Self::min_detection_confidence`] it is the cascade's
-    /// operating point chosen on the faces68 validation split (`models/MODEL_CARD.md`, face
-    /// detector). [`crate::track::Tracker::with_default_models`] runs the detector at this threshold.
+    /// operating point chosen on the faces68 validation split (`models/train/RESEARCH_LOG.md`,
+    /// "Face detector"; figures: `models/MODEL_CARD.md`, "Face detector").
+    /// [`crate::track::Tracker::with_default_models`] runs the detector at this threshold.
     pub min_detection_score: f32,
     /// A new detection is accepted when M3's face confidence on its box is at least this. Stricter
     /// than [`Self::min_face_confidence`]: a detection is a guess anywhere in the frame, a tracked
-    /// window is where the face just was. On jittered validation faces 99.8 % score ≥ 0.95 while 1.7 %
-    /// of the detector's false positives do (`models/train/eval_face_check.py`).
+    /// window is where the face just was. Nearly all jittered validation faces reach the default
+    /// while few of the detector's false positives do (`models/train/eval_face_check.py`;
+    /// `models/MODEL_CARD.md`, "Face check").
     pub min_detection_confidence: f32,
     /// In video mode, for the frames a lost face is searched for ([`FaceTracker`]'s lost-face
     /// search), a detection near its last place and of about its size is accepted at this face
@@ -310,13 +312,15 @@ pub struct TrackerConfig {
     /// decision point (M3 level 1 is trained with a balanced face / non-face loss).
     pub min_face_confidence: f32,
     /// An NCC peak below this is a loss without asking the classifier. Consecutive frames of a
-    /// tracked face score > 0.9 in our synthetic sequences; 0.5 only rejects clearly wrong matches.
+    /// tracked face score far above it in our synthetic sequences; 0.5 only rejects clearly wrong
+    /// matches.
     pub min_ncc_score: f32,
     /// Search window margin around the previous region, as a fraction of the region's larger side,
     /// each direction. 0.5 follows a face moving half its width per frame.
     pub search_margin: f32,
     /// Larger side (pixels) of the NCC template after decimation: the reduced scale. 32 keeps the
-    /// search well under a millisecond whatever the face size.
+    /// search cheap whatever the face size (BENCHMARKS.md, "The tracker's own checks and
+    /// kernels").
     pub ncc_template_px: usize,
     /// Optical-flow filter on or off.
     pub flow_filter: bool,
@@ -347,10 +351,10 @@ pub struct TrackerConfig {
     /// ([`TrackerConfig::ultra_light`]).
     pub verify_interval: u32,
     /// Re-detect in the same frame when tracking fails (`false`: in the next frame, as the thesis
-    /// does because its detector cost 500 ms). Default `true`: our detector costs about 3 ms on a
-    /// 640×480 frame (2.8–3.0 ms in `track_eval` on an Intel Xeon), and re-detecting at once keeps the
-    /// frame where a face reappears elsewhere (98.6 → 100 % correct frames on the synthetic
-    /// sequences of `track_eval`).
+    /// does because its detector was too slow to run again in the frame that lost the face).
+    /// Default `true`: our detector is cheap enough for that (BENCHMARKS.md, "Face detector"), and
+    /// re-detecting at once keeps the frame where a face reappears elsewhere (more correct frames
+    /// on the synthetic sequences of `track_eval`).
     pub redetect_immediately: bool,
     /// The landmark estimator and fit of [`crate::track::Tracker`] (and the fit of any
     /// [`FaceTracker`]): M3 with MSBP, or the ultra-light gradient detector with FFBP.
@@ -372,8 +376,9 @@ impl TrackerConfig {
 
     /// The ultra-light mode's settings: [`LandmarkMode::Gradient`], a detection accepted on the
     /// detector's score alone (the gradient points' mean confidence is no face classifier), and a
-    /// tracked window kept while that confidence is at least 0.3 (95 % of the faces68 validation
-    /// faces on their boxes, 57 % of windows away from them).
+    /// tracked window kept while that confidence is at least 0.3 (most faces68 validation faces on
+    /// their boxes pass it, fewer windows away from them; `models/train/RESEARCH_LOG.md`,
+    /// "Gradient landmark detector").
     pub fn ultra_light() -> Self {
         Self {
             landmarks: LandmarkMode::Gradient,
@@ -744,11 +749,11 @@ impl Slot {
 
 /// [`TrackerConfig::verify_interval`] in the ultra-light mode. Its tracked windows are checked by
 /// the gradient points' mean confidence, which passes windows off the face, and its template
-/// keeps its size. On `track_eval --ultra-light --segments 30` (1,800 frames, three scale
-/// amplitudes) every tenth frame matched re-detecting every frame at scale 0 and ±12 % (and
-/// stayed 5 % of the frames behind at ±35 %) at a fifth of its time; every fifth was no better at
-/// 1.5× the time, every twentieth lost a sixth of the correct frames at ±35 % scale (BENCHMARKS,
-/// "Ultra-light mode on the same clips").
+/// keeps its size. On `track_eval --ultra-light --segments 30` (three scale amplitudes) every
+/// tenth frame matched re-detecting every frame at the smaller amplitudes, and stayed a little
+/// behind it at the largest, at a fraction of its time; checking more often was no better for
+/// more time, less often lost correct frames at the largest amplitude (BENCHMARKS.md and
+/// `models/train/RESEARCH_LOG.md`, "Ultra-light mode on the same clips").
 pub const ULTRA_LIGHT_VERIFY_INTERVAL: u32 = 10;
 
 /// A face whose track ended on a loss, kept for [`LOST_FRAMES`] frames: the upright detector
@@ -794,11 +799,11 @@ const LOST_DRIFT_FACES: f32 = 0.25;
 /// its three turns): a face lost to fast motion is still near it. Past them the face may be
 /// anywhere (it left and came back, or the scene cut), so every other frame searches the whole
 /// frame turned ([`WHOLE_FRAME_TURNS_DEG`]) as when nothing is tracked. With the window alone a
-/// head held at 40–55° that appeared elsewhere went unfound until the loss expired, 27–32 frames
-/// in each such segment of `track_eval --roll-offset 40 --roll 5` (235 correct frames of 360;
-/// with a new face's bar for re-detections, 344 with 3 window-only frames, 320 with 6, 352 with
-/// none, which left 11 frames with no face on the blur-and-light clip against 9). A frame costs at
-/// most what a frame with nothing tracked costs (the upright pass plus the whole-frame turn).
+/// head held at 40–55° that appeared elsewhere went unfound until the loss expired
+/// (`track_eval --roll-offset 40 --roll 5`); with more window-only frames fewer of those faces
+/// were found, and with none more faces lost to fast motion went unfound on the blur-and-light
+/// clip (`models/train/RESEARCH_LOG.md`, "Tracking"). A frame costs at most what a frame with
+/// nothing tracked costs (the upright pass plus the whole-frame turn).
 const LOST_WINDOW_ONLY_FRAMES: u32 = 3;
 
 /// Side of the turned window in face sizes (the face may have moved about a face size).
@@ -817,8 +822,8 @@ const TURNED_CHECK_FROM: f32 = 15.0 * std::f32::consts::PI / 180.0;
 
 /// Past this the last roll is taken for a misread (a face read upside down, whose turned crop
 /// would read it upside down again frame after frame) and the check stays upright: on the
-/// portable path a track started on such a reading held it, 1.25 eye distances off, for 55
-/// frames of the 40° clip.
+/// portable path a track started on such a reading held it, far off the face, for many frames of
+/// the 40° clip (`models/train/RESEARCH_LOG.md`, "Tracking").
 const TURNED_CHECK_TO: f32 = 75.0 * std::f32::consts::PI / 180.0;
 
 /// Turns within this of upright are left to the upright detector, which covers them.
@@ -828,9 +833,8 @@ const UPRIGHT_COVERS: f32 = 15.0 * std::f32::consts::PI / 180.0;
 /// for good), one per frame: the upright detector finds faces to about 25° of roll, and each turn
 /// covers about as much either side of it, so with these a head held at up to about 85° either way
 /// is found within four frames, at the cost of one turned pass per frame. With ±30° alone a head
-/// held at 60° (`track_eval --roll-offset 60 --roll 5`) was read correctly on 159 of 360 frames
-/// against 328 with these (both with a new face's bar for re-detections); at 30° and 40° both give
-/// the same frames.
+/// held at 60° (`track_eval --roll-offset 60 --roll 5`) was read correctly on far fewer frames
+/// (`models/train/RESEARCH_LOG.md`, "Tracking"); at 30° and 40° both give the same frames.
 const WHOLE_FRAME_TURNS_DEG: [f32; 4] = [30.0, -30.0, 60.0, -60.0];
 
 /// Side of the square window the whole frame is turned into, pixels: the frame's longer side
@@ -1480,8 +1484,8 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         }
         // Every detection must pass the classifier tracked windows are checked with (M3's
         // face confidence), on the face's own box; ranked by detector score × confidence
-        // (subtitle characters at 20 px pass at 0.99-1.0 while the real face scores 0.95 /
-        // 0.99, so the confidence alone ranks badly).
+        // (small subtitle characters pass near certainty while the real face may score lower,
+        // so the confidence alone ranks badly).
         let (min_new, min_again) = (
             self.config.min_detection_confidence,
             self.config.redetection_bar(),

@@ -47,7 +47,7 @@ impl LandmarkEstimator for M3 {
 ///
 /// It has no face classifier: its face confidence is the mean confidence of its points with a
 /// 68-point counterpart ([`GradientPoints::mean_confidence`]), a weak one (on faces68 validation
-/// faces a median of 0.41, on windows of the same images away from the faces 0.32;
+/// images it scores windows away from the faces not far below the faces themselves;
 /// [`TrackerConfig::ultra_light`] sets the thresholds for it).
 #[derive(Debug, Clone, Default)]
 pub struct GradientLandmarks {
@@ -216,10 +216,10 @@ impl FaceTracker<ModelDetector, Landmarker> {
     /// [`TrackerConfig::min_detection_score`]: M3's face check decides) and M3 — in [`Mode::Image`]
     /// in its mirror-average mode ([`M3::set_mirror_average`]; `estimator_mut` changes it).
     ///
-    /// Why by mode: on still images the mode's two runs per net are more accurate (faces68
-    /// validation NME 4.06 → 3.89 % on detected faces, 3.98 → 3.87 % on jittered landmark boxes,
-    /// `models/MODEL_CARD.md`), while in a video track it gains nothing (synthetic sequences
-    /// 3.57 → 3.58 %) for 0.14–0.16 ms more per face (criterion and the CLI, Intel Xeon with AVX-512).
+    /// Why by mode: on still images the mode's second runs are more accurate (BENCHMARKS.md, "M3
+    /// landmarks: accuracy"); in a video track they would run on every frame, so video mode stays
+    /// single-pass and leaves the choice to the caller (the mode in the tracker, accuracy and time
+    /// per frame: BENCHMARKS.md, "Tracking").
     ///
     /// # Errors
     /// As [`FaceTracker::new`], plus [`crate::Error::ModelLoad`] if an embedded model cannot be

@@ -1,7 +1,7 @@
 //! `monotrack bench`: the face pipeline timed from camera frames as phones deliver them to the
 //! result, per stage, on a moving-face clip made from the committed sample picture
 //! (`monotrack_core::bench::run_camera_benchmark`). Which kernel forms ran and on which CPU are
-//! part of the report: `MONOTRACK_KERNELS=portable` times the forms an aarch64 phone runs.
+//! part of the report: `--kernels portable` times the forms an aarch64 phone runs.
 
 use monotrack_core::TrackerConfig;
 use monotrack_core::bench::{

@@ -1,7 +1,8 @@
 //! `monotrack landmarks IN.jsonl [--out OUT.jsonl]`: M3 landmarks, gestures, gaze and the MSBP
 //! fit for every face of every image (CONTRACT.md), M3 in mirror-average mode unless
-//! `--single-pass` (still images: the mode's gain holds on given and on detected boxes, while the
-//! video tracker, which gains nothing from it, stays single-pass; `models/MODEL_CARD.md`). With
+//! `--single-pass` (still images: the mode is more accurate on given and on detected boxes,
+//! `core/models/MODEL_CARD.md`; the video tracker, where it would run on every frame, stays
+//! single-pass). With
 //! `faces` boxes in a line, M3 runs on those boxes only (no detection); without, the SDK's
 //! detection finds them (the tracker's defaults, or with `--small-faces` its small-faces operating
 //! point, `track::SMALL_FACES_MIN_FACE_PX`). One output line per input line; a bad line yields

@@ -23,6 +23,11 @@ use std::process::ExitCode;
 #[derive(Parser)]
 #[command(name = "monotrack", version, about = "monotrack SDK command line")]
 struct Cli {
+    /// Which kernel forms run: `native` (the CPU's fastest), `portable` (an aarch64 phone's
+    /// choices, on any CPU), optionally with `,conv=FORM` or `,flow=FORM` to time one form
+    /// (`monotrack_core::kernels::KernelChoice`). Default: `MONOTRACK_KERNELS`, else native.
+    #[arg(long, global = true)]
+    kernels: Option<String>,
     #[command(subcommand)]
     command: Command,
 }
@@ -126,7 +131,7 @@ enum Command {
         out: Option<PathBuf>,
     },
     /// Time the face pipeline per stage from camera frames (a moving-face clip laid out as the
-    /// camera delivers it) to the result; `MONOTRACK_KERNELS=portable` times the phone's kernels.
+    /// camera delivers it) to the result; `--kernels portable` times the phone's kernels.
     Bench {
         /// Camera frame format.
         #[arg(long, value_enum, default_value = "nv21")]
@@ -276,6 +281,14 @@ fn run_track(
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Some(spec) = &cli.kernels {
+        let chosen = monotrack_core::kernels::KernelChoice::parse(spec)
+            .and_then(monotrack_core::kernels::select);
+        if let Err(e) = chosen {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    }
     let result = match cli.command {
         Command::Fit { input, out, method } => fit::run(&input, out.as_deref(), method),
         Command::Landmarks {

@@ -3,7 +3,7 @@
 //! as an aarch64 phone computes the networks: [`Block`] for a full convolution (any list of taps:
 //! the 3×3 layers of the M3 trunks and of the detector, the detector's 1×1 layers; its heads
 //! without the ReLU), [`Depthwise`] for one 3×3 kernel per channel (the detector's blocks).
-//! [`crate::nn::conv`] and `detect::tail` lay the layers out and call these per block.
+//! [`crate::nn::conv`] and `nn::tail` lay the layers out and call these per block.
 //!
 //! Why here and not in tract: tract lowers each such layer to an explicit `Pad` copy, a lazily
 //! gathered im2col matrix and a matrix product, gives each run's every output a new tensor (583
@@ -31,9 +31,9 @@
 #[cfg(target_arch = "aarch64")]
 mod arm64;
 #[cfg(target_arch = "x86_64")]
-mod x86_64;
-#[cfg(target_arch = "x86_64")]
 mod avx;
+#[cfg(target_arch = "x86_64")]
+mod x86_64;
 #[cfg(target_arch = "x86_64")]
 pub(crate) use avx::nonnegative_max;
 
@@ -294,7 +294,7 @@ impl Block<'_> {
 }
 
 /// A full convolution's every block of sixteen output channels over all its output positions, in
-/// groups of [`POSITIONS`]: the walk `conv` and `detect::tail` share.
+/// groups of [`POSITIONS`]: the walk `conv` and `nn::tail` share.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct FullLayer<'a> {
     /// As [`Block::input`].
