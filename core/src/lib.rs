@@ -23,8 +23,8 @@ pub mod kernels;
 pub mod landmarks;
 pub mod metrics;
 pub mod model;
-pub mod nn;
 pub mod motion;
+pub mod nn;
 pub mod track;
 
 pub use error::{Error, Result};

@@ -212,6 +212,26 @@ def _(data):
     return out
 
 
+@table("x86_forms", "BENCHMARKS.md", "metrics/bench_forms.json")
+def _(data):
+    """Each x86-64 form against the next narrower one, the stage it serves, in one set of runs."""
+    d = data.json("metrics/bench_forms.json")
+    runs_by = {}
+    for r in d["runs"]:
+        runs_by.setdefault(r["kernels"], []).append(r)
+    out = [f"{d['cpu']}; tracked frames, median µs per stage over {frames(len(d['runs']) // len(runs_by), 'run')} "
+           f"of each choice (alternating), NV21 640×480 rotated 90°, {num(d['runs'][0]['frames'])} frames a run.", ""]
+    out += header("kernel", "form (`--kernels`)", "stage", "median µs", "against")
+    for f in d["forms"]:
+        g = runs_by[f["kernels"]]
+        base = runs_by[f["against"]] if f.get("against") else None
+        cell = rng(stage_values(g, "tracked", f["stage"], "median_us"))
+        against = (f"`{f['against']}`: {rng(stage_values(base, 'tracked', f['stage'], 'median_us'))}"
+                   if base else DASH)
+        out.append(row(f["kernel"], f"`{f['kernels']}`", f["stage"], cell, against))
+    return out
+
+
 @table("peer_dlib", "BENCHMARKS.md", "metrics/bench_peers.json")
 def _(data):
     p = data.json("metrics/bench_peers.json")

@@ -39,8 +39,9 @@ impl KernelPath {
 pub struct KernelChoice {
     /// Native or portable.
     pub path: KernelPath,
-    /// The 3×3 layers' product form on x86-64's native path: `avx2`, `avx512`, `bf16` or `vnni`
-    /// (`None`: the CPU's default). A form the CPU lacks is ignored.
+    /// The networks' 3×3 product form on x86-64's native path: `f32x4` (the phone's 128-bit form),
+    /// `avx2`, `avx512`, `bf16` or `vnni` (`None`: the CPU's default). A form the CPU lacks is
+    /// ignored.
     pub conv: Option<String>,
     /// The Lucas–Kanade windows' form on x86-64's native path: `avx2` or `avx512`, or `portable`
     /// on any path (`None`: the widest the CPU has). A form the CPU lacks is ignored.
@@ -65,7 +66,7 @@ impl KernelChoice {
         let mut choice = KernelChoice::NATIVE;
         let bad = |what: &str| {
             Error::InvalidConfig(format!(
-                "kernel choice {spec:?}: {what} (expected native|portable[,conv=avx2|avx512|bf16|vnni][,flow=portable|avx2|avx512])"
+                "kernel choice {spec:?}: {what} (expected native|portable[,conv=f32x4|avx2|avx512|bf16|vnni][,flow=portable|avx2|avx512])"
             ))
         };
         for (i, part) in spec.split(',').map(str::trim).enumerate() {
@@ -74,7 +75,9 @@ impl KernelChoice {
                 (0, None) if part.eq_ignore_ascii_case("portable") => {
                     choice.path = KernelPath::Portable;
                 }
-                (_, Some(("conv", form))) if ["avx2", "avx512", "bf16", "vnni"].contains(&form) => {
+                (_, Some(("conv", form)))
+                    if ["f32x4", "avx2", "avx512", "bf16", "vnni"].contains(&form) =>
+                {
                     choice.conv = Some(form.to_string());
                 }
                 (_, Some(("flow", form))) if ["portable", "avx2", "avx512"].contains(&form) => {
@@ -152,8 +155,16 @@ mod tests {
         assert_eq!(KernelChoice::parse(&forms.to_string()).unwrap(), forms);
         // A form alone keeps the native path.
         let alone = KernelChoice::parse("conv=bf16").unwrap();
-        assert_eq!((alone.path, alone.conv.as_deref()), (KernelPath::Native, Some("bf16")));
-        for bad in ["fast", "native,conv=maddubs", "portable,tile=8", "native,portable"] {
+        assert_eq!(
+            (alone.path, alone.conv.as_deref()),
+            (KernelPath::Native, Some("bf16"))
+        );
+        for bad in [
+            "fast",
+            "native,conv=maddubs",
+            "portable,tile=8",
+            "native,portable",
+        ] {
             assert!(
                 matches!(KernelChoice::parse(bad), Err(Error::InvalidConfig(_))),
                 "{bad}"

@@ -3,7 +3,6 @@
 //! state tract's x86-64 assembly leaves dirty, and the AVX2 byte loads and stores the pixel kernels
 //! share. Every `std::arch` use of the library outside the kernels' own folders is here.
 
-
 use super::{KernelPath, kernel_path};
 
 /// Whether the CPU's vendor string is AMD's (`None` where CPUID gives none): which kind of 3×3
@@ -269,7 +268,6 @@ pub(crate) fn clear_upper_vector_state() {
         }
     }
 }
-
 
 #[cfg(test)]
 mod tests {

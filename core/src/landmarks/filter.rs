@@ -5,8 +5,13 @@
 //! Bit-exactness: the equalisation is exact. The bilateral filter uses OpenCV's weight formulas,
 //! float32 sums and truncation to u8 (what the installed OpenCV 5 does); OpenCV's vectorised
 //! kernels sum in another order (with fused multiply-adds) and approximate `exp` for the colour
-//! table, so a result within float rounding of an integer may land one level off: ±1 on about 3 %
-//! of the pixels (measured and checked by the golden tests of `tests/data/m3_preproc/`).
+//! table, so a result within float rounding of an integer may land one level off: ±1 on a small
+//! share of the pixels (the golden tests of `tests/data/m3_preproc/` measure and bound it).
+//!
+//! The filter's sums, which have a form per instruction set, are `crate::kernels::bilateral`'s;
+//! [`Bilateral`] keeps the tables, the padding and the buffers.
+
+use crate::kernels::bilateral::{Filter, RowSums};
 
 /// `cv::bilateralFilter(src, dst, d, sigma_color, sigma_space, BORDER_REFLECT_101)` for 8-bit
 /// gray images, with its tables precomputed and its padded buffer reused.
@@ -23,9 +28,8 @@ pub struct Bilateral {
     /// `taps` as offsets into `padded` rows of `offsets_width` bytes.
     offsets: Vec<isize>,
     offsets_width: usize,
-    /// One output row's running weighted sums and weight sums.
-    row_sum: Vec<f32>,
-    row_wsum: Vec<f32>,
+    /// The portable kernel's running sums of one output row.
+    sums: RowSums,
 }
 
 /// OpenCV copies the input when a sigma is at or below this (bilateral_filter.dispatch.cpp).
@@ -70,8 +74,7 @@ impl Bilateral {
             padded: Vec::new(),
             offsets: Vec::new(),
             offsets_width: 0,
-            row_sum: Vec::new(),
-            row_wsum: Vec::new(),
+            sums: RowSums::default(),
         }
     }
 
@@ -84,20 +87,16 @@ impl Bilateral {
             return;
         }
         self.pad(src, width, height);
-        #[cfg(target_arch = "x86_64")]
-        if crate::kernels::cpu::has_avx2_fma() {
-            #[allow(unsafe_code)]
-            // SAFETY: the CPU has the features each function is compiled for.
-            unsafe {
-                if crate::nn::conv::Products::Avx512.supported() {
-                    self.filter_avx512(width, height, dst)
-                } else {
-                    self.filter_avx2(width, height, dst)
-                }
-            };
-            return;
-        }
-        self.filter_rows(width, height, dst);
+        let filter = Filter {
+            padded: &self.padded,
+            width,
+            height,
+            radius: self.radius,
+            offsets: &self.offsets,
+            space_weight: &self.space_weight,
+            color_weight: &self.color_weight,
+        };
+        filter.run(&mut self.sums, dst);
     }
 
     /// Fills `padded` (BORDER_REFLECT_101) and, for a new row length, `offsets`.
@@ -122,185 +121,6 @@ impl Bilateral {
             self.offsets_width = pw;
         }
     }
-
-    /// The filter over `padded`, portable: tap by tap over each output row.
-    fn filter_rows(&mut self, width: usize, height: usize, dst: &mut [u8]) {
-        let r = self.radius;
-        let pw = width + 2 * r;
-        let cw = &self.color_weight;
-        self.row_sum.resize(width, 0.0);
-        self.row_wsum.resize(width, 0.0);
-        for y in 0..height {
-            // Tap by tap over the whole row: each pixel still sums its taps in OpenCV's order (so
-            // the result is the same to the bit), but the pixels' sums are independent chains the
-            // CPU overlaps, where one pixel's 25 dependent additions serialised before.
-            self.row_sum.fill(0.0);
-            self.row_wsum.fill(0.0);
-            let c0 = (y + r) * pw + r;
-            let centre = &self.padded[c0..c0 + width];
-            for (&o, &sw) in self.offsets.iter().zip(&self.space_weight) {
-                let start = (c0 as isize + o) as usize;
-                let taps = &self.padded[start..start + width];
-                for (((&v, &v0), sum), wsum) in taps
-                    .iter()
-                    .zip(centre)
-                    .zip(self.row_sum.iter_mut())
-                    .zip(self.row_wsum.iter_mut())
-                {
-                    let w = sw * cw[usize::from(v.abs_diff(v0))];
-                    *wsum += w;
-                    *sum += f32::from(v) * w;
-                }
-            }
-            for ((d, &sum), &wsum) in dst[y * width..(y + 1) * width]
-                .iter_mut()
-                .zip(&self.row_sum)
-                .zip(&self.row_wsum)
-            {
-                *d = quantize(sum, wsum);
-            }
-        }
-    }
-
-    /// [`Bilateral::filter_rows`] eight pixels at a time in AVX2 registers: the colour weights
-    /// come from one hardware gather per tap, the sums stay in registers over the taps, each pixel
-    /// adds its taps in the same order with the same operations (the same bytes; unit test). The
-    /// portable loop's table lookups were scalar loads: `bilateral_64x32_d5` 14.3 / 13.9 → 7.4 /
-    /// 7.1 µs, `m3_per_face` 656 / 639 → 623 / 635 µs (two alternating runs each, Intel Xeon).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn filter_avx2(&self, width: usize, height: usize, dst: &mut [u8]) {
-        let r = self.radius;
-        let pw = width + 2 * r;
-        for y in 0..height {
-            let c0 = (y + r) * pw + r;
-            let out = &mut dst[y * width..(y + 1) * width];
-            let mut x = 0;
-            while x + 8 <= width {
-                self.block8(c0 + x, &mut out[x..x + 8]);
-                x += 8;
-            }
-            for (x, d) in out.iter_mut().enumerate().skip(x) {
-                *d = self.pixel(c0 + x);
-            }
-        }
-    }
-
-    /// Eight output pixels centred at `padded[c..c + 8]` (see [`Bilateral::filter_avx2`]).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn block8(&self, c: usize, out: &mut [u8]) {
-        use crate::kernels::cpu::avx2::{load_u8x8 as load8, store_u8x8};
-        use std::arch::x86_64::{
-            _mm256_abs_epi32, _mm256_add_ps, _mm256_cvtepi32_ps, _mm256_cvttps_epi32,
-            _mm256_div_ps, _mm256_i32gather_ps, _mm256_max_ps, _mm256_min_ps, _mm256_mul_ps,
-            _mm256_set1_ps, _mm256_setzero_ps, _mm256_sub_epi32,
-        };
-        let table = self.color_weight.as_ptr();
-        let (zero, top) = (_mm256_setzero_ps(), _mm256_set1_ps(255.0));
-        let v0 = load8(&self.padded[c..]);
-        let (mut sum, mut wsum) = (zero, zero);
-        for (&o, &sw) in self.offsets.iter().zip(&self.space_weight) {
-            let v = load8(&self.padded[(c as isize + o) as usize..]);
-            let diff = _mm256_abs_epi32(_mm256_sub_epi32(v, v0));
-            #[allow(unsafe_code)]
-            // SAFETY: |v − v0| ≤ 255 indexes the 256-entry table.
-            let cw = unsafe { _mm256_i32gather_ps::<4>(table, diff) };
-            let w = _mm256_mul_ps(_mm256_set1_ps(sw), cw);
-            wsum = _mm256_add_ps(wsum, w);
-            sum = _mm256_add_ps(sum, _mm256_mul_ps(_mm256_cvtepi32_ps(v), w));
-        }
-        // `quantize`: the clamp, then truncation (≤ 255 after the clamp, so the packs do not
-        // saturate).
-        let q = _mm256_min_ps(_mm256_max_ps(_mm256_div_ps(sum, wsum), zero), top);
-        store_u8x8(_mm256_cvttps_epi32(q), out);
-    }
-
-    /// [`Bilateral::filter_avx2`] sixteen pixels at a time in 512-bit registers (one 16-lane
-    /// gather per tap), then eight, then single pixels: each pixel's operations in the same order,
-    /// so the same bytes (unit test).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,avx2,fma")]
-    fn filter_avx512(&self, width: usize, height: usize, dst: &mut [u8]) {
-        use std::arch::x86_64::{
-            __m128i, _mm_loadu_si128, _mm_storeu_si128, _mm512_abs_epi32, _mm512_add_ps,
-            _mm512_cvtepi32_epi8, _mm512_cvtepi32_ps, _mm512_cvtepu8_epi32, _mm512_cvttps_epi32,
-            _mm512_div_ps, _mm512_i32gather_ps, _mm512_max_ps, _mm512_min_ps, _mm512_mul_ps,
-            _mm512_set1_ps, _mm512_setzero_ps, _mm512_sub_epi32,
-        };
-        let r = self.radius;
-        let pw = width + 2 * r;
-        let table = self.color_weight.as_ptr();
-        let (zero, top) = (_mm512_setzero_ps(), _mm512_set1_ps(255.0));
-        let load16 = |at: usize| {
-            let bytes: &[u8; 16] = self.padded[at..at + 16].try_into().expect("16 bytes");
-            #[allow(unsafe_code)]
-            // SAFETY: `bytes` holds the sixteen bytes read (unaligned loads are allowed).
-            _mm512_cvtepu8_epi32(unsafe { _mm_loadu_si128(bytes.as_ptr().cast::<__m128i>()) })
-        };
-        for y in 0..height {
-            let c0 = (y + r) * pw + r;
-            let out = &mut dst[y * width..(y + 1) * width];
-            let mut x = 0;
-            while x + 16 <= width {
-                let c = c0 + x;
-                let v0 = load16(c);
-                let (mut sum, mut wsum) = (zero, zero);
-                for (&o, &sw) in self.offsets.iter().zip(&self.space_weight) {
-                    let v = load16((c as isize + o) as usize);
-                    let diff = _mm512_abs_epi32(_mm512_sub_epi32(v, v0));
-                    #[allow(unsafe_code)]
-                    // SAFETY: |v − v0| ≤ 255 indexes the 256-entry table.
-                    let cw = unsafe { _mm512_i32gather_ps::<4>(diff, table) };
-                    let w = _mm512_mul_ps(_mm512_set1_ps(sw), cw);
-                    wsum = _mm512_add_ps(wsum, w);
-                    sum = _mm512_add_ps(sum, _mm512_mul_ps(_mm512_cvtepi32_ps(v), w));
-                }
-                let q = _mm512_min_ps(_mm512_max_ps(_mm512_div_ps(sum, wsum), zero), top);
-                let bytes = _mm512_cvtepi32_epi8(_mm512_cvttps_epi32(q));
-                let dst16: &mut [u8; 16] = (&mut out[x..x + 16]).try_into().expect("16 bytes");
-                #[allow(unsafe_code)]
-                // SAFETY: `dst16` holds the sixteen bytes written.
-                unsafe {
-                    _mm_storeu_si128(dst16.as_mut_ptr().cast::<__m128i>(), bytes)
-                };
-                x += 16;
-            }
-            if x + 8 <= width {
-                self.block8(c0 + x, &mut out[x..x + 8]);
-                x += 8;
-            }
-            for (x, d) in out.iter_mut().enumerate().skip(x) {
-                *d = self.pixel(c0 + x);
-            }
-        }
-    }
-}
-
-impl Bilateral {
-    /// One output pixel, centred at `c` in `padded`, in OpenCV's loop order: the definition the
-    /// vectorised paths reproduce to the bit (unit test), and the AVX2 path's row tail.
-    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-    fn pixel(&self, c: usize) -> u8 {
-        let v0 = self.padded[c];
-        let (mut sum, mut wsum) = (0f32, 0f32);
-        for (&o, &sw) in self.offsets.iter().zip(&self.space_weight) {
-            let v = self.padded[(c as isize + o) as usize];
-            let w = sw * self.color_weight[usize::from(v.abs_diff(v0))];
-            wsum += w;
-            sum += f32::from(v) * w;
-        }
-        quantize(sum, wsum)
-    }
-}
-
-/// A pixel's weighted mean to u8. The OpenCV 5 build the training uses truncates here (measured
-/// against it by tests/data/m3_preproc: rounding put 46 % of the pixels one level off,
-/// truncation 3 %).
-#[inline(always)]
-fn quantize(sum: f32, wsum: f32) -> u8 {
-    (sum / wsum).clamp(0.0, 255.0) as u8
 }
 
 /// OpenCV's BORDER_REFLECT_101 index (`gfedcb|abcdefgh|gfedcba`), for any offset.
@@ -383,65 +203,46 @@ mod tests {
         }
     }
 
-    /// The filter pixel by pixel ([`Bilateral::pixel`], OpenCV's loop order), for the exactness
-    /// check below.
-    fn bilateral_per_pixel(f: &mut Bilateral, src: &[u8], width: usize, height: usize) -> Vec<u8> {
-        let mut scratch = vec![0u8; width * height];
-        f.apply(src, width, height, &mut scratch); // fills f.padded / f.offsets for this size
-        let (r, pw) = (f.radius, width + 2 * f.radius);
-        let mut dst = vec![0u8; width * height];
-        for y in 0..height {
-            for x in 0..width {
-                dst[y * width + x] = f.pixel((y + r) * pw + x + r);
+    /// `cv::bilateralFilter`'s definition pixel by pixel on the image itself, borders through
+    /// [`reflect101`], taps in OpenCV's order.
+    fn bilateral_definition(f: &Bilateral, src: &[u8], w: usize, h: usize) -> Vec<u8> {
+        let mut dst = vec![0u8; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let v0 = src[y * w + x];
+                let (mut sum, mut wsum) = (0f32, 0f32);
+                for (&(dy, dx), &sw) in f.taps.iter().zip(&f.space_weight) {
+                    let (sy, sx) = (
+                        reflect101(y as isize + dy, h),
+                        reflect101(x as isize + dx, w),
+                    );
+                    let v = src[sy * w + sx];
+                    let weight = sw * f.color_weight[usize::from(v.abs_diff(v0))];
+                    wsum += weight;
+                    sum += f32::from(v) * weight;
+                }
+                dst[y * w + x] = (sum / wsum).clamp(0.0, 255.0) as u8;
             }
         }
         dst
     }
 
-    /// On a CPU with AVX2 `apply` runs its gather path, so this holds that path to the per-pixel
-    /// loop's bytes (widths with and without a tail of fewer than eight pixels); elsewhere it
-    /// checks the portable row loop.
+    /// The padding, the offsets (recomputed as the width changes between calls) and the kernel
+    /// this CPU runs, together, to the bit.
     #[test]
-    fn row_order_bilateral_equals_the_per_pixel_loop_to_the_bit() {
+    fn bilateral_equals_the_definition_on_the_unpadded_image() {
         let mut f = Bilateral::new(5, 20.0, 3.0);
-        let mut state = 12345u32;
-        for (w, h) in [
-            (64, 32),
-            (48, 48),
-            (40, 24),
-            (7, 3),
-            (1, 1),
-            (13, 5),
-            (21, 9),
-            (40, 7),
-            (17, 4),
-        ] {
+        let mut state = 777u32;
+        for (w, h) in [(64, 32), (7, 3), (1, 1), (13, 5), (40, 7), (2, 9)] {
             let src: Vec<u8> = (0..w * h)
                 .map(|i| {
                     state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                    // Smooth ramps plus noise: many sums land near level boundaries.
                     ((i % w) * 3 + (i / w) * 2) as u8 ^ (state >> 29) as u8
                 })
                 .collect();
             let mut got = vec![0u8; w * h];
             f.apply(&src, w, h, &mut got);
-            let want = bilateral_per_pixel(&mut f, &src, w, h);
-            assert_eq!(got, want, "{w}x{h}");
-            // The AVX2 path too, where `apply` took the 512-bit one.
-            #[cfg(target_arch = "x86_64")]
-            if crate::kernels::cpu::has_avx2_fma() {
-                let mut avx2 = vec![0u8; w * h];
-                #[allow(unsafe_code)]
-                // SAFETY: the CPU has AVX2 and FMA; `apply` left `padded` filled for this image.
-                unsafe {
-                    f.filter_avx2(w, h, &mut avx2)
-                };
-                assert_eq!(avx2, want, "avx2 {w}x{h}");
-            }
-            // The portable loop too, where `apply` took a gather path.
-            let mut rows = vec![0u8; w * h];
-            f.filter_rows(w, h, &mut rows);
-            assert_eq!(rows, want, "rows {w}x{h}");
+            assert_eq!(got, bilateral_definition(&f, &src, w, h), "{w}x{h}");
         }
     }
 

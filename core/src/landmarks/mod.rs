@@ -23,7 +23,6 @@ pub mod filter;
 pub mod gradient;
 mod m3;
 mod prior;
-#[cfg(test)]
 pub mod warp;
 
 pub use gradient::{

@@ -204,8 +204,8 @@ impl ShapePrior {
 
 /// `output = featuresᵀ · matrix` (`matrix` row-major, rows of `output.len()` values), each
 /// output summed from the first feature on. Blocks of outputs with their sums held in registers
-/// over the features: summing into `output` feature by feature loaded and stored it per feature
-/// (the prior then took 3.9 % of `m3_per_face` on an Intel Xeon).
+/// over the features: summing into `output` feature by feature loaded and stored it per feature,
+/// which made the prior a needless part of `m3_per_face`'s time.
 #[inline(always)]
 fn regress(features: &[f64], matrix: &[f32], output: &mut [f64]) {
     let cols = output.len();

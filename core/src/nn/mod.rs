@@ -30,4 +30,6 @@ pub(crate) mod tail;
 pub mod tract;
 
 pub(crate) use fcn::FullyConvNet;
-pub(crate) use net::{Net, onnx_op_types};
+pub(crate) use net::Net;
+#[cfg(test)]
+pub(crate) use net::onnx_op_types;

@@ -149,4 +149,3 @@ impl<W: Weight> Product<'_, W> {
         }
     }
 }
-

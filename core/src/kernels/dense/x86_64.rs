@@ -132,4 +132,3 @@ unsafe fn int8_columns<const NJ: usize>(
         unsafe { _mm512_mask_storeu_ps(out.as_mut_ptr().add(c), ((1u32 << n) - 1) as u16, v) };
     }
 }
-

@@ -1,7 +1,7 @@
-//! NEON forms of the Lucas–Kanade window kernels ([`super::PyramidalLk::window_gradients`] and
-//! [`super::PyramidalLk::mismatch`]): a lane group of sixteen cells in four registers, the
-//! portable path's operations in its order — multiplies and adds kept apart, never fused — so the
-//! same bits. NEON is baseline on aarch64: no run-time check (the callers' `unsafe` blocks rest on
+//! NEON forms of the Lucas–Kanade window kernels ([`super::Windows::gradients`] and
+//! [`super::Windows::mismatch`]): a lane group of sixteen cells in four registers, the portable
+//! path's operations in its order — multiplies and adds kept apart, never fused — so the same
+//! bits. NEON is baseline on aarch64: no run-time check (the callers' `unsafe` blocks rest on
 //! that).
 
 use super::{LANES, window_inside};
