@@ -219,7 +219,8 @@ def _(data):
     runs_by = {}
     for r in d["runs"]:
         runs_by.setdefault(r["kernels"], []).append(r)
-    out = [f"{d['cpu']}; tracked frames, median µs per stage over {frames(len(d['runs']) // len(runs_by), 'run')} "
+    n = len(d["runs"]) // len(runs_by)
+    out = [f"{d['cpu']}; tracked frames, median µs per stage, lowest–highest over {n} run{'s' if n > 1 else ''} "
            f"of each choice (alternating), NV21 640×480 rotated 90°, {num(d['runs'][0]['frames'])} frames a run.", ""]
     out += header("kernel", "form (`--kernels`)", "stage", "median µs", "against")
     for f in d["forms"]:

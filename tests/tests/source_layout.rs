@@ -6,8 +6,11 @@
 
 use std::path::{Path, PathBuf};
 
-/// Every `.rs` file under `dir`, recursively, in a fixed order.
+/// Every `.rs` file under `dir` (or `dir` itself, a file), recursively, in a fixed order.
 fn rust_files(dir: &Path) -> Vec<PathBuf> {
+    if dir.is_file() {
+        return vec![dir.to_path_buf()];
+    }
     let mut out = Vec::new();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {

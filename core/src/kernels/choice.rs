@@ -40,7 +40,7 @@ pub struct KernelChoice {
     /// Native or portable.
     pub path: KernelPath,
     /// The networks' 3×3 product form on x86-64's native path: `f32x4` (the phone's 128-bit form),
-    /// `avx2`, `avx512`, `bf16` or `vnni` (`None`: the CPU's default). A form the CPU lacks is
+    /// `avx2`, `bf16` or `vnni` (`None`: the CPU's default). A form the CPU lacks is
     /// ignored.
     pub conv: Option<String>,
     /// The Lucas–Kanade windows' form on x86-64's native path: `avx2` or `avx512`, or `portable`
@@ -66,7 +66,7 @@ impl KernelChoice {
         let mut choice = KernelChoice::NATIVE;
         let bad = |what: &str| {
             Error::InvalidConfig(format!(
-                "kernel choice {spec:?}: {what} (expected native|portable[,conv=f32x4|avx2|avx512|bf16|vnni][,flow=portable|avx2|avx512])"
+                "kernel choice {spec:?}: {what} (expected native|portable[,conv=f32x4|avx2|bf16|vnni][,flow=portable|avx2|avx512])"
             ))
         };
         for (i, part) in spec.split(',').map(str::trim).enumerate() {
@@ -76,7 +76,7 @@ impl KernelChoice {
                     choice.path = KernelPath::Portable;
                 }
                 (_, Some(("conv", form)))
-                    if ["f32x4", "avx2", "avx512", "bf16", "vnni"].contains(&form) =>
+                    if ["f32x4", "avx2", "bf16", "vnni"].contains(&form) =>
                 {
                     choice.conv = Some(form.to_string());
                 }

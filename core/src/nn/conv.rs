@@ -14,8 +14,7 @@
 //! |---|---|---|
 //! | aarch64 (phones), and any x86-64 CPU on the portable path | f32 on 128-bit registers ([`Products::F32x4`]) | [`crate::kernels::conv3x3`] (NEON; its 128-bit twin on x86-64) |
 //! | x86-64, AMD with AVX-512 BF16 (Zen 4) | bf16 pairs summed in f32 (`vdpbf16ps`) for layers of more than one input channel | `kernels/conv3x3/avx.rs` |
-//! | x86-64, other CPUs with AVX-512 VNNI | int8 quads summed in i32 (`vpdpbusd`) for layers with int8 weights ([`Quads`]) | `kernels/conv3x3/avx.rs` |
-//! | x86-64, other CPUs with AVX-512F | f32 on 512-bit registers | `kernels/conv3x3/avx.rs` |
+//! | x86-64, other CPUs with AVX-512 VNNI | int8 quads summed in i32 (`vpdpbusd`) for layers with int8 weights ([`Quads`]), f32 on 512-bit registers for the others | `kernels/conv3x3/avx.rs` |
 //! | x86-64 with AVX2 + FMA | f32 on 256-bit registers | `kernels/conv3x3/avx.rs` |
 //!
 //! bf16 rounds inputs and weights to 8 significant bits and int8 rounds each layer's input to
@@ -75,8 +74,6 @@ pub(crate) const POSITIONS_512: usize = 8;
 pub(crate) enum Products {
     /// f32 FMAs on 256-bit registers (AVX2 + FMA).
     Avx2,
-    /// f32 FMAs on 512-bit registers (AVX-512F).
-    Avx512,
     /// bf16 pairs summed in f32 (AVX-512 BF16 + VL), for layers of more than one input channel.
     Bf16,
     /// u8 inputs times int8 weights, four products summed in an i32 lane by `vpdpbusd` (AVX-512
@@ -100,7 +97,6 @@ impl Products {
             use crate::kernels::cpu::{Avx512, has_avx2_fma, has_avx512, has_fma};
             match self {
                 Products::Avx2 => has_avx2_fma(),
-                Products::Avx512 => has_avx512(Avx512::F),
                 Products::Bf16 => has_avx512(Avx512::Bf16),
                 Products::Vnni => has_avx512(Avx512::Vnni),
                 // The twin needs FMA (without it the portable form's fused multiply-add is a
@@ -128,7 +124,7 @@ impl Products {
     #[cfg(test)]
     pub(crate) fn whole_graph_tolerance(self) -> f32 {
         match self {
-            Products::Avx2 | Products::Avx512 | Products::F32x4 => 1e-4,
+            Products::Avx2 | Products::F32x4 => 1e-4,
             Products::Bf16 => crate::nn::stem::BF16_TOLERANCE,
             Products::Vnni => INT8_TOLERANCE,
         }
@@ -137,8 +133,10 @@ impl Products {
 
 /// The form for this CPU, decided once (the table in the module notes); the kernel choice's
 /// `conv=FORM` ([`crate::kernels::KernelChoice`]) overrides it where the CPU has the named form.
-/// bf16 on AMD only: on Intel's AVX-512 parts `vdpbf16ps` runs at half the FMA's rate, and their
-/// two 512-bit FMA units make 512-bit f32 the faster form there.
+/// bf16 on AMD only: on Intel's AVX-512 parts `vdpbf16ps` runs at half the FMA's rate. f32 on
+/// 512-bit registers is no default of its own: it lost to the 256-bit form where it was measured
+/// (`BENCHMARKS.md`, "What each x86-64 form earns"); the int8 form keeps it for the layers it does
+/// not take.
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 fn chosen_products() -> Products {
     static CHOSEN: std::sync::OnceLock<Products> = std::sync::OnceLock::new();
@@ -148,7 +146,6 @@ fn chosen_products() -> Products {
             .as_deref()
             .and_then(|v| match v {
                 "avx2" => Some(Products::Avx2),
-                "avx512" => Some(Products::Avx512),
                 "bf16" => Some(Products::Bf16),
                 "vnni" => Some(Products::Vnni),
                 "f32x4" => Some(Products::F32x4),
@@ -167,24 +164,17 @@ fn chosen_products() -> Products {
         let amd = crate::kernels::cpu::is_amd().unwrap_or(false);
         #[cfg(not(target_arch = "x86_64"))]
         let amd = false;
-        products_for(
-            amd,
-            Products::Bf16.supported(),
-            Products::Avx512.supported(),
-            Products::Vnni.supported(),
-        )
+        products_for(amd, Products::Bf16.supported(), Products::Vnni.supported())
     })
 }
 
 /// The policy of [`chosen_products`], from the vendor and the forms the CPU has.
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-fn products_for(amd: bool, has_bf16: bool, has_avx512: bool, has_vnni: bool) -> Products {
+fn products_for(amd: bool, has_bf16: bool, has_vnni: bool) -> Products {
     if amd && has_bf16 {
         Products::Bf16
     } else if !amd && has_vnni {
         Products::Vnni
-    } else if !amd && has_avx512 {
-        Products::Avx512
     } else {
         Products::Avx2
     }
@@ -229,8 +219,8 @@ pub(crate) struct Conv3x3 {
     /// The form of [`crate::kernels::conv3x3`] the layer runs, where its products are
     /// [`Products::F32x4`].
     pub(crate) x4: Option<crate::kernels::conv3x3::Form>,
-    /// Whether the f32 products run on 512-bit registers ([`Products::Avx512`], and
-    /// [`Products::Vnni`] for the runs the int8 form does not take).
+    /// Whether the f32 products run on 512-bit registers: [`Products::Vnni`]'s layers and runs
+    /// that the int8 form does not take.
     pub(crate) wide: bool,
     /// How the input and the output are held ([`Self::interleave_input`],
     /// [`Self::interleave_output`]).
@@ -426,7 +416,7 @@ impl Conv3x3 {
             pairs,
             quads,
             x4: (form == Products::F32x4).then(crate::kernels::conv3x3::Form::for_this_cpu),
-            wide: matches!(form, Products::Avx512 | Products::Vnni),
+            wide: form == Products::Vnni,
             input_layout: Layout::Planar,
             output_layout: Layout::Planar,
             planar: Vec::new(),
@@ -681,7 +671,6 @@ thread_local! {
 pub(crate) fn product_forms() -> impl Iterator<Item = Products> + Clone {
     [
         Products::Avx2,
-        Products::Avx512,
         Products::Bf16,
         Products::Vnni,
         Products::F32x4,
@@ -803,17 +792,15 @@ mod tests {
         out
     }
 
-    /// bf16 on AMD CPUs with it, int8 on the other CPUs with AVX-512 VNNI, 512-bit f32 on the
-    /// other CPUs with AVX-512F, 256-bit f32 elsewhere.
+    /// bf16 on AMD CPUs with it, int8 on the other CPUs with AVX-512 VNNI, 256-bit f32 elsewhere.
     #[test]
-    fn the_policy_picks_bf16_on_amd_and_int8_or_512_bit_f32_on_other_avx512_cpus() {
-        assert_eq!(products_for(true, true, true, true), Products::Bf16);
-        assert_eq!(products_for(true, false, true, true), Products::Avx2);
-        assert_eq!(products_for(true, false, false, false), Products::Avx2);
-        assert_eq!(products_for(false, true, true, true), Products::Vnni);
-        assert_eq!(products_for(false, true, true, false), Products::Avx512);
-        assert_eq!(products_for(false, false, true, false), Products::Avx512);
-        assert_eq!(products_for(false, false, false, false), Products::Avx2);
+    fn the_policy_picks_bf16_on_amd_and_int8_on_other_avx512_vnni_cpus() {
+        assert_eq!(products_for(true, true, true), Products::Bf16);
+        assert_eq!(products_for(true, false, true), Products::Avx2);
+        assert_eq!(products_for(true, false, false), Products::Avx2);
+        assert_eq!(products_for(false, true, true), Products::Vnni);
+        assert_eq!(products_for(false, true, false), Products::Avx2);
+        assert_eq!(products_for(false, false, false), Products::Avx2);
     }
 
     #[test]
@@ -855,7 +842,7 @@ mod tests {
                 assert_eq!(layer.is_bf16(), form.is_bf16() && cin >= 2);
                 assert_eq!(
                     layer.wide,
-                    matches!(form, Products::Avx512 | Products::Vnni)
+                    form == Products::Vnni
                 );
                 let rel = if layer.is_bf16() { 2f32.powi(-8) } else { 0.0 };
                 let got = run_unbordered(&mut layer, &maps, (h, w));
