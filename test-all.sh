@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Runs every test of the project from one build: the Rust workspace (unit, golden, cross-crate and
-# CLI tests, the generated Swift against its snapshot, the committed fuzz corpora), the kernels and
-# the M3 golden cases a second time on the portable path (MONOTRACK_KERNELS=portable: the choices
-# an aarch64 phone makes; the same test executables, run again), then the generated Kotlin on the
-# JVM (bindings/tests/run-kotlin.sh, against the FFI library this build made), and the docs' generated
+# CLI tests, the committed fuzz corpora), the kernels and the M3 golden cases a second time on the
+# portable path (MONOTRACK_KERNELS=portable: the choices an aarch64 phone makes; the same test
+# executables, run again), then the generated Kotlin on the
+# JVM (bindings/tests/run-kotlin.sh, against the FFI library this build made), the generated Swift
+# with ios/'s wrappers and XCTests on Linux (bindings/tests/run-swift.sh, against the same library;
+# its first run makes a Debian trixie root with Swift in target/swift-root), and the docs' generated
 # tables against the metrics files they are written from (tests/scripts/docs_tables.py). Ends with a summary:
 # how many tests passed, failed and were ignored, and why. Tests that need ../shared/data are
 # ignored, with that reason, where it is absent (a fresh clone); where it is present none may be.
@@ -49,6 +51,10 @@ echo "== the Kotlin bindings on the JVM"
 bash bindings/tests/run-kotlin.sh 2>&1 | tee "$LOGS/kotlin.log"
 kotlin_rc=${PIPESTATUS[0]}
 
+echo "== the Swift bindings and ios/ wrappers on Linux (swift test)"
+bash bindings/tests/run-swift.sh 2>&1 | tee "$LOGS/swift.log"
+swift_rc=${PIPESTATUS[0]}
+
 echo "== the docs' generated tables against their metrics files (tests/scripts/docs_tables.py)"
 { python3 tests/scripts/docs_tables.py --check && python3 tests/scripts/docs_tables.py --self-test; } \
   2>&1 | tee "$LOGS/docs.log"
@@ -62,9 +68,10 @@ echo "== summary: $(( (end - start) / 60 )) min $(( (end - start) % 60 )) s ($((
 python3 tests/scripts/test_summary.py "native=$LOGS/rust.log" "portable path=$LOGS/portable.log" "${strict[@]}"
 summary_rc=$?
 grep -h '^kotlin: ' "$LOGS/kotlin.log" | tail -1 || echo "kotlin: no result line"
+grep -h '^swift: ' "$LOGS/swift.log" | tail -1 || echo "swift: no result line"
 grep -h -E '^docs( self-test)?: ' "$LOGS/docs.log" || echo "docs: no result line"
 status=0
-for v in rust_rc portable_rc kotlin_rc docs_rc summary_rc; do
+for v in rust_rc portable_rc kotlin_rc swift_rc docs_rc summary_rc; do
   [ "${!v}" -eq 0 ] || { echo "FAILED: ${v%_rc}"; status=1; }
 done
 [ "$status" -eq 0 ] && echo "all passed"

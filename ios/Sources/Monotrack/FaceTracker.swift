@@ -1,7 +1,9 @@
-import CoreMedia
-import CoreVideo
 import Foundation
 @_exported import MonotrackFFI
+#if canImport(CoreMedia) && canImport(CoreVideo)
+import CoreMedia
+import CoreVideo
+#endif
 
 /// Tracks faces in camera frames: the idiomatic Swift face of the generated
 /// `MonotrackFFI.FaceTracker`.
@@ -36,6 +38,7 @@ public final class FaceTracker: @unchecked Sendable {
         videoMode = config.runningMode == .video
     }
 
+    #if canImport(CoreMedia) && canImport(CoreVideo)
     /// Tracks faces in a camera sample buffer (its image buffer and presentation timestamp).
     ///
     /// - Parameter orientation: how to make the buffer upright, e.g.
@@ -72,6 +75,7 @@ public final class FaceTracker: @unchecked Sendable {
             try native.processImage(bytes: data, desc: desc)
         }
     }
+    #endif
 
     /// Tracks faces in described bytes (any `PixelFormat`); in image mode every call detects afresh.
     ///
@@ -111,9 +115,11 @@ public final class FaceTracker: @unchecked Sendable {
         native.resetGazeCalibration()
     }
 
+    #if canImport(CoreMedia)
     /// `time` in nanoseconds (0 for an invalid time, which the timestamp guard then moves forward).
     static func nanoseconds(_ time: CMTime) -> Int64 {
         guard time.isValid, time.isNumeric else { return 0 }
         return CMTimeConvertScale(time, timescale: 1_000_000_000, method: .roundHalfAwayFromZero).value
     }
+    #endif
 }

@@ -1,8 +1,16 @@
-// Pure mapping logic (no CoreVideo calls) so it is unit-testable without a camera.
-import CoreGraphics
+// Pure mapping logic (no CoreVideo calls) so it is unit-testable without a camera, and builds on
+// Linux too (bindings/tests/run-swift.sh): only the EXIF orientation needs ImageIO.
 import Foundation
-import ImageIO
 import MonotrackFFI
+#if canImport(ImageIO)
+import CoreGraphics
+import ImageIO
+#endif
+
+#if !canImport(Darwin)
+/// A CoreVideo pixel format code, as MacTypes' `OSType` (Linux has no MacTypes).
+public typealias OSType = UInt32
+#endif
 
 /// Errors raised by the wrapper before a frame reaches the SDK. Errors from the SDK itself are
 /// `MonotrackError` (invalid frame, invalid config, model load, internal).
@@ -72,6 +80,7 @@ public struct FrameOrientation: Equatable, Sendable {
         self.init(uncheckedDegrees: UInt32(q * 90), mirrored: mirrored)
     }
 
+    #if canImport(ImageIO)
     /// The orientation that displays an image tagged with EXIF orientation `orientation` upright
     /// (still photos, `CGImageSource` properties, Vision's convention).
     ///
@@ -91,6 +100,7 @@ public struct FrameOrientation: Equatable, Sendable {
         @unknown default: self.init(uncheckedDegrees: 0, mirrored: false)
         }
     }
+    #endif
 
     /// The orientation for a camera buffer delivered unrotated, given the clockwise angle that makes
     /// it upright: `AVCaptureDevice.RotationCoordinator.videoRotationAngleForHorizonLevelCapture`

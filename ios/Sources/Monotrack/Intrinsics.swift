@@ -1,11 +1,15 @@
+import Foundation
+import MonotrackFFI
+#if canImport(CoreMedia)
 import AVFoundation
 import CoreMedia
-import Foundation
 import simd
+#endif
 
 /// Camera intrinsics for `TrackerConfig.camera`. The SDK wants them for the buffer as delivered
 /// (before rotation and mirroring), in that buffer's pixels; it turns them with each frame.
 extension CameraIntrinsics {
+    #if canImport(CoreMedia)
     /// The intrinsic matrix the camera attaches to a frame, already in the buffer's pixels. Attached
     /// when `AVCaptureConnection.isCameraIntrinsicMatrixDeliveryEnabled` is on (check
     /// `isCameraIntrinsicMatrixDeliverySupported` first); `nil` otherwise.
@@ -20,6 +24,7 @@ extension CameraIntrinsics {
         guard fx > 0, fy > 0, fx.isFinite, fy.isFinite, cx.isFinite, cy.isFinite else { return nil }
         self.init(fx: fx, fy: fy, cx: cx, cy: cy)
     }
+    #endif
 
     /// Intrinsics for a horizontal field of view of `fieldOfViewDegrees` across a `width`×`height`
     /// buffer, principal point centred (for example from `AVCaptureDevice.activeFormat.videoFieldOfView`

@@ -1,7 +1,9 @@
-import CoreMedia
-import CoreVideo
 import Foundation
 @_exported import MonotrackFFI
+#if canImport(CoreMedia) && canImport(CoreVideo)
+import CoreMedia
+import CoreVideo
+#endif
 
 /// What a `LiveTracker` delivers for one frame.
 public enum LiveEvent: Sendable {
@@ -47,6 +49,7 @@ public final class LiveTracker: @unchecked Sendable {
         continuation.finish()
     }
 
+    #if canImport(CoreMedia) && canImport(CoreVideo)
     /// Submits a camera sample buffer (its image buffer and presentation time) and returns at once.
     ///
     /// - Returns: `true` when a frame still waiting was replaced by this one.
@@ -61,6 +64,17 @@ public final class LiveTracker: @unchecked Sendable {
         return try pixelBuffer.withMonotrackFrame(orientation: orientation) { data, desc in
             try native.processAsync(bytes: data, desc: desc, timestampNs: timestamps.next(t))
         }
+    }
+    #endif
+
+    /// Submits described bytes (any `PixelFormat`; copied before it returns) taken at `timestampNs`
+    /// and returns at once. A repeated or earlier time becomes the previous one plus 1 ns.
+    ///
+    /// - Returns: `true` when a frame still waiting was replaced by this one.
+    /// - Throws: `MonotrackError.InvalidFrame` for bytes that do not match `desc`, or after `shutdown()`.
+    @discardableResult
+    public func process(bytes: Data, desc: FrameDesc, timestampNs: Int64) throws -> Bool {
+        try native.processAsync(bytes: bytes, desc: desc, timestampNs: timestamps.next(timestampNs))
     }
 
     /// Sets the targets each face's point of gaze is located among (as `FaceTracker.setGazeTargets`);

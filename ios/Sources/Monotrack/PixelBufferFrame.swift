@@ -1,3 +1,5 @@
+// CoreVideo exists on Apple platforms only: on Linux (bindings/tests/run-swift.sh) this file is empty.
+#if canImport(CoreVideo)
 import CoreVideo
 import Foundation
 import MonotrackFFI
@@ -42,3 +44,4 @@ extension CVPixelBuffer {
         return try body(data, desc)
     }
 }
+#endif

@@ -1,7 +1,10 @@
 // Helpers for drawing results. Conventions (CONTRACT.md at the repository root): image pixels of the upright,
 // mirrored-as-asked frame, x right, y down, origin at the top-left corner of the top-left pixel;
 // camera frame x right, y down, z forward, millimetres; the pose maps model X to R·X + t.
+// CGPoint, CGSize and CGFloat come from CoreGraphics on Apple platforms, from Foundation elsewhere.
+#if canImport(CoreGraphics)
 import CoreGraphics
+#endif
 import Foundation
 import MonotrackFFI
 

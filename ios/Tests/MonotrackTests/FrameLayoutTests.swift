@@ -1,5 +1,8 @@
+#if canImport(ImageIO)
 import CoreGraphics
 import ImageIO
+#endif
+import Foundation
 import XCTest
 @testable import Monotrack
 
@@ -34,6 +37,7 @@ final class FrameLayoutTests: XCTestCase {
         }
     }
 
+    #if canImport(ImageIO)
     func testExifOrientationsMapToRotateThenMirror() {
         let expected: [(CGImagePropertyOrientation, UInt32, Bool)] = [
             (.up, 0, false), (.upMirrored, 0, true), (.down, 180, false), (.downMirrored, 180, true),
@@ -45,6 +49,7 @@ final class FrameLayoutTests: XCTestCase {
             XCTAssertEqual(o.mirrored, mirrored, "\(exif)")
         }
     }
+    #endif
 
     func testRotationAnglesNormaliseAndRejectNonQuarterTurns() throws {
         XCTAssertEqual(try FrameOrientation(videoRotationAngle: 90, frontCamera: true).rotationDegrees, 90)
@@ -89,7 +94,7 @@ final class ResultHelperTests: XCTestCase {
     }
 
     func testBenchTableIsInMilliseconds() {
-        let r = BenchReport(device: "t", iterations: 3, stages: [StageStat(name: "landmarks", medianUs: 1234, p90Us: 2000, meanUs: 1300)])
+        let r = BenchReport(device: "t", iterations: 3, modelLoadUs: 0, stages: [StageStat(name: "landmarks", medianUs: 1234, p90Us: 2000, meanUs: 1300)])
         let lines = r.table.split(separator: "\n")
         XCTAssertEqual(lines.count, 2)
         XCTAssertEqual(lines[1].split(separator: " ").map(String.init), ["landmarks", "1.23", "2.00"])
