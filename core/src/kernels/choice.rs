@@ -75,9 +75,7 @@ impl KernelChoice {
                 (0, None) if part.eq_ignore_ascii_case("portable") => {
                     choice.path = KernelPath::Portable;
                 }
-                (_, Some(("conv", form)))
-                    if ["f32x4", "avx2", "bf16", "vnni"].contains(&form) =>
-                {
+                (_, Some(("conv", form))) if ["f32x4", "avx2", "bf16", "vnni"].contains(&form) => {
                     choice.conv = Some(form.to_string());
                 }
                 (_, Some(("flow", form))) if ["portable", "avx2", "avx512"].contains(&form) => {

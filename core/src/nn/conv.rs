@@ -805,7 +805,7 @@ mod tests {
 
     #[test]
     #[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]
-    fn matches_the_definition_with_a_zero_border() {
+    fn the_avx2_forms_match_the_definition_with_a_zero_border() {
         crate::kernels::cpu::assert_avx2_fma_path();
         // Strides 1 and 2, odd and even sides, a partial channel block (24 = 16 + 8), position
         // counts that leave every remainder of six (the 256-bit kernels) and of eight (the
@@ -840,10 +840,7 @@ mod tests {
             for form in product_forms() {
                 let mut layer = building(form, || Conv3x3::new(batch, cin, h, w, &weights, pad));
                 assert_eq!(layer.is_bf16(), form.is_bf16() && cin >= 2);
-                assert_eq!(
-                    layer.wide,
-                    form == Products::Vnni
-                );
+                assert_eq!(layer.wide, form == Products::Vnni);
                 let rel = if layer.is_bf16() { 2f32.powi(-8) } else { 0.0 };
                 let got = run_unbordered(&mut layer, &maps, (h, w));
                 let [_, _, ph, pw] = layer.output_shape();
@@ -906,7 +903,7 @@ mod tests {
         not(host_avx512_vnni),
         ignore = "this CPU runs no AVX-512 VNNI kernels"
     )]
-    fn int8_layers_match_the_definition_within_the_input_quantisation() {
+    fn the_avx512_vnni_int8_layers_match_the_definition_within_the_input_quantisation() {
         assert!(
             Products::Vnni.supported(),
             "the AVX-512 VNNI kernels do not run here (no such CPU, or the portable path)"
@@ -1005,7 +1002,8 @@ mod tests {
     /// planar chain, and an input u8 cannot hold goes through the f32 kernel on a planar copy
     /// with the bits of the planar run.
     #[test]
-    fn interleaved_buffers_give_the_bits_of_planar_ones() {
+    #[cfg_attr(not(host_avx2_fma), ignore = "this CPU runs no AVX2 + FMA kernels")]
+    fn the_avx2_and_int8_interleaved_buffers_give_the_bits_of_planar_ones() {
         crate::kernels::cpu::assert_avx2_fma_path();
         let forms: Vec<_> = [Products::Vnni, Products::Avx2]
             .into_iter()
