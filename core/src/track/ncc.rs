@@ -10,10 +10,9 @@
 //!
 //! Coarse to fine: where the template is at least 16 cells a side, every offset is scored at half
 //! that scale (2×2 means of the cells: a quarter of the offsets, each a quarter of the work) and
-//! only 4×4 fine offsets around each of the three best coarse peaks at the fine one
-//! (`ncc_search_640x480`: 75 → 37 µs, 32 µs with the decimation's AVX2 copy, 27 µs with the cell
-//! means' group width known at compile time and integral images four rows at a time; the same
-//! peaks as the exhaustive search in the tests). The
+//! only 4×4 fine offsets around each of the three best coarse peaks at the fine one (the same
+//! peaks as the exhaustive search in the tests; `ncc_search_640x480` in `BENCHMARKS.md` times
+//! it). The
 //! peak is refined to sub-pixel by a parabola through its neighbours along x and y, and the shift is
 //! returned in full-resolution pixels.
 //!
@@ -635,8 +634,8 @@ fn decimate_bands<T>(
     band.clear();
     band.resize(cols * f, T::default());
     // Columns a chunk at a time, the chunk's sums kept in registers over the band's rows: summing
-    // whole rows into the band instead loaded and stored it once per row (measured 52 % of an HD
-    // search, mostly that store).
+    // whole rows into the band instead loaded and stored it once per row, and that store
+    // dominated a large search.
     const CHUNK: usize = 32;
     for r in 0..rows {
         let srcs = (0..f).map(|dy| &image.row(y0 + r * f + dy)[x0..x0 + cols * f]);
