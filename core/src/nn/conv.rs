@@ -86,6 +86,7 @@ pub(crate) enum Products {
 }
 
 /// Largest u8 step of the [`Products::Vnni`] form's inputs (`vpdpbusd` sums in i32).
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) const VNNI_LEVELS: i32 = 255;
 
 impl Products {
