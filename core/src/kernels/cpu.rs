@@ -3,6 +3,7 @@
 //! state tract's x86-64 assembly leaves dirty, and the AVX2 byte loads and stores the pixel kernels
 //! share. Every `std::arch` use of the library outside the kernels' own folders is here.
 
+#[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
 use super::{KernelPath, kernel_path};
 
 /// Whether the CPU's vendor string is AMD's (`None` where CPUID gives none): which kind of 3×3

@@ -129,6 +129,10 @@ impl Form {
 
     /// Every form this CPU can run (for the tests).
     #[cfg(test)]
+    #[cfg_attr(
+        not(any(target_arch = "x86_64", target_arch = "aarch64")),
+        allow(unused_mut)
+    )]
     pub(crate) fn all() -> Vec<Self> {
         let mut forms = vec![Form::Portable];
         #[cfg(target_arch = "aarch64")]
