@@ -141,6 +141,54 @@ pub(crate) fn has_avx512(features: Avx512) -> bool {
         }
 }
 
+/// Which form a pixel kernel with AVX2 and AVX-512F forms beside its portable one runs (the
+/// patch warps and the bilateral filter).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum PixelForm {
+    /// Plain Rust: the reference.
+    Portable,
+    /// AVX2 + FMA.
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    /// AVX-512F, AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+}
+
+impl PixelForm {
+    /// The widest form this CPU runs on the process's kernel path (the portable one on aarch64
+    /// and on the portable path).
+    pub(crate) fn for_this_cpu() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if has_avx512(Avx512::F) {
+                return PixelForm::Avx512;
+            }
+            if has_avx2_fma() {
+                return PixelForm::Avx2;
+            }
+        }
+        PixelForm::Portable
+    }
+
+    /// Every form this CPU runs on the process's kernel path (for the tests).
+    #[cfg(test)]
+    pub(crate) fn all() -> Vec<Self> {
+        #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))]
+        let mut forms = vec![PixelForm::Portable];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if has_avx2_fma() {
+                forms.push(PixelForm::Avx2);
+            }
+            if has_avx512(Avx512::F) {
+                forms.push(PixelForm::Avx512);
+            }
+        }
+        forms
+    }
+}
+
 /// Whether the CPU has FMA, on either path (x86-64's portable path runs the NEON forms' 128-bit
 /// twins, which need it).
 #[cfg(target_arch = "x86_64")]

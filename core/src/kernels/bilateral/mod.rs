@@ -16,54 +16,7 @@
 #[cfg(target_arch = "x86_64")]
 mod x86_64;
 
-/// Which form [`Filter::run`] takes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Form {
-    /// Plain Rust: the reference.
-    Portable,
-    /// AVX2 + FMA.
-    #[cfg(target_arch = "x86_64")]
-    Avx2,
-    /// AVX-512F, AVX2 and FMA.
-    #[cfg(target_arch = "x86_64")]
-    Avx512,
-}
-
-impl Form {
-    /// The widest form this CPU runs on the process's kernel path (the portable one on aarch64
-    /// and on the portable path).
-    fn for_this_cpu() -> Self {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use crate::kernels::cpu::{Avx512, has_avx2_fma, has_avx512};
-            if has_avx512(Avx512::F) {
-                return Form::Avx512;
-            }
-            if has_avx2_fma() {
-                return Form::Avx2;
-            }
-        }
-        Form::Portable
-    }
-
-    /// Every form this CPU runs on the process's kernel path (for the tests).
-    #[cfg(test)]
-    fn all() -> Vec<Self> {
-        #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))]
-        let mut forms = vec![Form::Portable];
-        #[cfg(target_arch = "x86_64")]
-        {
-            use crate::kernels::cpu::{Avx512, has_avx2_fma, has_avx512};
-            if has_avx2_fma() {
-                forms.push(Form::Avx2);
-            }
-            if has_avx512(Avx512::F) {
-                forms.push(Form::Avx512);
-            }
-        }
-        forms
-    }
-}
+use crate::kernels::cpu::PixelForm as Form;
 
 /// One filtering: the padded image and the tables every form reads.
 #[derive(Debug, Clone, Copy)]
