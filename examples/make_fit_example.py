@@ -2,12 +2,20 @@
 """Writes examples/fit_example.jsonl: landmarks projected from monotrack's own face model
 (core/models/face_model/face_model.json) at known poses, shapes and expressions, with 0.5 px noise
 (seed fixed). The true pose rides along in each line's "truth" field (ignored by `monotrack fit`),
-so the README's main command can be checked by eye."""
-import json, math, os, random
+so the README's main command can be checked by eye; its angles are the head frame's (CONTRACT.md),
+those the CLI reports, so the model is turned by R(truth) times the head frame's constant pitch
+undone (core/src/fit/pose.rs, HEAD_FRAME_PITCH_DEG)."""
+import json, math, os, random, re
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 model = json.load(open(os.path.join(HERE, "../core/models/face_model/face_model.json")))
 rng = random.Random(7)
+HEAD_PITCH = float(re.search(r"pub const HEAD_FRAME_PITCH_DEG: f64 = ([-0-9.eE]+);",
+                             open(os.path.join(HERE, "../core/src/fit/pose.rs")).read()).group(1))
+
+
+def mm(a, b):
+    return [[sum(a[i][k] * b[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
 
 
 def rot(yaw, pitch, roll):
@@ -15,13 +23,12 @@ def rot(yaw, pitch, roll):
     rx = [[1, 0, 0], [0, math.cos(p), -math.sin(p)], [0, math.sin(p), math.cos(p)]]
     ry = [[math.cos(y), 0, math.sin(y)], [0, 1, 0], [-math.sin(y), 0, math.cos(y)]]
     rz = [[math.cos(r), -math.sin(r), 0], [math.sin(r), math.cos(r), 0], [0, 0, 1]]
-    mm = lambda a, b: [[sum(a[i][k] * b[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
     return mm(rz, mm(ry, rx))
 
 
 def face(yaw, pitch, roll, t, shape, anim, w, h):
     f = 0.9 * max(w, h)
-    R = rot(yaw, pitch, roll)
+    R = mm(rot(yaw, pitch, roll), rot(0, -HEAD_PITCH, 0))
     pts = []
     for i in range(68):
         g = list(model["mean"][i])
