@@ -19,6 +19,7 @@
 //! network's one-channel first layer runs outside tract (`crate::nn::stem`, found in the graph at load).
 //! One face = one call; run one `M3` per thread (it is `Send`).
 
+pub mod eyes;
 pub mod filter;
 pub mod gradient;
 mod m3;
