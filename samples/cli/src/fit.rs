@@ -2,7 +2,7 @@
 //! given landmarks (CONTRACT.md). One output line per input line; a malformed line yields
 //! `{"line": N, "error": "..."}` in its place, a message on stderr, and exit status 1 at the end.
 
-use crate::json::{CameraJson, intrinsics, put_fit};
+use crate::json::{CameraJson, intrinsics, put_eyes, put_fit};
 use crate::{LineSink, read_lines};
 use monotrack_core::fit::{Ffbp, FfbpConfig, Msbp, MsbpConfig};
 use monotrack_core::model::N_LANDMARKS;
@@ -64,6 +64,8 @@ fn fit_line(text: &str, method: Method, f: &mut Fitters) -> Result<Value, String
         }
         .map_err(|e| format!("face {k}: {e}"))?;
         let mut out = Map::new();
+        let pts32 = pts.map(|[x, y]| [x as f32, y as f32]);
+        put_eyes(&mut out, &pts32, &w.map(|v| v as f32));
         put_fit(&mut out, &fit);
         faces.push(Value::Object(out));
     }

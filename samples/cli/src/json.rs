@@ -3,6 +3,8 @@
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::fit::FaceFit;
 use monotrack_core::gaze::{PointOfGaze, Target, targets_from_json};
+use monotrack_core::landmarks::N_POINTS;
+use monotrack_core::landmarks::eyes::eye_openness;
 use monotrack_core::model::{ANIM_UNIT_NAMES, SHAPE_UNIT_NAMES};
 use serde::Deserialize;
 use serde_json::{Map, Value, json};
@@ -68,7 +70,24 @@ pub fn put_point_of_gaze(face: &mut Map<String, Value>, g: &PointOfGaze, targets
     );
 }
 
-/// Adds `pose`, `shape_units`, `action_units`, `fit_rms_px` (and `fit_report`) to a FACE object.
+/// Adds `eyes` to a FACE object: each of the subject's eyes' openness from its six landmarks, or
+/// `null` when any of the twelve is not measured (weight 0: the gradient detector has no lid
+/// midpoints).
+pub fn put_eyes(face: &mut Map<String, Value>, points: &[[f32; 2]; N_POINTS], weights: &[f32]) {
+    let measured = weights
+        .get(36..48)
+        .is_some_and(|w| w.iter().all(|w| *w > 0.0));
+    let eyes = if measured {
+        let o = eye_openness(points);
+        json!({"left_open": round(f64::from(o.left), 4), "right_open": round(f64::from(o.right), 4)})
+    } else {
+        Value::Null
+    };
+    face.insert("eyes".into(), eyes);
+}
+
+/// Adds `pose`, `transform`, `shape_units`, `action_units`, `fit_rms_px` (and `fit_report`) to a
+/// FACE object.
 pub fn put_fit(face: &mut Map<String, Value>, fit: &FaceFit) {
     let r = &fit.pose.rotation;
     let t = &fit.pose.translation;
@@ -80,6 +99,17 @@ pub fn put_fit(face: &mut Map<String, Value>, fit: &FaceFit) {
             "translation_mm": [round(t.x, 2), round(t.y, 2), round(t.z, 2)],
             "yaw_deg": round(yaw, 3), "pitch_deg": round(pitch, 3), "roll_deg": round(roll, 3),
         }),
+    );
+    // Rotation entries to the same digits as `rotation`, the translation's as `translation_mm`.
+    let m = fit.pose.transform();
+    face.insert(
+        "transform".into(),
+        json!(
+            m.iter()
+                .enumerate()
+                .map(|(k, v)| round(*v, if k % 4 == 3 { 2 } else { 6 }))
+                .collect::<Vec<_>>()
+        ),
     );
     let units = |names: &[&str], vals: &[f64]| {
         Value::Object(

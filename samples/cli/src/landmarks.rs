@@ -15,7 +15,7 @@
 //! Detected faces are those the detector scores at or above the tracker's detection score (no
 //! face classifier runs).
 
-use crate::json::{CameraJson, intrinsics, put_fit, put_point_of_gaze};
+use crate::json::{CameraJson, intrinsics, put_eyes, put_fit, put_point_of_gaze};
 use crate::{LineSink, read_lines};
 use monotrack_core::detect::DetectorConfig;
 use monotrack_core::fit::{Ffbp, FfbpConfig, Msbp, MsbpConfig};
@@ -191,6 +191,7 @@ fn face_json(rect: &Rect, score: f32, lm: &FaceLandmarks) -> Map<String, Value> 
         ),
     );
     face.insert("face_prob".into(), json!(round(f64::from(lm.face_prob), 4)));
+    put_eyes(&mut face, &lm.points, &lm.weights);
     if lm.weights.contains(&0.0) {
         for k in ["yaw_class_deg", "yaw_probs", "gestures", "gaze"] {
             face.insert(k.into(), Value::Null);

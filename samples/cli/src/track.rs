@@ -6,7 +6,7 @@
 //! estimator.
 
 use crate::LineSink;
-use crate::json::{put_fit, put_point_of_gaze};
+use crate::json::{put_eyes, put_fit, put_point_of_gaze};
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::gaze::Target;
 use monotrack_core::image::GrayImage;
@@ -453,6 +453,7 @@ pub fn face_json(face: &TrackedFace, targets: Option<&[Target]>) -> Value {
                 .collect(),
         ),
     );
+    put_eyes(&mut m, &lm.points, &lm.weights);
     if gradient {
         for k in ["yaw_class_deg", "yaw_probs", "gestures", "gaze"] {
             m.insert(k.into(), Value::Null);

@@ -44,6 +44,34 @@ fn fit_example_recovers_the_known_poses() {
         assert_eq!(face["action_units"].as_object().unwrap().len(), 6);
         assert!(face["pose"]["rotation"].as_array().unwrap().len() == 3);
         assert!(face["fit_rms_px"].as_f64().unwrap() < 2.0);
+        // `transform` holds the head rotation the reported angles are those of (R = Rz·Ry·Rx).
+        let m: Vec<f64> = face["transform"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(m.len(), 16);
+        assert_eq!(m[12..], [0.0, 0.0, 0.0, 1.0]);
+        let (yaw, pitch, roll) = (
+            (-m[8]).asin().to_degrees(),
+            m[9].atan2(m[10]).to_degrees(),
+            m[4].atan2(m[0]).to_degrees(),
+        );
+        for (key, v) in [("yaw_deg", yaw), ("pitch_deg", pitch), ("roll_deg", roll)] {
+            let reported = face["pose"][key].as_f64().unwrap();
+            assert!((v - reported).abs() < 0.01, "{key}: {v} vs {reported}");
+        }
+        // The model's mean face has open eyes.
+        for e in ["left_open", "right_open"] {
+            assert!(face["eyes"][e].as_f64().unwrap() > 0.5, "{e}");
+        }
+    }
+    // The first face looks straight into the camera: the identity rotation.
+    let first: serde_json::Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
+    let m = &first["faces"][0]["transform"];
+    for (i, j) in [(0, 0), (1, 1), (2, 2)] {
+        assert!(m[4 * i + j].as_f64().unwrap() > 0.999, "{m}");
     }
     assert_eq!(text.lines().count(), 3);
 }

@@ -37,6 +37,11 @@ fn check_face(f: &Value) {
     assert_eq!(t["nearest"], "phone");
     assert_eq!(t["hit"].as_bool().unwrap(), t["id"] == "phone");
     assert!(t["distance_mm"].as_f64().unwrap() >= 0.0);
+    // The rest of the FACE is there too, the head transform and the eyes included.
+    assert_eq!(f["transform"].as_array().unwrap().len(), 16);
+    for e in ["left_open", "right_open"] {
+        assert!(f["eyes"][e].as_f64().unwrap() > 0.5, "{e}: {}", f["eyes"]);
+    }
 }
 
 #[test]

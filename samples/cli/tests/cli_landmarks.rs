@@ -45,6 +45,28 @@ fn centred_on_the_face(face: &serde_json::Value) -> bool {
     cx > b[0] && cx < b[0] + b[2] && cy > b[1] && cy < b[1] + b[3]
 }
 
+/// The CONTRACT's `transform`: 16 numbers, a rotation over `translation_mm`, last row 0 0 0 1.
+fn check_transform(f: &serde_json::Value) {
+    let m: Vec<f64> = f["transform"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(m.len(), 16);
+    assert_eq!(m[12..], [0.0, 0.0, 0.0, 1.0]);
+    for i in 0..3 {
+        assert_eq!(
+            m[4 * i + 3],
+            f["pose"]["translation_mm"][i].as_f64().unwrap()
+        );
+        for j in 0..3 {
+            let dot: f64 = (0..3).map(|k| m[4 * i + k] * m[4 * j + k]).sum();
+            assert!((dot - f64::from(u8::from(i == j))).abs() < 1e-4, "{m:?}");
+        }
+    }
+}
+
 fn norm(v: &serde_json::Value) -> f64 {
     v.as_array()
         .unwrap()
@@ -124,6 +146,13 @@ fn landmarks_on_given_boxes_follow_the_contract() {
                 assert!((norm(&f["gaze"][g]) - 1.0).abs() < 1e-3, "gaze {g}");
             }
             assert_eq!(f["pose"]["rotation"].as_array().unwrap().len(), 3);
+            check_transform(f);
+            // The sample face's eyes are open.
+            for e in ["left_open", "right_open"] {
+                let p = f["eyes"][e].as_f64().unwrap();
+                assert!(p > 0.5 && p <= 1.0, "{e} {p}");
+            }
+            assert_eq!(f["eyes"].as_object().unwrap().len(), 2);
             assert_eq!(f["shape_units"].as_object().unwrap().len(), 11);
             assert_eq!(f["action_units"].as_object().unwrap().len(), 6);
             assert!(f["fit_rms_px"].as_f64().unwrap().is_finite());
@@ -301,7 +330,7 @@ fn small_faces_detects_the_face_first_and_keeps_the_contract() {
 }
 
 /// `--landmarks gradient`: the CONTRACT's gradient-mode FACE (32 points with confidences, 68 with
-/// `null` where there is no counterpart, a fit, no M3 fields), its points around the face M3
+/// `null` where there is no counterpart, a fit and its transform, no M3 fields or eyes), its points around the face M3
 /// finds on the same box, and the detector's faces without a box.
 #[test]
 fn gradient_mode_follows_the_contract_on_the_face() {
@@ -343,10 +372,11 @@ fn gradient_mode_follows_the_contract_on_the_face() {
     assert_eq!(l68.len(), 68);
     let present: Vec<usize> = (0..68).filter(|&k| !l68[k].is_null()).collect();
     assert_eq!(present.len(), 27, "{present:?}");
-    for k in ["yaw_class_deg", "yaw_probs", "gestures", "gaze"] {
+    for k in ["yaw_class_deg", "yaw_probs", "gestures", "gaze", "eyes"] {
         assert!(g[k].is_null(), "{k}");
     }
     assert!(g["pose"].is_object() && g["fit_rms_px"].as_f64().unwrap().is_finite());
+    check_transform(g);
     // On the face M3 finds on the same box: the points' mean within three quarters of the eye
     // distance of M3's, each point within two eye distances. (A bound on gross failure only: on
     // real faces the detector is far less accurate than M3, core/models/gradient_metrics.json.)
@@ -396,8 +426,8 @@ fn gradient_mode_follows_the_contract_on_the_face() {
 }
 
 /// `track --landmarks gradient`: the ultra-light tracker over a frame directory; each FACE's
-/// `landmarks68` has the 27 measured points and `null` elsewhere, the M3-only fields are `null`,
-/// and there is a fit.
+/// `landmarks68` has the 27 measured points and `null` elsewhere, the M3-only fields and `eyes`
+/// are `null`, and there is a fit with its transform.
 #[test]
 fn track_in_gradient_mode_reports_the_measured_points() {
     let dir = dir_with_astronaut("track-grad");
@@ -427,7 +457,8 @@ fn track_in_gradient_mode_reports_the_measured_points() {
         assert!(centred_on_the_face(face), "{face}");
         let l68 = face["landmarks68"].as_array().unwrap();
         assert_eq!(l68.iter().filter(|p| !p.is_null()).count(), 27);
-        assert!(face["gestures"].is_null() && face["gaze"].is_null());
+        assert!(face["gestures"].is_null() && face["gaze"].is_null() && face["eyes"].is_null());
         assert!(face["fit_rms_px"].as_f64().unwrap().is_finite());
+        check_transform(face);
     }
 }
