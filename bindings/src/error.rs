@@ -6,10 +6,24 @@ use monotrack_core::Error as CoreError;
 /// purpose: apps branch on the kind, the message says what exactly was wrong.
 #[derive(Debug, thiserror::Error, uniffi::Error)]
 pub enum MonotrackError {
-    /// The frame's bytes do not match its description (size, strides, format, zero size), or its
-    /// timestamp went backwards in video mode.
+    /// The frame's bytes do not match its description (size, strides, format, zero size), or a
+    /// tap has no frame with a face near its time.
     #[error("invalid frame: {msg}")]
     InvalidFrame {
+        /// What was wrong.
+        msg: String,
+    },
+    /// A frame's timestamp is not after the previous frame's (video and live-stream modes): a
+    /// restarted camera or a repeated frame. Nothing was tracked; `reset()` starts the clock again.
+    #[error("invalid timestamp: {msg}")]
+    InvalidTimestamp {
+        /// What was wrong.
+        msg: String,
+    },
+    /// A call the tracker cannot take now: one of another running mode, or any after
+    /// `shutdown()`.
+    #[error("invalid state: {msg}")]
+    InvalidState {
         /// What was wrong.
         msg: String,
     },
@@ -38,12 +52,22 @@ impl From<CoreError> for MonotrackError {
         let msg = e.to_string();
         match e {
             CoreError::InvalidFrame(_) => Self::InvalidFrame { msg },
+            CoreError::InvalidTimestamp(_) => Self::InvalidTimestamp { msg },
             CoreError::InvalidCamera(_)
             | CoreError::InvalidInput(_)
             | CoreError::InvalidConfig(_) => Self::InvalidConfig { msg },
             CoreError::ModelLoad(_) => Self::ModelLoad { msg },
             CoreError::Internal(_) => Self::Internal { msg },
         }
+    }
+}
+
+/// A core error where the caller's input is a frame or a tap: what it could not give (a tap with
+/// no face near its time) is `InvalidFrame`.
+pub(crate) fn input_as_frame(e: CoreError) -> MonotrackError {
+    match e {
+        CoreError::InvalidInput(msg) => MonotrackError::InvalidFrame { msg },
+        e => e.into(),
     }
 }
 

@@ -6,9 +6,11 @@
 //! `java.nio.ByteBuffer` in Kotlin) plus a `FrameDesc`. A Rust panic surfaces as an exception
 //! (uniffi catches unwinding panics; every profile keeps `panic = "unwind"`).
 //!
-//! Exported: the `FaceTracker` object (detector → fast tracker → M3 → flow filter → MSBP), the shared
-//! benchmark, frame conversion, default intrinsics, the 3D fit of given landmarks, and body fitting
-//! (floor calibration, `BodyTracker`) (`API.md`).
+//! Exported: the `FaceTracker` object (detector → fast tracker → M3 → flow filter → MSBP) in
+//! MediaPipe's three running modes with `FaceTrackerOptions`, the shared benchmarks, frame
+//! conversion and the frame and overlay rules (upright size, byte counts, default intrinsics,
+//! projections), the 3D fit of given landmarks, and body fitting (floor calibration,
+//! `BodyTracker`) (`API.md`).
 
 uniffi::setup_scaffolding!();
 
@@ -17,6 +19,8 @@ mod error;
 mod gaze;
 mod live;
 mod motion;
+mod options;
+mod overlay;
 mod tracker;
 mod types;
 
@@ -26,6 +30,8 @@ use error::guard;
 pub use gaze::*;
 pub use live::*;
 pub use motion::*;
+pub use options::*;
+pub use overlay::*;
 pub use tracker::*;
 pub use types::*;
 

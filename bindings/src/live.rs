@@ -1,23 +1,21 @@
-//! Live-stream mode (`bindings/API.md`): `LiveFaceTracker` takes camera frames without waiting for
-//! them to be tracked and delivers results to a `LiveStreamListener` the app implements, from one
-//! worker thread (`monotrack_core::track::live`).
+//! The live-stream mode's listener (`bindings/API.md`): a `FaceTracker` built with
+//! `RunningMode::LiveStream` takes camera frames without waiting for them to be tracked and
+//! delivers results to a `LiveStreamListener` the app implements, from one worker thread
+//! (`monotrack_core::track::live`).
 
 use crate::MonotrackError;
-use crate::error::{guard, guard_infallible};
-use crate::gaze::{GazeTarget, PlanePoint};
-use crate::tracker::{Outputs, TrackerConfig, TrackingResult, build_tracker, result};
-use crate::types::FrameDesc;
+use crate::tracker::{ResultShape, TrackingResult, result};
 use monotrack_core::gaze::Target;
-use monotrack_core::image::{Frame, FrameDesc as CoreFrameDesc};
-use monotrack_core::track::live::{LiveListener, LiveStream, Submitted};
+use monotrack_core::image::FrameDesc as CoreFrameDesc;
+use monotrack_core::track::live::LiveListener;
 use monotrack_core::track::{self as core_track};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 /// One live-stream result.
 #[derive(Debug, Clone, PartialEq, uniffi::Record)]
 pub struct LiveStreamResult {
-    /// The timestamp the frame was submitted with.
-    pub timestamp_ns: i64,
+    /// The timestamp the frame was submitted with, milliseconds.
+    pub timestamp_ms: i64,
     /// Frames submitted since the previous delivery that were skipped because the tracker was
     /// busy (the newest frame is never the one skipped).
     pub frames_dropped: u64,
@@ -25,21 +23,35 @@ pub struct LiveStreamResult {
     pub result: TrackingResult,
 }
 
-/// Receives a `LiveFaceTracker`'s results, implemented by the app. Calls come from the tracker's
-/// worker thread, one at a time, in timestamp order; a slow listener makes the tracker skip
-/// frames, so hand the result to the UI thread and return. An exception thrown here is caught and
-/// does not stop the stream.
+/// Receives a live-stream tracker's results (MediaPipe's result listener), implemented by the
+/// app. Calls come from the tracker's worker thread, one at a time, in timestamp order; a slow
+/// listener makes the tracker skip frames, so hand the result to the UI thread and return. An
+/// exception thrown here is caught and does not stop the stream.
 #[uniffi::export(with_foreign)]
 pub trait LiveStreamListener: Send + Sync {
     /// The faces of one frame.
     fn on_result(&self, result: LiveStreamResult);
-    /// Tracking the frame taken at `timestamp_ns` failed, or a tap at that time could not be used
-    /// (`LiveFaceTracker::add_calibration_point`); the stream goes on with the next frame.
-    fn on_error(&self, timestamp_ns: i64, frames_dropped: u64, error: MonotrackError);
+    /// Tracking the frame taken at `timestamp_ms` failed, or a tap at that time could not be used
+    /// (`FaceTracker::add_calibration_point`); the stream goes on with the next frame.
+    fn on_error(&self, timestamp_ms: i64, frames_dropped: u64, error: MonotrackError);
 }
 
-/// Hands the core's deliveries to the app's listener as FFI records with the config's outputs.
-struct Forward(Arc<dyn LiveStreamListener>, Outputs);
+/// Hands the core's deliveries to the app's listener as FFI records with the options' outputs.
+pub(crate) struct Forward {
+    listener: Arc<dyn LiveStreamListener>,
+    shape: ResultShape,
+}
+
+impl Forward {
+    pub(crate) fn new(listener: Arc<dyn LiveStreamListener>, shape: ResultShape) -> Self {
+        Self { listener, shape }
+    }
+}
+
+/// The core's nanoseconds as the milliseconds they were submitted in.
+fn milliseconds(timestamp_ns: i64) -> i64 {
+    timestamp_ns.div_euclid(1_000_000)
+}
 
 impl LiveListener for Forward {
     fn on_result(
@@ -50,192 +62,36 @@ impl LiveListener for Forward {
         r: &core_track::TrackingResult,
         targets: &[Target],
     ) {
-        let (w, h) = frame.upright_size();
-        self.0.on_result(LiveStreamResult {
-            timestamp_ns,
-            frames_dropped,
-            result: result(r, w as u32, h as u32, targets, self.1),
-        });
+        let timestamp_ms = milliseconds(timestamp_ns);
+        match result(r, frame, targets, self.shape) {
+            Ok(result) => self.listener.on_result(LiveStreamResult {
+                timestamp_ms,
+                frames_dropped,
+                result,
+            }),
+            Err(e) => self.listener.on_error(timestamp_ms, frames_dropped, e),
+        }
     }
 
     fn on_error(&mut self, timestamp_ns: i64, frames_dropped: u64, error: monotrack_core::Error) {
-        // As `FaceTracker`'s calls: what the input of a frame or a tap could not give (a frame
-        // the tracker refuses, a tap with no face near its time) is `InvalidFrame`.
-        let error = match error {
-            monotrack_core::Error::InvalidInput(msg) => MonotrackError::InvalidFrame { msg },
-            e => e.into(),
-        };
-        self.0.on_error(timestamp_ns, frames_dropped, error);
-    }
-}
-
-/// The face tracker in live-stream mode: `process_async` copies the frame and returns at once;
-/// one worker thread tracks (as in video mode) and calls the listener. While it is busy the newest
-/// frame waits and replaces any older waiting one (latest wins).
-#[derive(uniffi::Object)]
-pub struct LiveFaceTracker {
-    config: TrackerConfig,
-    /// The ids of the gaze targets set, in order (taps name their target by id).
-    target_ids: Mutex<Vec<String>>,
-    /// `None` once shut down.
-    stream: Mutex<Option<LiveStream>>,
-}
-
-#[uniffi::export]
-impl LiveFaceTracker {
-    /// Loads the models and starts the worker. `config.running_mode` is not read: a live stream
-    /// always tracks between frames.
-    ///
-    /// # Errors
-    /// `InvalidConfig` for out-of-range settings, `ModelLoad` if the embedded models cannot load,
-    /// `Internal` if no thread can be started.
-    #[uniffi::constructor]
-    pub fn new(
-        config: TrackerConfig,
-        listener: Arc<dyn LiveStreamListener>,
-    ) -> Result<Arc<Self>, MonotrackError> {
-        guard(|| {
-            let video = TrackerConfig {
-                running_mode: crate::tracker::RunningMode::Video,
-                ..config
-            };
-            let tracker = build_tracker(&video, false)?;
-            let stream =
-                LiveStream::start(tracker, Box::new(Forward(listener, Outputs::from(&config))))?;
-            Ok(Arc::new(Self {
-                config,
-                target_ids: Mutex::new(Vec::new()),
-                stream: Mutex::new(Some(stream)),
-            }))
-        })
-    }
-
-    /// Submits one camera frame taken at `timestamp_ns` (strictly increasing) and returns without
-    /// waiting: the bytes are copied, so the camera's buffer can be released on return. Returns
-    /// `true` when a frame that was still waiting has been replaced by this one.
-    ///
-    /// # Errors
-    /// `InvalidFrame` when the description does not match the bytes, the timestamp does not
-    /// increase, or the tracker was shut down.
-    pub fn process_async(
-        &self,
-        bytes: &[u8],
-        desc: FrameDesc,
-        timestamp_ns: i64,
-    ) -> Result<bool, MonotrackError> {
-        guard(|| {
-            let frame = Frame::new(bytes, desc.try_into()?)?;
-            let g = self.stream.lock().unwrap_or_else(|p| p.into_inner());
-            let stream = g.as_ref().ok_or_else(|| MonotrackError::InvalidFrame {
-                msg: "the live tracker was shut down".into(),
-            })?;
-            match stream.submit(&frame, timestamp_ns) {
-                Ok(s) => Ok(s == Submitted::Replaced),
-                Err(monotrack_core::Error::InvalidInput(msg)) => {
-                    Err(MonotrackError::InvalidFrame { msg })
-                }
-                Err(e) => Err(e.into()),
-            }
-        })
-    }
-
-    /// Stops the worker: a frame being tracked finishes and is delivered, a waiting one is
-    /// dropped, and the listener is not called afterwards. Idempotent; later frames are refused.
-    /// Called from the listener itself, it returns at once and the worker stops after that call.
-    pub fn shutdown(&self) {
-        guard_infallible(|| {
-            let taken = self.stream.lock().unwrap_or_else(|p| p.into_inner()).take();
-            // Dropped outside the lock: the drop waits for the worker.
-            drop(taken);
-        });
-    }
-
-    /// The settings this tracker was built with.
-    pub fn config(&self) -> TrackerConfig {
-        self.config
-    }
-
-    /// Sets the gaze targets (as `FaceTracker::set_gaze_targets`), from the next frame the
-    /// worker takes.
-    ///
-    /// # Errors
-    /// `InvalidConfig` for a bad target or a repeated id.
-    pub fn set_gaze_targets(&self, targets: Vec<GazeTarget>) -> Result<(), MonotrackError> {
-        guard(|| {
-            let core = crate::gaze::to_core(&targets)?;
-            *self.target_ids.lock().unwrap_or_else(|p| p.into_inner()) =
-                targets.iter().map(|t| t.id.clone()).collect();
-            if let Some(s) = self
-                .stream
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .as_ref()
-            {
-                s.set_gaze_targets(core);
-            }
-            Ok(())
-        })
-    }
-
-    /// Tells the tracker the user looked at `point` on the target `target_id` at `timestamp_ns`
-    /// (as `FaceTracker::add_calibration_point`, in the frames' clock). The tap is learnt on the
-    /// worker before the next frame; one it cannot use (no frame with a face within 250 ms of
-    /// it) reaches the listener's `on_error` with the tap's timestamp.
-    ///
-    /// # Errors
-    /// `InvalidConfig` for an unknown target, a non-finite point, or the gaze output turned off
-    /// (`TrackerConfig.gaze`); `InvalidFrame` once shut down.
-    pub fn add_calibration_point(
-        &self,
-        target_id: String,
-        point: PlanePoint,
-        timestamp_ns: i64,
-    ) -> Result<(), MonotrackError> {
-        guard(|| {
-            if !Outputs::from(&self.config).gaze() {
-                return Err(MonotrackError::InvalidConfig {
-                    msg: "the gaze output is off (TrackerConfig.gaze): taps cannot calibrate it"
-                        .into(),
-                });
-            }
-            let index = crate::gaze::tap_target(
-                self.target_ids
-                    .lock()
-                    .unwrap_or_else(|p| p.into_inner())
-                    .iter()
-                    .map(String::as_str),
-                &target_id,
-                &point,
-            )?;
-            let g = self.stream.lock().unwrap_or_else(|p| p.into_inner());
-            let stream = g.as_ref().ok_or_else(|| MonotrackError::InvalidFrame {
-                msg: "the live tracker was shut down".into(),
-            })?;
-            stream.add_calibration_point(index, [point.u_mm, point.v_mm], timestamp_ns);
-            Ok(())
-        })
-    }
-
-    /// Forgets the tap calibration (a new user), before the next frame.
-    pub fn reset_gaze_calibration(&self) {
-        guard_infallible(|| {
-            if let Some(s) = self
-                .stream
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .as_ref()
-            {
-                s.reset_gaze_calibration();
-            }
-        });
+        // As the synchronous calls: what a frame's or a tap's input could not give (a tap with no
+        // face near its time) is `InvalidFrame`.
+        self.listener.on_error(
+            milliseconds(timestamp_ns),
+            frames_dropped,
+            crate::error::input_as_frame(error),
+        );
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tracker::default_tracker_config;
-    use crate::types::PixelFormat;
+    use crate::gaze::PlanePoint;
+    use crate::options::{FaceTrackerOptions, RunningMode};
+    use crate::tracker::FaceTracker;
+    use crate::types::{FrameDesc, PixelFormat};
+    use std::sync::Mutex;
     use std::sync::mpsc;
     use std::time::Duration;
 
@@ -250,12 +106,18 @@ mod tests {
         }
     }
 
+    fn live_tracker(options: FaceTrackerOptions, tx: Channel) -> Arc<FaceTracker> {
+        let options = FaceTrackerOptions {
+            running_mode: Some(RunningMode::LiveStream),
+            ..options
+        };
+        FaceTracker::new(options, Some(Arc::new(tx))).unwrap()
+    }
+
     #[test]
     fn frames_go_through_the_worker_and_bad_ones_are_refused_at_once() {
         let (tx, rx) = mpsc::channel();
-        let live =
-            LiveFaceTracker::new(default_tracker_config(), Arc::new(Channel(Mutex::new(tx))))
-                .unwrap();
+        let live = live_tracker(FaceTrackerOptions::default(), Channel(Mutex::new(tx)));
         let desc = FrameDesc {
             width: 64,
             height: 48,
@@ -267,21 +129,33 @@ mod tests {
             mirrored: false,
         };
         assert!(matches!(
-            live.process_async(&[0; 10], desc, 1),
+            live.detect_async(&[0; 10], desc, 1),
             Err(MonotrackError::InvalidFrame { .. })
         ));
-        live.process_async(&[90; 64 * 48], desc, 5).unwrap();
         assert!(matches!(
-            live.process_async(&[90; 64 * 48], desc, 5),
-            Err(MonotrackError::InvalidFrame { .. })
+            live.detect_for_video(&[90; 64 * 48], desc, 1),
+            Err(MonotrackError::InvalidState { .. })
+        ));
+        live.detect_async(&[90; 64 * 48], desc, 5).unwrap();
+        assert!(matches!(
+            live.detect_async(&[90; 64 * 48], desc, 5),
+            Err(MonotrackError::InvalidTimestamp { .. })
         ));
         let r = rx.recv_timeout(Duration::from_secs(60)).unwrap().unwrap();
-        assert_eq!(r.timestamp_ns, 5);
+        assert_eq!(r.timestamp_ms, 5);
         assert_eq!((r.result.frame_width, r.result.frame_height), (48, 64));
         assert!(r.result.faces.is_empty());
+        // A reset restarts the clock (a camera restart may go back in time).
+        live.reset();
+        live.detect_async(&[90; 64 * 48], desc, 2).unwrap();
+        let r = rx.recv_timeout(Duration::from_secs(60)).unwrap().unwrap();
+        assert_eq!(r.timestamp_ms, 2);
         live.shutdown();
         live.shutdown();
-        assert!(live.process_async(&[90; 64 * 48], desc, 6).is_err());
+        assert!(matches!(
+            live.detect_async(&[90; 64 * 48], desc, 6),
+            Err(MonotrackError::InvalidState { .. })
+        ));
     }
 
     /// Taps on a live tracker: learnt on the worker, the next frame's point of gaze lands near the
@@ -293,14 +167,12 @@ mod tests {
         let (upright, w, h) = upright_face();
         let desc = gray_desc(w, h, 0, false);
         let (tx, rx) = mpsc::channel();
-        let live =
-            LiveFaceTracker::new(default_tracker_config(), Arc::new(Channel(Mutex::new(tx))))
-                .unwrap();
+        let live = live_tracker(FaceTrackerOptions::default(), Channel(Mutex::new(tx)));
         let screen = crate::gaze::screen_target("phone".into(), 70.0, 150.0, 35.0, -8.0).unwrap();
         live.set_gaze_targets(vec![screen]).unwrap();
-        let ms = 1_000_000;
+        let ms = 1;
         let next = |ts: i64| {
-            live.process_async(&upright, desc, ts).unwrap();
+            live.detect_async(&upright, desc, ts).unwrap();
             rx.recv_timeout(Duration::from_secs(60)).unwrap()
         };
         assert!(next(10 * ms).unwrap().result.faces.len() == 1);
@@ -312,8 +184,11 @@ mod tests {
             live.add_calibration_point("tv".into(), tap, 10 * ms),
             Err(MonotrackError::InvalidConfig { .. })
         ));
-        live.add_calibration_point("phone".into(), tap, 12 * ms)
-            .unwrap();
+        assert_eq!(
+            live.add_calibration_point("phone".into(), tap, 12 * ms)
+                .unwrap(),
+            None
+        );
         let after = next(43 * ms).unwrap();
         let h = after.result.faces[0]
             .point_of_gaze
@@ -334,14 +209,13 @@ mod tests {
         assert!(rx.recv_timeout(Duration::from_secs(60)).unwrap().is_ok());
         live.reset_gaze_calibration();
         live.shutdown();
-        let off = LiveFaceTracker::new(
-            TrackerConfig {
-                gaze: false,
-                ..default_tracker_config()
+        let off = live_tracker(
+            FaceTrackerOptions {
+                output_gaze: false,
+                ..FaceTrackerOptions::default()
             },
-            Arc::new(Channel(Mutex::new(mpsc::channel().0))),
-        )
-        .unwrap();
+            Channel(Mutex::new(mpsc::channel().0)),
+        );
         assert!(matches!(
             off.add_calibration_point("phone".into(), tap, 1),
             Err(MonotrackError::InvalidConfig { .. })

@@ -140,7 +140,10 @@ pub struct Vec3 {
     pub z: f64,
 }
 
-/// Head pose: X_cam = R·X_model + t (mm); Euler angles per CONTRACT (R = Rz(roll)·Ry(yaw)·Rx(pitch)).
+/// Head pose: X_cam = R·X_head + t (mm), the head frame's axes x towards the subject's left, y down
+/// the face, z into the head; Euler angles per CONTRACT (R = Rz(roll)·Ry(yaw)·Rx(pitch)), all zero
+/// for a face looking straight into the camera, upright (`monotrack_core::fit::pose`, "head
+/// frame").
 #[derive(Debug, Clone, PartialEq, uniffi::Record)]
 pub struct HeadPose {
     /// R, 9 values row-major.
@@ -158,8 +161,9 @@ pub struct HeadPose {
 impl From<&Pose> for HeadPose {
     fn from(p: &Pose) -> Self {
         let (yaw, pitch, roll) = p.euler_deg();
+        let r = p.head_rotation();
         Self {
-            rotation: (0..9).map(|k| p.rotation[(k / 3, k % 3)]).collect(),
+            rotation: (0..9).map(|k| r[(k / 3, k % 3)]).collect(),
             translation_mm: Vec3 {
                 x: p.translation.x,
                 y: p.translation.y,

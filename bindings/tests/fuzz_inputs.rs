@@ -125,13 +125,17 @@ impl LiveStreamListener for Ignore {
 #[test]
 fn frames_and_trackers_never_panic() {
     let mut r = Rng(1);
-    let tracker = FaceTracker::new(default_tracker_config()).unwrap();
-    let image = FaceTracker::new(TrackerConfig {
-        running_mode: RunningMode::Image,
-        ..default_tracker_config()
-    })
+    let mode = |m| FaceTrackerOptions {
+        running_mode: Some(m),
+        ..FaceTrackerOptions::default()
+    };
+    let tracker = FaceTracker::new(mode(RunningMode::Video), None).unwrap();
+    let image = FaceTracker::new(mode(RunningMode::Image), None).unwrap();
+    let live = FaceTracker::new(
+        mode(RunningMode::LiveStream),
+        Some(std::sync::Arc::new(Ignore)),
+    )
     .unwrap();
-    let live = LiveFaceTracker::new(default_tracker_config(), std::sync::Arc::new(Ignore)).unwrap();
     let mut ok_frames = 0;
     for case in 0..300 {
         let d = desc(&mut r);
@@ -140,36 +144,47 @@ fn frames_and_trackers_never_panic() {
             ok_frames += usize::from(luma_image(&b, d).is_ok());
         });
         let ts = r.next() as i64;
-        no_panic("process_frame", case, || {
-            typed("process_frame", case, tracker.process_frame(&b, d, ts));
+        no_panic("detect_for_video", case, || {
+            typed(
+                "detect_for_video",
+                case,
+                tracker.detect_for_video(&b, d, ts),
+            );
         });
-        no_panic("process_async", case, || {
-            typed("process_async", case, live.process_async(&b, d, ts));
+        no_panic("detect_async", case, || {
+            typed("detect_async", case, live.detect_async(&b, d, ts));
         });
-        no_panic("process_image", case, || {
-            typed("process_image", case, image.process_image(&b, d));
+        no_panic("detect", case, || {
+            typed("detect", case, image.detect(&b, d));
         });
-        let cfg = TrackerConfig {
-            running_mode: RunningMode::Video,
-            max_faces: r.small(),
-            camera: (r.below(2) == 0).then(|| intrinsics(&mut r)),
-            min_face_size_px: r.small(),
-            min_detection_score: r.float(1.5) as f32,
-            min_detection_confidence: r.float(1.5) as f32,
+        no_panic("frame rules", case, || {
+            typed("upright_size", case, upright_size(d));
+            typed("frame_byte_count", case, frame_byte_count(d));
+        });
+        let cfg = FaceTrackerOptions {
+            running_mode: Some([RunningMode::Image, RunningMode::Video][r.below(2) as usize]),
+            num_faces: r.small(),
+            min_face_detection_confidence: r.float(1.5) as f32,
+            min_face_presence_confidence: r.float(1.5) as f32,
             min_tracking_confidence: r.float(1.5) as f32,
-            min_match_score: r.float(3.0) as f32 - 1.0,
-            search_margin: r.float(6.0) as f32 - 1.0,
-            flow_filter: r.below(2) == 0,
-            gaze_filter: r.below(2) == 1,
-            shape_frames: r.small(),
-            mirror_average: [None, Some(false), Some(true)][r.below(3) as usize],
-            ultra_light: r.below(2) == 0,
-            gestures: r.below(2) == 0,
-            gaze: r.below(2) == 0,
-            expressions: r.below(2) == 0,
+            output_action_units: r.below(2) == 0,
+            output_facial_transformation_matrixes: r.below(2) == 0,
+            output_gestures: r.below(2) == 0,
+            output_gaze: r.below(2) == 0,
+            camera: (r.below(2) == 0).then(|| intrinsics(&mut r)),
+            tuning: TrackerTuning {
+                min_face_size_px: r.small(),
+                min_match_score: r.float(3.0) as f32 - 1.0,
+                search_margin: r.float(6.0) as f32 - 1.0,
+                flow_filter: r.below(2) == 0,
+                gaze_filter: r.below(2) == 1,
+                shape_frames: r.small(),
+                mirror_average: [None, Some(false), Some(true)][r.below(3) as usize],
+                ultra_light: r.below(2) == 0,
+            },
         };
         no_panic("FaceTracker::new", case, || {
-            typed("FaceTracker::new", case, FaceTracker::new(cfg));
+            typed("FaceTracker::new", case, FaceTracker::new(cfg, None));
         });
         let (w, h) = (r.small(), r.small());
         no_panic("default_camera", case, || {

@@ -12,6 +12,11 @@ pub enum Error {
     /// Camera intrinsics that are not finite and positive.
     #[error("invalid camera: {0}")]
     InvalidCamera(String),
+    /// A frame timestamp that does not come after the previous frame's (video and live-stream
+    /// tracking need strictly increasing times: a camera restart or a repeated frame shows here,
+    /// and `reset` starts the clock again).
+    #[error("invalid timestamp: {0}")]
+    InvalidTimestamp(String),
     /// Any other caller input that cannot be used (wrong number of landmarks, NaN coordinates, ...).
     #[error("invalid input: {0}")]
     InvalidInput(String),

@@ -25,6 +25,7 @@ pub mod metrics;
 pub mod model;
 pub mod motion;
 pub mod nn;
+pub mod overlay;
 pub mod track;
 
 pub use error::{Error, Result};

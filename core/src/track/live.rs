@@ -44,7 +44,7 @@ pub trait FrameProcessor: Send + 'static {
     /// As [`FaceTracker::process_frame`].
     fn process(&mut self, frame: &Frame<'_>, timestamp_ns: i64) -> Result<&TrackingResult>;
 
-    /// Ends every track (after a caught panic, whose state is unknown).
+    /// Ends every track: after a caught panic (whose state is unknown) and on [`LiveStream::reset`].
     fn reset(&mut self);
 
     /// The last result, and the gaze targets it was located among.
@@ -137,6 +137,8 @@ struct Slot {
     last_timestamp_ns: Option<i64>,
     /// Gaze targets for the worker to take before its next frame.
     targets: Option<Vec<Target>>,
+    /// Whether the worker ends every track before its next frame ([`LiveStream::reset`]).
+    reset_tracks: bool,
     /// Whether the worker forgets the tap calibration before its next frame (before `taps`).
     reset_calibration: bool,
     /// Taps (target, point in mm, time) for the worker to learn from before its next frame.
@@ -191,8 +193,9 @@ impl LiveStream {
     /// copied).
     ///
     /// # Errors
-    /// [`Error::InvalidInput`] when `timestamp_ns` is not after the last submitted frame's, or the
-    /// stream is closed.
+    /// [`Error::InvalidTimestamp`] when `timestamp_ns` is not after the last submitted frame's
+    /// (since the start or the last [`Self::reset`]), [`Error::InvalidInput`] when the stream is
+    /// closed.
     pub fn submit(&self, frame: &Frame<'_>, timestamp_ns: i64) -> Result<Submitted> {
         let mut slot = self.shared.lock();
         if slot.shutdown {
@@ -201,7 +204,7 @@ impl LiveStream {
         if let Some(last) = slot.last_timestamp_ns
             && timestamp_ns <= last
         {
-            return Err(Error::InvalidInput(format!(
+            return Err(Error::InvalidTimestamp(format!(
                 "live-stream frames need strictly increasing timestamps: got {timestamp_ns} ns after {last} ns"
             )));
         }
@@ -247,6 +250,17 @@ impl LiveStream {
         slot.taps.clear();
     }
 
+    /// Ends every track and forgets the user's shape before the next frame, drops a frame still
+    /// waiting, and starts the timestamp clock again (a camera restart may go back in time).
+    pub fn reset(&self) {
+        let mut slot = self.shared.lock();
+        slot.reset_tracks = true;
+        slot.last_timestamp_ns = None;
+        if slot.waiting.desc.take().is_some() {
+            slot.dropped += 1;
+        }
+    }
+
     /// Stops the worker (see the type's docs) and waits for it, unless called from the listener
     /// itself (on the worker thread), where it only asks the worker to stop after this delivery.
     pub fn close(&mut self) {
@@ -285,6 +299,9 @@ fn run_worker(
                 return;
             }
             std::mem::swap(&mut slot.waiting, &mut working);
+            if std::mem::take(&mut slot.reset_tracks) {
+                tracker.reset();
+            }
             if std::mem::take(&mut slot.reset_calibration) {
                 tracker.reset_gaze_calibration();
             }
@@ -518,6 +535,32 @@ mod tests {
         live.submit(&frame, 12).unwrap();
         let e = rx.recv_timeout(Duration::from_secs(10)).unwrap();
         assert_eq!(e, Event::Result(12, 0));
+        live.close();
+    }
+
+    /// A reset ends the tracks on the worker before its next frame and starts the clock again:
+    /// an earlier timestamp (a restarted camera) is taken after it, refused before it.
+    #[test]
+    fn a_reset_reaches_the_worker_and_restarts_the_clock() {
+        let (mut live, rx, resets) = stream(0);
+        let (bytes, desc) = gray(0);
+        let frame = Frame::new(&bytes, desc).unwrap();
+        live.submit(&frame, 100).unwrap();
+        assert_eq!(
+            rx.recv_timeout(Duration::from_secs(10)).unwrap(),
+            Event::Result(100, 0)
+        );
+        assert!(matches!(
+            live.submit(&frame, 5),
+            Err(Error::InvalidTimestamp(_))
+        ));
+        live.reset();
+        live.submit(&frame, 5).unwrap();
+        assert_eq!(
+            rx.recv_timeout(Duration::from_secs(10)).unwrap(),
+            Event::Result(5, 0)
+        );
+        assert_eq!(*resets.lock().unwrap(), 1, "the worker's tracker was reset");
         live.close();
     }
 }
