@@ -36,7 +36,7 @@ use crate::gaze::{
     GazeCalibration, GazeConfig, GazeRay, PointOfGaze, Target, eye_openness,
     point_of_gaze_from_rays, raw_eye_rays,
 };
-use crate::image::{Frame, GrayImage, Rect};
+use crate::image::{Frame, FrameDesc, GrayImage, Rect};
 use crate::landmarks::warp::{Affine, sample};
 use crate::landmarks::{FaceLandmarks, N_POINTS};
 use crate::model::{FaceModel, N_LANDMARKS};
@@ -387,6 +387,23 @@ impl TrackerConfig {
             min_face_confidence: 0.3,
             verify_interval: ULTRA_LIGHT_VERIFY_INTERVAL,
             ..Self::default()
+        }
+    }
+}
+
+/// The intrinsics of `frame`'s upright image that the tracker works with: `camera` (the
+/// sensor's, for the buffer as delivered) turned and mirrored with the frame, or
+/// [`Intrinsics::default_for`] the upright size when none are given. What an overlay projects
+/// the pose and vertices with.
+///
+/// # Errors
+/// [`Error::InvalidCamera`] for a zero-size frame.
+pub fn upright_intrinsics(camera: Option<Intrinsics>, frame: &FrameDesc) -> Result<Intrinsics> {
+    match camera {
+        Some(k) => Ok(k.for_upright(frame.width, frame.height, frame.rotation, frame.mirrored)),
+        None => {
+            let (w, h) = frame.upright_size();
+            Intrinsics::default_for(w as u32, h as u32)
         }
     }
 }
@@ -1327,7 +1344,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             if let Some(last) = self.last_timestamp
                 && timestamp_ns <= last
             {
-                return Err(Error::InvalidInput(format!(
+                return Err(Error::InvalidTimestamp(format!(
                     "video mode needs strictly increasing timestamps: got {timestamp_ns} ns after {last} ns"
                 )));
             }
