@@ -575,7 +575,10 @@ impl Default for GazeConfig {
 /// Where one face looks.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PointOfGaze {
-    /// The ray used (corrected by the calibration, filtered if asked).
+    /// The ray `hit` was located with, and so the one to show with it: the eyes' combined
+    /// direction (corrected by the calibration, filtered if asked) or, where `source` is
+    /// [`GazeSource::Head`], the head's. Not M3's `FaceLandmarks::gaze_combined`, which is the
+    /// eye network's own estimate and stays the eyes' where the head stands in.
     pub ray: GazeRay,
     /// The two eyes' rays (right, left), corrected by the calibration.
     pub eyes: [GazeRay; 2],
@@ -586,7 +589,7 @@ pub struct PointOfGaze {
     pub confidence: f64,
     /// Angle between the head's facing direction and the gaze, degrees.
     pub head_to_gaze_deg: f64,
-    /// Where it lands among the targets (`None` without targets).
+    /// Where `ray` lands among the targets (`None` without targets).
     pub hit: Option<TargetHit>,
 }
 

@@ -442,3 +442,177 @@ fn the_head_correction_shifts_eye_angles_and_weights_the_near_eye() {
     let to = |g: &PointOfGaze, e: usize| g.ray.direction.angle(&raw[e].direction);
     assert!(to(&dominant, near) < to(&plain, near), "{dominant:?}");
 }
+
+/// An independent check of one target against a ray: where the ray meets the plane through the
+/// target's first three corners in front of the eyes, and how far inside the polygon (a convex
+/// one, either winding) that point lies (negative outside).
+fn meet_convex(t: &Target, r: &GazeRay) -> Option<(f64, Vector3<f64>, f64)> {
+    let c = t.corners();
+    let n = (c[1] - c[0]).cross(&(c[2] - c[0])).normalize();
+    let denom = n.dot(&r.direction);
+    if denom.abs() < 1e-9 {
+        return None;
+    }
+    let s = n.dot(&(c[0] - r.origin)) / denom;
+    if s <= 0.0 {
+        return None;
+    }
+    let p = r.origin + r.direction * s;
+    let margin = (0..c.len())
+        .map(|i| {
+            let e = c[(i + 1) % c.len()] - c[i];
+            e.cross(&(p - c[i])).dot(&n) / e.norm()
+        })
+        .fold(f64::INFINITY, f64::min);
+    Some((s, p, margin))
+}
+
+/// What apps draw is the point of gaze's ray and its target together, so the target must be where
+/// that very ray lands — whichever direction it took (the eyes' mean, the head's direction where
+/// the eyes are not trusted, calibrated, filtered) and not where either eye's own ray, or the
+/// eyes' mean when the head stood in, would land.
+#[test]
+fn the_reported_target_is_where_the_reported_ray_lands() {
+    let mut rng = Noise(0x9e37_79b9_7f4a_7c15);
+    let mut previous: Option<Vector3<f64>> = None;
+    let (mut hits, mut misses, mut heads, mut split, mut head_moved) = (0, 0, 0, 0, 0);
+    for k in 0..4000 {
+        let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.uniform();
+        // Targets: convex polygons (points on an ellipse at increasing angles) in random planes
+        // round the camera, either winding.
+        let mut targets = Vec::new();
+        for i in 0..1 + k % 4 {
+            let centre = Vector3::new(u(-250.0, 250.0), u(-250.0, 250.0), u(-300.0, 250.0));
+            let normal = Vector3::new(u(-0.6, 0.6), u(-0.6, 0.6), 1.0).normalize();
+            let a = normal.cross(&Vector3::new(0.3, 1.0, 0.1)).normalize();
+            let b = normal.cross(&a);
+            let (ra, rb, spin) = (u(20.0, 150.0), u(20.0, 150.0), u(0.0, 6.3));
+            let sides = 3 + (k / 4) % 5;
+            let mut corners: Vec<[f64; 3]> = (0..sides)
+                .map(|j| {
+                    let t = spin + std::f64::consts::TAU * j as f64 / sides as f64;
+                    (centre + a * (ra * t.cos()) + b * (rb * t.sin())).into()
+                })
+                .collect();
+            if k % 3 == 0 {
+                corners.reverse();
+            }
+            targets.push(Target::new(format!("t{i}"), &corners).unwrap());
+        }
+        let mid = Vector3::new(u(-100.0, 100.0), u(-80.0, 80.0), u(350.0, 700.0));
+        let (yaw, openness) = (u(-65.0, 65.0), u(0.05, 0.35));
+        let mut raw = [-1.0, 1.0].map(|side| {
+            let aim = targets[0].centroid() + Vector3::new(u(-120.0, 120.0), u(-120.0, 120.0), 0.0);
+            let spread = if k % 7 == 0 { 20.0 } else { 3.0 };
+            ray(
+                (mid + Vector3::new(side * 31.0, 0.0, 0.0)).into(),
+                (rotate_by(
+                    &(aim - mid).normalize(),
+                    [
+                        u(-spread, spread).to_radians(),
+                        u(-spread, spread).to_radians(),
+                    ],
+                ))
+                .into(),
+            )
+        });
+        let mut open = openness;
+        let mut face_yaw = yaw;
+        if k % 10 == 0 {
+            // Each eye on its own pane, the panes apart: either eye's ray hits, their mean lands
+            // in the gap between.
+            let z = u(-100.0, 100.0);
+            targets = vec![rect("left", -60.0, 0.0, z), rect("right", 60.0, 0.0, z)];
+            for (e, x) in [(0, -60.0), (1, 60.0)] {
+                raw[e] = ray(
+                    [x / 2.0, 0.0, mid.z],
+                    (Vector3::new(x, 0.0, z) - Vector3::new(x / 2.0, 0.0, mid.z)).into(),
+                );
+            }
+            (open, face_yaw) = (0.3, 0.0);
+        }
+        let mut calibration = GazeCalibration::default();
+        for _ in 0..k % 3 {
+            let p = Vector3::new(u(-50.0, 50.0), u(-50.0, 50.0), 0.0);
+            calibration.add_tap(&raw, &p).unwrap();
+        }
+        let config = GazeConfig {
+            filter: (k % 5 == 2).then(GazeFilter::default),
+            ..GazeConfig::default()
+        };
+        let fit = facing(face_yaw);
+        let g = point_of_gaze_from_rays(
+            &raw,
+            open,
+            &fit,
+            &calibration,
+            &config,
+            previous.as_ref(),
+            &targets,
+        );
+        previous = Some(g.ray.direction);
+        let h = g.hit.unwrap();
+        let meets: Vec<_> = targets.iter().map(|t| meet_convex(t, &g.ray)).collect();
+        let reported = h.target.unwrap_or(h.nearest);
+        let t = &targets[reported];
+        match meets[reported] {
+            Some((s, p, _)) => {
+                let err = (t.point_at(h.point_mm) - p).norm();
+                assert!(
+                    err < 1e-6,
+                    "case {k}: point {:?} is {err} mm off the ray",
+                    h.point_mm
+                );
+                assert!((h.range_mm - s).abs() < 1e-6, "case {k}");
+            }
+            None => {
+                assert_eq!(h.target, None, "case {k}: hit a plane the ray never meets");
+                assert!(h.range_mm.is_infinite(), "case {k}");
+            }
+        }
+        // Hit exactly when the ray's point lies inside a polygon, and then the nearest such
+        // along the ray; points within rounding of an edge may go either way.
+        if meets.iter().flatten().any(|m| m.2.abs() < 1e-6) {
+            continue;
+        }
+        let inside = meets
+            .iter()
+            .enumerate()
+            .filter_map(|(i, m)| m.filter(|m| m.2 > 0.0).map(|m| (i, m.0)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, _)| i);
+        assert_eq!(h.target, inside, "case {k}: {h:?}");
+        assert_eq!(h.distance_mm == 0.0, inside.is_some(), "case {k}: {h:?}");
+        if inside.is_some() {
+            hits += 1;
+        } else {
+            misses += 1;
+        }
+        let eyes_mean = GazeRay {
+            origin: g.ray.origin,
+            direction: (g.eyes[0].direction + g.eyes[1].direction).normalize(),
+        };
+        if g.source == GazeSource::Head {
+            heads += 1;
+            if locate(&targets, &eyes_mean).map(|e| (e.target, e.nearest))
+                != Some((h.target, h.nearest))
+            {
+                head_moved += 1;
+            }
+        }
+        if k % 10 == 0 {
+            assert_eq!(g.source, GazeSource::Eyes, "case {k}");
+            if calibration.taps() == 0 {
+                for e in &g.eyes {
+                    assert!(locate(&targets, e).unwrap().target.is_some(), "case {k}");
+                }
+                assert_eq!(h.target, None, "case {k}: the eyes' mean lands between");
+                split += 1;
+            }
+        }
+    }
+    // Every kind of case above was met.
+    let counts = (hits, misses, heads, split, head_moved);
+    assert!(hits > 200 && misses > 200 && heads > 200, "{counts:?}");
+    assert!(split > 50 && head_moved > 50, "{counts:?}");
+}
