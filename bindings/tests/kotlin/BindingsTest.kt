@@ -11,9 +11,15 @@ import io.monotrack.calibrateFloorCamera
 import io.monotrack.defaultBodyTrackerConfig
 import io.monotrack.FaceState
 import io.monotrack.FaceTracker
+import io.monotrack.FaceTrackerOptions
 import io.monotrack.RunningMode
-import io.monotrack.defaultTrackerConfig
-import io.monotrack.ultraLightTrackerConfig
+import io.monotrack.TrackerTuning
+import io.monotrack.defaultCamera
+import io.monotrack.defaultFaceTrackerOptions
+import io.monotrack.frameByteCount
+import io.monotrack.openglTransform
+import io.monotrack.ultraLightFaceTrackerOptions
+import io.monotrack.uprightSize
 import io.monotrack.runBenchmark
 import io.monotrack.FitMethod
 import io.monotrack.FrameDesc
@@ -135,6 +141,12 @@ private fun namedPoints(line: String, key: String): Map<String, List<Double>> {
         .associate { it.groupValues[1] to numbers(it.groupValues[2]) }
 }
 
+/** The default options in the video running mode. */
+private val video = FaceTrackerOptions(runningMode = RunningMode.VIDEO)
+
+/** The default options in the image running mode (MediaPipe's default). */
+private val stills = FaceTrackerOptions()
+
 class BindingsTest {
     @Test
     fun versionIsTheCrateVersion() {
@@ -209,11 +221,32 @@ class BindingsTest {
     }
 
     @Test
+    fun optionLiteralsAreTheCoresDefaults() {
+        // The generated record's literals must be what Rust calls the defaults.
+        assertEquals(defaultFaceTrackerOptions(), FaceTrackerOptions())
+        assertEquals(null, FaceTrackerOptions().runningMode, "null reads as IMAGE, MediaPipe's default")
+        assertEquals(TrackerTuning(), FaceTrackerOptions().tuning)
+        assertEquals(0.4f, FaceTrackerOptions().minFaceDetectionConfidence)
+    }
+
+    @Test
+    fun frameRulesComeFromRust() {
+        val (buf, stride) = rgbaFrame()
+        val d = desc(PixelFormat.RGBA8, stride, 90)
+        assertEquals(buf.capacity().toULong(), frameByteCount(d))
+        val size = uprightSize(d)
+        assertEquals(image.height.toUInt() to image.width.toUInt(), size.width to size.height)
+        val k = defaultCamera(size.width, size.height)
+        assertEquals(0.9 * maxOf(image.width, image.height), k.fx, 1e-9)
+        assertThrows(MonotrackException.InvalidFrame::class.java) { frameByteCount(desc(PixelFormat.RGBA8, 3, 0)) }
+    }
+
+    @Test
     fun trackerFindsTracksAndRejectsBadInput() {
-        FaceTracker(defaultTrackerConfig()).use { t ->
+        FaceTracker(video).use { t ->
             val (buf, stride) = rgbaFrame()
             val d = desc(PixelFormat.RGBA8, stride, 0)
-            val first = t.processFrame(buf, d, 1_000_000L)
+            val first = t.detectForVideo(buf, d, 1L)
             assertEquals(1, first.faces.size, "one face in the astronaut portrait")
             val f = first.faces[0]
             assertEquals(FaceState.DETECTED, f.state)
@@ -225,40 +258,61 @@ class BindingsTest {
             assertTrue(kotlin.math.abs(f.pose.yawDeg) < 30.0, "frontal: yaw ${f.pose.yawDeg}")
             assertTrue(f.pose.translationMm.z in 200.0..2000.0)
             assertTrue(f.shapeUnits.eyesWidth.isFinite() && f.actionUnits!!.openMouth.isFinite())
-            val second = t.processFrame(buf, d, 2_000_000L)
+            assertEquals(defaultCamera(first.frameWidth, first.frameHeight), first.camera)
+            val eyes = f.eyes!!
+            assertTrue(eyes.leftOpen > 0.5f && eyes.rightOpen > 0.5f, "open eyes read open: $eyes")
+            val m = f.transform!!
+            assertEquals(16, m.size)
+            assertEquals(f.pose.translationMm.z, m[11])
+            assertEquals(f.pose.rotation[4], m[5])
+            val gl = openglTransform(m)
+            assertEquals(-m[11], gl[11])
+            assertEquals(m[5], gl[5])
+            assertEquals(-m[4], gl[4])
+            val second = t.detectForVideo(buf, d, 2L)
             assertEquals(FaceState.TRACKED, second.faces[0].state)
             assertEquals(f.id, second.faces[0].id)
-            assertThrows(MonotrackException.InvalidFrame::class.java) { t.processFrame(buf, d, 2_000_000L) }
+            // A timestamp that does not increase is the app's to see: nothing is tracked.
+            assertThrows(MonotrackException.InvalidTimestamp::class.java) { t.detectForVideo(buf, d, 2L) }
             assertThrows(MonotrackException.InvalidFrame::class.java) {
-                t.processFrame(direct(ByteArray(10)), d, 3_000_000L)
+                t.detectForVideo(direct(ByteArray(10)), d, 3L)
             }
+            // Stills belong to the image mode.
+            assertThrows(MonotrackException.InvalidState::class.java) { t.detect(buf, d) }
+            t.reset()
+            assertEquals(FaceState.DETECTED, t.detectForVideo(buf, d, 1L).faces[0].state)
+            t.shutdown()
+            assertThrows(MonotrackException.InvalidState::class.java) { t.detectForVideo(buf, d, 5L) }
+        }
+        FaceTracker(stills).use { t ->
             val (nv, s2, size) = nv21SensorFrame()
-            val still = t.processImage(
+            val still = t.detect(
                 nv,
                 FrameDesc(size.first.toUInt(), size.second.toUInt(), PixelFormat.NV21, s2.toUInt(), s2.toUInt(), 2u, 90u, false),
             )
             assertEquals(1, still.faces.size, "the face in the rotated NV21 frame")
             assertEquals(image.width.toUInt(), still.frameWidth)
             assertEquals(image.height.toUInt(), still.frameHeight)
-            t.reset()
-            assertEquals(FaceState.DETECTED, t.processFrame(buf, d, 1L).faces[0].state)
+            assertThrows(MonotrackException.InvalidState::class.java) {
+                t.detectForVideo(nv, FrameDesc(size.first.toUInt(), size.second.toUInt(), PixelFormat.NV21, s2.toUInt(), s2.toUInt(), 2u, 90u, false), 1L)
+            }
         }
     }
 
     @Test
     fun mirrorAverageIsTheStillsDefaultAndATrackerSetting() {
-        assertEquals(null, defaultTrackerConfig().mirrorAverage)
+        assertEquals(null, TrackerTuning().mirrorAverage)
         val (buf, stride) = rgbaFrame()
         val d = desc(PixelFormat.RGBA8, stride, 0)
-        val byDefault = FaceTracker(defaultTrackerConfig()).use { it.processImage(buf, d).faces[0].landmarks }
-        val plain = FaceTracker(defaultTrackerConfig().copy(mirrorAverage = false)).use {
-            assertEquals(false, it.config().mirrorAverage)
-            it.processImage(buf, d).faces[0].landmarks
+        val byDefault = FaceTracker(stills).use { it.detect(buf, d).faces[0].landmarks }
+        val plain = FaceTracker(stills.copy(tuning = TrackerTuning(mirrorAverage = false))).use {
+            assertEquals(false, it.options().tuning.mirrorAverage)
+            it.detect(buf, d).faces[0].landmarks
         }
-        FaceTracker(defaultTrackerConfig().copy(mirrorAverage = true)).use { t ->
-            assertEquals(true, t.config().mirrorAverage)
-            val averaged = t.processImage(buf, d).faces[0].landmarks
-            // Stills are mirror-averaged unless the config says otherwise.
+        FaceTracker(stills.copy(tuning = TrackerTuning(mirrorAverage = true))).use { t ->
+            assertEquals(true, t.options().tuning.mirrorAverage)
+            val averaged = t.detect(buf, d).faces[0].landmarks
+            // Stills are mirror-averaged unless the options say otherwise.
             assertEquals(averaged, byDefault)
             val moved = plain.zip(averaged).maxOf { (a, b) -> kotlin.math.hypot(a.x - b.x, a.y - b.y) }
             // The mode moves points, by less than the nets' own error on a ~100 px face.
@@ -268,21 +322,23 @@ class BindingsTest {
 
     @Test
     fun ultraLightTrackerFollowsTheFaceWithoutLandmarkNetworks() {
-        assertEquals(false, defaultTrackerConfig().ultraLight)
-        FaceTracker(ultraLightTrackerConfig()).use { t ->
-            assertEquals(true, t.config().ultraLight)
+        assertEquals(false, TrackerTuning().ultraLight)
+        FaceTracker(ultraLightFaceTrackerOptions(RunningMode.VIDEO)).use { t ->
+            assertEquals(true, t.options().tuning.ultraLight)
             val (buf, stride) = rgbaFrame()
             val d = desc(PixelFormat.RGBA8, stride, 0)
             for (ts in 1L..3L) {
-                val f = t.processFrame(buf, d, ts * 33_000_000L).faces.single()
-                assertEquals(68, f.landmarkConfidence.size)
-                val measured = f.landmarkConfidence.count { it > 0f }
+                val f = t.detectForVideo(buf, d, ts * 33L).faces.single()
+                val confidence = f.landmarkConfidence!!
+                assertEquals(68, confidence.size)
+                val measured = confidence.count { it > 0f }
                 assertTrue(measured in 20..27, "$measured points measured")
                 // The nose tip lies inside the astronaut's face box, as in the full pipeline.
                 val nose = f.landmarks[30]
                 assertTrue(nose.x in 176f..273f && nose.y in 88f..181f, "nose at $nose")
-                // No networks, so no gestures, gaze or action units.
+                // No networks, so no gestures, gaze, action units or eyelids.
                 assertTrue(f.gestures == null && f.gaze == null && f.pointOfGaze == null && f.actionUnits == null)
+                assertEquals(null, f.eyes)
             }
         }
     }
@@ -291,45 +347,56 @@ class BindingsTest {
     fun outputTogglesLeaveTheirFieldsOut() {
         val (buf, stride) = rgbaFrame()
         val d = desc(PixelFormat.RGBA8, stride, 0)
-        val lean = defaultTrackerConfig().copy(gestures = false, gaze = false, expressions = false)
+        val lean = video.copy(
+            outputGestures = false,
+            outputGaze = false,
+            outputActionUnits = false,
+            outputFacialTransformationMatrixes = false,
+        )
         FaceTracker(lean).use { t ->
-            val f = t.processFrame(buf, d, 1L).faces.single()
+            val f = t.detectForVideo(buf, d, 1L).faces.single()
             assertTrue(f.gestures == null && f.gaze == null && f.pointOfGaze == null && f.actionUnits == null)
+            assertEquals(null, f.transform)
             assertEquals(68, f.landmarks.size)
             assertThrows(MonotrackException.InvalidConfig::class.java) {
                 t.addCalibrationPoint("phone", PlanePoint(1.0, 1.0), 1L)
             }
         }
-        FaceTracker(defaultTrackerConfig()).use { t ->
-            val f = t.processFrame(buf, d, 1L).faces.single()
+        FaceTracker(video).use { t ->
+            val f = t.detectForVideo(buf, d, 1L).faces.single()
             assertTrue(f.gestures != null && f.gaze != null && f.pointOfGaze != null && f.actionUnits != null)
+            // M3 measures every point: no per-point confidence to carry.
+            assertEquals(null, f.landmarkConfidence)
         }
     }
 
     @Test
-    fun badTrackerConfigRaisesInvalidConfig() {
+    fun badTrackerOptionsRaiseInvalidConfig() {
         assertThrows(MonotrackException.InvalidConfig::class.java) {
-            FaceTracker(defaultTrackerConfig().copy(maxFaces = 0u))
+            FaceTracker(video.copy(numFaces = 0u))
         }
         assertThrows(MonotrackException.InvalidConfig::class.java) {
-            FaceTracker(defaultTrackerConfig().copy(runningMode = RunningMode.IMAGE, minFaceSizePx = 2u))
+            FaceTracker(stills.copy(tuning = TrackerTuning(minFaceSizePx = 2u)))
         }
         for (score in listOf(Float.NaN, -0.1f, 1.5f)) {
             assertThrows(MonotrackException.InvalidConfig::class.java) {
-                FaceTracker(defaultTrackerConfig().copy(minDetectionScore = score))
+                FaceTracker(video.copy(minFaceDetectionConfidence = score))
             }
+        }
+        // The live stream needs its listener.
+        assertThrows(MonotrackException.InvalidConfig::class.java) {
+            FaceTracker(FaceTrackerOptions(runningMode = RunningMode.LIVE_STREAM))
         }
     }
 
     @Test
     fun smallFacesOperatingPointFindsTheSampleFace() {
-        assertEquals(0.4f, defaultTrackerConfig().minDetectionScore)
         val (buf, stride) = rgbaFrame()
         val d = desc(PixelFormat.RGBA8, stride, 0)
-        val small = defaultTrackerConfig().copy(minFaceSizePx = 16u, minDetectionScore = 0.25f)
+        val small = stills.copy(minFaceDetectionConfidence = 0.25f, tuning = TrackerTuning(minFaceSizePx = 16u))
         FaceTracker(small).use { t ->
-            assertEquals(0.25f, t.config().minDetectionScore)
-            val faces = t.processImage(buf, d).faces
+            assertEquals(0.25f, t.options().minFaceDetectionConfidence)
+            val faces = t.detect(buf, d).faces
             assertTrue(faces.isNotEmpty(), "the sample face is found at the small-faces point")
             // The best-ranked face is the astronaut's (face check and detector score both high).
             assertTrue(faces[0].bbox.width > 60f, "box ${faces[0].bbox}")
@@ -341,6 +408,7 @@ class BindingsTest {
         val (buf, stride) = rgbaFrame()
         val r = runBenchmark(buf, desc(PixelFormat.RGBA8, stride, 0), 3u)
         assertEquals(3u, r.iterations)
+        assertEquals(1u, r.faces, "the report says a face was there")
         assertEquals(21, r.stages.size)
         assertTrue(r.stages.first { it.name == "tracking/landmarks" }.medianUs > 0.0, "a face was tracked")
         assertTrue(r.stages.first { it.name == "tracking_mirror_average/landmarks" }.medianUs > 0.0)

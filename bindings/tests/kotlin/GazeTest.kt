@@ -9,7 +9,8 @@ import io.monotrack.MonotrackException
 import io.monotrack.PixelFormat
 import io.monotrack.PlanePoint
 import io.monotrack.Vec3
-import io.monotrack.defaultTrackerConfig
+import io.monotrack.FaceTrackerOptions
+import io.monotrack.RunningMode
 import io.monotrack.gazeTargetsFromJson
 import io.monotrack.screenTarget
 import java.io.File
@@ -46,7 +47,7 @@ class GazeTest {
         )
         assertThrows(MonotrackException.InvalidConfig::class.java) { gazeTargetsFromJson("{\"targets\": []}") }
         assertThrows(MonotrackException.InvalidConfig::class.java) { screenTarget("s", -1.0, 100.0, 0.0, 0.0) }
-        FaceTracker(defaultTrackerConfig()).use { t ->
+        FaceTracker(FaceTrackerOptions(runningMode = RunningMode.VIDEO)).use { t ->
             val line = GazeTarget("line", listOf(Vec3(0.0, 0.0, 0.0), Vec3(1.0, 0.0, 0.0), Vec3(2.0, 0.0, 0.0)))
             assertThrows(MonotrackException.InvalidConfig::class.java) { t.setGazeTargets(listOf(line)) }
         }
@@ -55,19 +56,19 @@ class GazeTest {
     @Test
     fun facesCarryAPointOfGazeAndATapCalibratesIt() {
         val (buf, desc) = face()
-        FaceTracker(defaultTrackerConfig()).use { t ->
+        FaceTracker(FaceTrackerOptions(runningMode = RunningMode.VIDEO)).use { t ->
             t.setGazeTargets(listOf(screenTarget("phone", 70.0, 150.0, 35.0, -8.0)))
-            val first = t.processFrame(buf, desc, 10_000_000L).faces.single().pointOfGaze!!
+            val first = t.detectForVideo(buf, desc, 10L).faces.single().pointOfGaze!!
             assertTrue(first.originMm.z in 200.0..3000.0, "origin ${first.originMm}")
             assertEquals("phone", first.target!!.nearest)
             assertThrows(MonotrackException.InvalidFrame::class.java) {
-                t.addCalibrationPoint("phone", PlanePoint(10.0, 10.0), 5_000_000_000L)
+                t.addCalibrationPoint("phone", PlanePoint(10.0, 10.0), 5_000L)
             }
-            assertEquals(1u, t.addCalibrationPoint("phone", PlanePoint(20.0, 90.0), 11_000_000L))
-            val hit = t.processFrame(buf, desc, 43_000_000L).faces.single().pointOfGaze!!.target!!
+            assertEquals(1u, t.addCalibrationPoint("phone", PlanePoint(20.0, 90.0), 11L))
+            val hit = t.detectForVideo(buf, desc, 43L).faces.single().pointOfGaze!!.target!!
             assertTrue(hit.hit && hypot(hit.point.uMm - 20.0, hit.point.vMm - 90.0) < 10.0, "landed at ${hit.point}")
             t.setGazeTargets(emptyList())
-            assertNull(t.processFrame(buf, desc, 76_000_000L).faces.single().pointOfGaze!!.target)
+            assertNull(t.detectForVideo(buf, desc, 76L).faces.single().pointOfGaze!!.target)
         }
     }
 }

@@ -1,9 +1,10 @@
-// JVM tests of the live-stream mode (the generated LiveFaceTracker and the Android wrapper
-// io.monotrack.android.LiveTracker) and of the intrinsics convention, against the host library.
+// JVM tests of the live-stream mode (the generated FaceTracker in LIVE_STREAM with the Android
+// listener io.monotrack.android.LiveEvents) and of the intrinsics convention, against the host library.
 package io.monotrack.tests
 
 import io.monotrack.CameraIntrinsics
 import io.monotrack.FaceTracker
+import io.monotrack.FaceTrackerOptions
 import io.monotrack.FrameDesc
 import io.monotrack.HeadPose
 import io.monotrack.MonotrackException
@@ -11,8 +12,7 @@ import io.monotrack.PixelFormat
 import io.monotrack.PlanePoint
 import io.monotrack.RunningMode
 import io.monotrack.android.LiveEvent
-import io.monotrack.android.LiveTracker
-import io.monotrack.defaultTrackerConfig
+import io.monotrack.android.LiveEvents
 import io.monotrack.screenTarget
 import java.io.File
 import java.nio.ByteBuffer
@@ -78,10 +78,12 @@ private fun turned(k: CameraIntrinsics, w: Int, h: Int, rot: Int): CameraIntrins
     else -> CameraIntrinsics(k.fy, k.fx, k.cy, w - k.cx)
 }
 
+private val liveStream = FaceTrackerOptions(runningMode = RunningMode.LIVE_STREAM)
+
 class LiveStreamTest {
     private fun facePose(bytes: ByteArray, w: Int, h: Int, rot: Int, mirrored: Boolean, k: CameraIntrinsics): HeadPose {
-        FaceTracker(defaultTrackerConfig().copy(runningMode = RunningMode.IMAGE, camera = k)).use { t ->
-            val r = t.processImage(directOf(bytes), grayDesc(w, h, rot, mirrored))
+        FaceTracker(FaceTrackerOptions(camera = k)).use { t ->
+            val r = t.detect(directOf(bytes), grayDesc(w, h, rot, mirrored))
             assertEquals(1, r.faces.size, "rotation $rot mirrored $mirrored")
             return r.faces[0].pose
         }
@@ -110,21 +112,21 @@ class LiveStreamTest {
         val events = Collections.synchronizedList(mutableListOf<LiveEvent>())
         val last = CountDownLatch(1)
         val submitted = 40L
-        val tracker = LiveTracker(defaultTrackerConfig()) { e ->
+        val listener = LiveEvents { e ->
             events.add(e)
             Thread.sleep(15) // a slow consumer: the camera outpaces it
-            if (e.timestampNs == submitted * 1_000_000) last.countDown()
+            if (e.timestampMs == submitted) last.countDown()
         }
-        tracker.use {
+        FaceTracker(liveStream, listener).use {
             var replaced = 0
             val frame = directOf(u)
             for (i in 1..submitted) {
-                if (it.process(frame, grayDesc(w, h), i * 1_000_000)) replaced++
+                if (it.detectAsync(frame, grayDesc(w, h), i)) replaced++
                 Thread.sleep(2)
             }
             assertTrue(last.await(60, TimeUnit.SECONDS), "the newest frame is always delivered")
             val list = synchronized(events) { events.toList() }
-            val ts = list.map { e -> e.timestampNs }
+            val ts = list.map { e -> e.timestampMs }
             assertEquals(ts.sorted(), ts, "in timestamp order")
             assertEquals(ts.distinct(), ts)
             assertTrue(list.all { e -> e is LiveEvent.Faces && e.result.faces.size == 1 }, "every event found the face")
@@ -136,19 +138,37 @@ class LiveStreamTest {
     }
 
     @Test
-    fun closeWhileBusyStopsDeliveriesAndLaterFramesAreRefused() {
+    fun shutdownWhileBusyStopsDeliveriesAndLaterFramesAreRefused() {
         val (w, h, u) = upright
         val count = java.util.concurrent.atomic.AtomicInteger()
-        val tracker = LiveTracker(defaultTrackerConfig()) { count.incrementAndGet() }
-        tracker.process(directOf(u), grayDesc(w, h), 1)
-        tracker.process(directOf(u), grayDesc(w, h), 2)
-        tracker.close()
-        val atClose = count.get()
-        assertTrue(atClose <= 2)
-        Thread.sleep(300)
-        assertEquals(atClose, count.get(), "no delivery after close returns")
-        tracker.close()
-        assertThrows(IllegalStateException::class.java) { tracker.process(directOf(u), grayDesc(w, h), 3) }
+        FaceTracker(liveStream, LiveEvents { count.incrementAndGet() }).use { tracker ->
+            tracker.detectAsync(directOf(u), grayDesc(w, h), 1)
+            tracker.detectAsync(directOf(u), grayDesc(w, h), 2)
+            tracker.shutdown()
+            val atClose = count.get()
+            assertTrue(atClose <= 2)
+            Thread.sleep(300)
+            assertEquals(atClose, count.get(), "no delivery after shutdown returns")
+            tracker.shutdown()
+            assertThrows(MonotrackException.InvalidState::class.java) { tracker.detectAsync(directOf(u), grayDesc(w, h), 3) }
+        }
+    }
+
+    @Test
+    fun aTimestampThatDoesNotIncreaseIsRefusedUntilReset() {
+        val (w, h, u) = upright
+        val events = java.util.concurrent.LinkedBlockingQueue<LiveEvent>()
+        FaceTracker(liveStream, LiveEvents { events.add(it) }).use { t ->
+            t.detectAsync(directOf(u), grayDesc(w, h), 100)
+            assertTrue(events.poll(60, TimeUnit.SECONDS) is LiveEvent.Faces)
+            assertThrows(MonotrackException.InvalidTimestamp::class.java) { t.detectAsync(directOf(u), grayDesc(w, h), 100) }
+            assertThrows(MonotrackException.InvalidState::class.java) { t.detectForVideo(directOf(u), grayDesc(w, h), 101) }
+            // A camera restart: reset, and time may start again.
+            t.reset()
+            t.detectAsync(directOf(u), grayDesc(w, h), 3)
+            val e = events.poll(60, TimeUnit.SECONDS)
+            assertTrue(e is LiveEvent.Faces && e.timestampMs == 3L, "$e")
+        }
     }
 
     @Test
@@ -156,17 +176,18 @@ class LiveStreamTest {
         val (w, h, u) = upright
         val seen = Collections.synchronizedList(mutableListOf<Long>())
         val second = CountDownLatch(1)
-        LiveTracker(defaultTrackerConfig()) { e ->
-            seen.add(e.timestampNs)
-            if (e.timestampNs == 20L) second.countDown()
-            if (e.timestampNs == 10L) throw IllegalStateException("the app's bug")
-        }.use { t ->
+        val listener = LiveEvents { e ->
+            seen.add(e.timestampMs)
+            if (e.timestampMs == 20L) second.countDown()
+            if (e.timestampMs == 10L) throw IllegalStateException("the app's bug")
+        }
+        FaceTracker(liveStream, listener).use { t ->
             assertThrows(MonotrackException.InvalidFrame::class.java) {
-                t.process(directOf(ByteArray(10)), grayDesc(w, h), 5)
+                t.detectAsync(directOf(ByteArray(10)), grayDesc(w, h), 5)
             }
-            t.process(directOf(u), grayDesc(w, h), 10)
+            t.detectAsync(directOf(u), grayDesc(w, h), 10)
             Thread.sleep(500)
-            t.process(directOf(u), grayDesc(w, h), 20)
+            t.detectAsync(directOf(u), grayDesc(w, h), 20)
             assertTrue(second.await(60, TimeUnit.SECONDS), "events after the listener threw")
             assertEquals(10L, seen.first())
         }
@@ -175,13 +196,14 @@ class LiveStreamTest {
     @Test
     fun eventsFlowToCollectors() = runBlocking {
         val (w, h, u) = upright
-        LiveTracker(defaultTrackerConfig()).use { t ->
+        val listener = LiveEvents()
+        FaceTracker(liveStream, listener).use { t ->
             val first = async(Dispatchers.Default, start = CoroutineStart.UNDISPATCHED) {
-                withTimeout(60_000) { t.events.first() }
+                withTimeout(60_000) { listener.events.first() }
             }
-            t.process(directOf(u), grayDesc(w, h), 7)
+            t.detectAsync(directOf(u), grayDesc(w, h), 7)
             val e = first.await()
-            assertEquals(7L, e.timestampNs)
+            assertEquals(7L, e.timestampMs)
             assertTrue(e is LiveEvent.Faces && e.result.faces.size == 1)
         }
     }
@@ -190,24 +212,25 @@ class LiveStreamTest {
     fun tapsCalibrateTheLiveTrackerAndUnusableOnesReachTheListenerAsFailures() {
         val (w, h, u) = upright
         val events = java.util.concurrent.LinkedBlockingQueue<LiveEvent>()
-        LiveTracker(defaultTrackerConfig()) { events.add(it) }.use { t ->
+        FaceTracker(liveStream, LiveEvents { events.add(it) }).use { t ->
             t.setGazeTargets(listOf(screenTarget("phone", 70.0, 150.0, 35.0, -8.0)))
-            t.process(directOf(u), grayDesc(w, h), 10_000_000L)
+            t.detectAsync(directOf(u), grayDesc(w, h), 10L)
             assertTrue(events.poll(60, TimeUnit.SECONDS) is LiveEvent.Faces)
             assertThrows(MonotrackException.InvalidConfig::class.java) {
-                t.addCalibrationPoint("tv", PlanePoint(35.0, 50.0), 10_000_000L)
+                t.addCalibrationPoint("tv", PlanePoint(35.0, 50.0), 10L)
             }
-            t.addCalibrationPoint("phone", PlanePoint(35.0, 50.0), 12_000_000L)
-            t.process(directOf(u), grayDesc(w, h), 43_000_000L)
+            // Learnt later, on the worker: no count yet.
+            assertEquals(null, t.addCalibrationPoint("phone", PlanePoint(35.0, 50.0), 12L))
+            t.detectAsync(directOf(u), grayDesc(w, h), 43L)
             val after = events.poll(60, TimeUnit.SECONDS)
             assertTrue(after is LiveEvent.Faces, "$after")
             val hit = (after as LiveEvent.Faces).result.faces.single().pointOfGaze!!.target!!
             assertTrue(hit.hit && abs(hit.point.uMm - 35.0) < 10.0 && abs(hit.point.vMm - 50.0) < 10.0, "$hit")
             // No face near this tap's time: the listener hears it, then the frame's faces.
-            t.addCalibrationPoint("phone", PlanePoint(35.0, 50.0), 900_000_000L)
-            t.process(directOf(u), grayDesc(w, h), 950_000_000L)
+            t.addCalibrationPoint("phone", PlanePoint(35.0, 50.0), 900L)
+            t.detectAsync(directOf(u), grayDesc(w, h), 950L)
             val failed = events.poll(60, TimeUnit.SECONDS)
-            assertTrue(failed is LiveEvent.Failed && failed.timestampNs == 900_000_000L, "$failed")
+            assertTrue(failed is LiveEvent.Failed && failed.timestampMs == 900L, "$failed")
             assertTrue((failed as LiveEvent.Failed).error is MonotrackException.InvalidFrame)
             assertTrue(events.poll(60, TimeUnit.SECONDS) is LiveEvent.Faces)
         }

@@ -2,8 +2,8 @@
 //! through `luma_image`, the face tracker and the live tracker.
 use crate::bytes::{Bytes, typed};
 use monotrack_ffi::{
-    FaceTracker, FrameDesc, LiveFaceTracker, LiveStreamListener, LiveStreamResult, MonotrackError,
-    PixelFormat, default_tracker_config, luma_image,
+    FaceTracker, FaceTrackerOptions, FrameDesc, LiveStreamListener, LiveStreamResult,
+    MonotrackError, PixelFormat, RunningMode, frame_byte_count, luma_image, upright_size,
 };
 use std::sync::{Arc, OnceLock};
 
@@ -20,13 +20,19 @@ impl LiveStreamListener for Ignore {
     }
 }
 
-fn trackers() -> &'static (Arc<FaceTracker>, Arc<LiveFaceTracker>) {
-    static T: OnceLock<(Arc<FaceTracker>, Arc<LiveFaceTracker>)> = OnceLock::new();
+/// One tracker per running mode: image, video, live stream.
+fn trackers() -> &'static [Arc<FaceTracker>; 3] {
+    static T: OnceLock<[Arc<FaceTracker>; 3]> = OnceLock::new();
     T.get_or_init(|| {
-        (
-            FaceTracker::new(default_tracker_config()).unwrap(),
-            LiveFaceTracker::new(default_tracker_config(), Arc::new(Ignore)).unwrap(),
-        )
+        let options = |mode| FaceTrackerOptions {
+            running_mode: Some(mode),
+            ..FaceTrackerOptions::default()
+        };
+        [
+            FaceTracker::new(options(RunningMode::Image), None).unwrap(),
+            FaceTracker::new(options(RunningMode::Video), None).unwrap(),
+            FaceTracker::new(options(RunningMode::LiveStream), Some(Arc::new(Ignore))).unwrap(),
+        ]
     })
 }
 
@@ -59,10 +65,12 @@ pub fn run(data: &[u8]) {
     let ts = i64::from(b.u32());
     let bytes = b.rest();
     typed("luma_image", luma_image(bytes, desc));
+    typed("upright_size", upright_size(desc));
+    typed("frame_byte_count", frame_byte_count(desc));
     if small {
-        let (tracker, live) = trackers();
-        typed("process_frame", tracker.process_frame(bytes, desc, ts));
-        typed("process_image", tracker.process_image(bytes, desc));
-        typed("process_async", live.process_async(bytes, desc, ts));
+        let [image, video, live] = trackers();
+        typed("detect", image.detect(bytes, desc));
+        typed("detect_for_video", video.detect_for_video(bytes, desc, ts));
+        typed("detect_async", live.detect_async(bytes, desc, ts));
     }
 }

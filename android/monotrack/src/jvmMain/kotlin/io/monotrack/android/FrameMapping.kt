@@ -5,6 +5,7 @@ package io.monotrack.android
 import io.monotrack.FrameDesc
 import io.monotrack.MonotrackException
 import io.monotrack.PixelFormat
+import io.monotrack.frameByteCount
 
 /**
  * The layout of one image plane as a camera API reports it, free of Android types so that the
@@ -42,14 +43,6 @@ public object FrameMapping {
     }
 
     /**
-     * The number of bytes a buffer must hold for [height] rows of [rowBytes] payload bytes spaced
-     * [rowStride] apart. The last row may stop after its payload: camera HALs often end a plane
-     * buffer there, so `rowStride * height` would wrongly reject valid frames.
-     */
-    public fun requiredBytes(height: Int, rowStride: Int, rowBytes: Int): Long =
-        if (height <= 0) 0L else rowStride.toLong() * (height - 1) + rowBytes
-
-    /**
      * Describes the luma (Y) plane of a YUV_420_888 image as a [PixelFormat.GRAY8] frame: the core
      * tracks on luma only, so plane 0 is passed as is and the chroma planes are never touched.
      *
@@ -67,13 +60,11 @@ public object FrameMapping {
         rotationDegrees: Int,
         mirrored: Boolean,
     ): FrameDesc {
-        checkSize(width, height)
         if (yPlane.pixelStride != 1) {
             // YUV_420_888 guarantees pixelStride 1 for Y; anything else is not a GRAY8 layout.
             throw MonotrackException.InvalidFrame("Y plane pixelStride ${yPlane.pixelStride}, expected 1")
         }
-        checkRows(width, height, yPlane.rowStride, width, yPlane.sizeBytes, "Y plane")
-        return FrameDesc(
+        return checked(FrameDesc(
             width = width.toUInt(),
             height = height.toUInt(),
             format = PixelFormat.GRAY8,
@@ -82,7 +73,7 @@ public object FrameMapping {
             uvPixelStride = 0u,
             rotationDegrees = normalizeRotation(rotationDegrees).toUInt(),
             mirrored = mirrored,
-        )
+        ), yPlane.sizeBytes, "Y plane")
     }
 
     /**
@@ -100,9 +91,7 @@ public object FrameMapping {
         rotationDegrees: Int = 0,
         mirrored: Boolean = false,
     ): FrameDesc {
-        checkSize(width, height)
-        checkRows(width, height, rowStride, width * RGBA_BYTES_PER_PIXEL, sizeBytes, "RGBA buffer")
-        return FrameDesc(
+        return checked(FrameDesc(
             width = width.toUInt(),
             height = height.toUInt(),
             format = PixelFormat.RGBA8,
@@ -111,58 +100,17 @@ public object FrameMapping {
             uvPixelStride = 0u,
             rotationDegrees = normalizeRotation(rotationDegrees).toUInt(),
             mirrored = mirrored,
-        )
+        ), sizeBytes, "RGBA buffer")
     }
 
-    /**
-     * The size of the upright image that results refer to: width and height swap for 90° and 270°.
-     *
-     * @throws MonotrackException.InvalidFrame when [rotationDegrees] is not a multiple of 90.
-     */
-    public fun uprightSize(width: Int, height: Int, rotationDegrees: Int): Pair<Int, Int> =
-        when (normalizeRotation(rotationDegrees)) {
-            QUARTER_TURN_DEG, 3 * QUARTER_TURN_DEG -> height to width
-            else -> width to height
-        }
-
-    private fun checkSize(width: Int, height: Int) {
-        if (width <= 0 || height <= 0) {
-            throw MonotrackException.InvalidFrame("frame size ${width}x$height must be positive")
-        }
-    }
-
-    private fun checkRows(width: Int, height: Int, rowStride: Int, rowBytes: Int, sizeBytes: Int, what: String) {
-        if (rowStride < rowBytes) {
+    /** [desc] when a buffer of [sizeBytes] holds it (the native `frameByteCount` says what it needs). */
+    private fun checked(desc: FrameDesc, sizeBytes: Int, what: String): FrameDesc {
+        val need = frameByteCount(desc)
+        if (sizeBytes < 0 || sizeBytes.toULong() < need) {
             throw MonotrackException.InvalidFrame(
-                "$what rowStride $rowStride < $rowBytes bytes of a ${width}-pixel row",
+                "$what holds $sizeBytes bytes, ${desc.width}x${desc.height} with rowStride ${desc.rowStride} needs $need",
             )
         }
-        val need = requiredBytes(height, rowStride, rowBytes)
-        if (sizeBytes < need) {
-            throw MonotrackException.InvalidFrame(
-                "$what holds $sizeBytes bytes, ${width}x$height with rowStride $rowStride needs $need",
-            )
-        }
-    }
-}
-
-/**
- * Makes camera timestamps strictly increasing, as video mode requires. Camera timestamps normally
- * increase, but a restarted session or a duplicated frame can repeat or go back; such a frame is
- * given the previous timestamp plus one nanosecond instead of failing the whole pipeline.
- */
-public class MonotonicTimestamps {
-    private var last: Long = Long.MIN_VALUE
-
-    /** Returns [timestampNs], or one nanosecond after the previous returned value if it is not later. */
-    public fun next(timestampNs: Long): Long {
-        val t = if (last != Long.MIN_VALUE && timestampNs <= last) last + 1 else timestampNs
-        last = t
-        return t
-    }
-
-    /** Forgets the previous timestamp (call with `FaceTracker.reset`). */
-    public fun reset() {
-        last = Long.MIN_VALUE
+        return desc
     }
 }

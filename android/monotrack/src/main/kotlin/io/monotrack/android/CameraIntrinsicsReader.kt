@@ -9,7 +9,7 @@ import androidx.camera.core.CameraInfo
 import io.monotrack.CameraIntrinsics
 
 /**
- * The intrinsics to put in `TrackerConfig.camera` for this camera's [bufferWidth]×[bufferHeight]
+ * The intrinsics to put in `FaceTrackerOptions.camera` for this camera's [bufferWidth]×[bufferHeight]
  * frames as delivered (the analysis buffer's size, before rotation; the SDK turns and mirrors them
  * with each frame): `LENS_INTRINSIC_CALIBRATION` when the device reports it (API 28+), else the
  * lens's focal length over the sensor's physical size ([CameraIntrinsicsMapping]).

@@ -64,17 +64,3 @@ public fun Bitmap.rgbaFrame(): Frame {
     val desc = FrameMapping.rgbaFrameDesc(width = width, height = height, rowStride = rowBytes, sizeBytes = buffer.remaining())
     return Frame(buffer, desc)
 }
-
-/**
- * Submits a CameraX frame to a [LiveTracker]: plane 0 (Y) as a GRAY8 frame with the image's
- * rotation and sensor timestamp. The bytes are copied by the SDK before this returns, so the caller
- * may close [image] right after (`image.use { tracker.process(it, mirrored) }`).
- *
- * @param mirrored true for the front camera.
- * @return true when a frame still waiting was replaced by this one.
- * @throws MonotrackException.InvalidFrame when the image is not YUV_420_888 or its planes are inconsistent.
- */
-public fun LiveTracker.process(image: ImageProxy, mirrored: Boolean): Boolean {
-    val frame = image.lumaFrame(mirrored)
-    return process(frame.bytes, frame.desc, image.imageInfo.timestamp)
-}

@@ -47,11 +47,8 @@ object BenchSummary {
         return PathTotals(tracking.medianUs / US_PER_MS, redetect.medianUs / US_PER_MS)
     }
 
-    /**
-     * Whether the benchmark frame held a face. [BenchReport] has no face count: without a face the
-     * landmark stages never run and measure 0.
-     */
-    fun faceFound(report: BenchReport): Boolean = (stage(report, "tracking/landmarks")?.meanUs ?: 0.0) > 0.0
+    /** Whether the benchmark frame held a face (the report counts them). */
+    fun faceFound(report: BenchReport): Boolean = report.faces > 0u
 
     /** The stage table: a header, then one line per stage with median, p90 and mean in ms. */
     fun table(report: BenchReport): String {
@@ -118,6 +115,8 @@ object BenchSummary {
     fun describe(e: MonotrackException): String = when (e) {
         is MonotrackException.InvalidFrame -> "invalid frame: ${e.msg}"
         is MonotrackException.InvalidConfig -> "invalid configuration: ${e.msg}"
+        is MonotrackException.InvalidTimestamp -> "invalid timestamp: ${e.msg}"
+        is MonotrackException.InvalidState -> "invalid state: ${e.msg}"
         is MonotrackException.ModelLoad -> "model load failed: ${e.msg}"
         is MonotrackException.Internal -> "internal error: ${e.msg}"
     }

@@ -23,7 +23,7 @@ class BenchSummaryTest {
                 StageStat("$path/$n", us, us * 1.5, us * 1.2)
             }
         }
-        return BenchReport("android aarch64", 100u, 250_000.0, stages)
+        return BenchReport("android aarch64", 100u, if (landmarksUs > 0.0) 1u else 0u, 250_000.0, stages)
     }
 
     @Test
@@ -47,7 +47,7 @@ class BenchSummaryTest {
             BenchSummary.totalsLine(r),
         )
         assertNull(PathTotals(0.0, 5.0).ratio)
-        assertNull(BenchSummary.totals(BenchReport("x", 1u, 0.0, emptyList())))
+        assertNull(BenchSummary.totals(BenchReport("x", 1u, 0u, 0.0, emptyList())))
     }
 
     @Test
