@@ -94,11 +94,11 @@ mod tests {
     #[test]
     fn gaze_arrows_start_at_the_eye_centroids() {
         let mut p = [[0.0f32; 2]; N_LANDMARKS];
-        for i in 36..42 {
-            p[i] = [100.0 + i as f32 - 36.0, 50.0];
+        for (k, q) in p[36..42].iter_mut().enumerate() {
+            *q = [100.0 + k as f32, 50.0];
         }
-        for i in 42..48 {
-            p[i] = [200.0, 60.0 + i as f32 - 42.0];
+        for (k, q) in p[42..48].iter_mut().enumerate() {
+            *q = [200.0, 60.0 + k as f32];
         }
         let [r, l] = gaze_arrows(&p, &[0.5, -0.5, -0.7], &[0.0, 1.0, 0.0], 20.0);
         assert_eq!(r, [[102.5, 50.0], [112.5, 40.0]]);

@@ -47,11 +47,17 @@ pub fn load_targets(path: &std::path::Path) -> Result<Vec<Target>, String> {
 /// With `--targets`: adds `origin_mm` to the FACE's `gaze` object and its `target` object
 /// (CONTRACT.md, "Options shared by face commands").
 pub fn put_point_of_gaze(face: &mut Map<String, Value>, g: &PointOfGaze, targets: &[Target]) {
-    let o = &g.ray.origin;
+    let (o, d) = (&g.ray.origin, &g.ray.direction);
     if let Some(Value::Object(gaze)) = face.get_mut("gaze") {
         gaze.insert(
             "origin_mm".into(),
             json!([round(o.x, 2), round(o.y, 2), round(o.z, 2)]),
+        );
+        // The ray the target was located with: the eyes' (calibrated) or, where they are not
+        // trusted, the head's; `combined` stays M3's own eye estimate.
+        gaze.insert(
+            "direction".into(),
+            json!([round(d.x, 6), round(d.y, 6), round(d.z, 6)]),
         );
     }
     let Some(h) = g.hit else {

@@ -12,11 +12,11 @@ use monotrack_core::gaze::Target;
 use monotrack_core::image::GrayImage;
 use monotrack_core::landmarks::{BROW_GESTURES, MOUTH_GESTURES};
 use monotrack_core::model::{FaceModel, N_LANDMARKS};
+use monotrack_core::overlay;
 use monotrack_core::track::{
     FaceState, FaceTracker, FrameState, LandmarkEstimator, RegionDetector, TrackedFace,
     TrackingResult,
 };
-use nalgebra::Vector3;
 use serde_json::{Map, Value, json};
 use std::io::{IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
@@ -715,7 +715,7 @@ impl Canvas {
 }
 
 /// Draws every face of `result`: its box, the fitted model's mesh projected through `camera`, the
-/// head axes (x red, y green, z blue, from the model's centroid) and the 68 landmarks.
+/// head axes (x red, y green, z blue, from the head frame's origin) and the 68 landmarks.
 pub fn draw_overlay(canvas: &mut Canvas, result: &TrackingResult, camera: &Intrinsics) {
     let model = FaceModel::builtin();
     for face in &result.faces {
@@ -740,19 +740,11 @@ pub fn draw_overlay(canvas: &mut Canvas, result: &TrackingResult, camera: &Intri
                 canvas.line(proj[a], proj[b], MESH_RGB);
             }
         }
-        let mut g = [Vector3::zeros(); N_LANDMARKS];
-        model.shape_into(&fit.shape, &fit.animation, &mut g);
-        let centre = g.iter().sum::<Vector3<f64>>() / N_LANDMARKS as f64;
-        let to_px = |p: Vector3<f64>| {
-            let c = rot * p + t;
-            let (u, v) = camera.project(c.x, c.y, c.z);
-            [u, v]
-        };
-        let o = to_px(centre);
-        for (k, col) in AXIS_RGB.iter().enumerate() {
-            let mut e = Vector3::zeros();
-            e[k] = AXIS_MM;
-            canvas.line(o, to_px(centre + e), *col);
+        // The SDK's one definition of the head's axes (the FFI's `head_axes` too).
+        if let Some(a) = overlay::head_axes(&fit.pose.head_rotation(), t, camera, AXIS_MM) {
+            for (tip, col) in [a.x, a.y, a.z].iter().zip(AXIS_RGB) {
+                canvas.line(a.origin, *tip, col);
+            }
         }
         for p in &face.landmarks.points {
             canvas.disc([f64::from(p[0]), f64::from(p[1])], 1.5, LANDMARK_RGB);
@@ -828,7 +820,7 @@ mod tests {
     use monotrack_core::track::StageTimings;
 
     fn result(cam: &Intrinsics) -> TrackingResult {
-        let pose = Pose::from_euler_deg(20.0, -5.0, 3.0, Vector3::new(10.0, 0.0, 600.0));
+        let pose = Pose::from_euler_deg(20.0, -5.0, 3.0, nalgebra::Vector3::new(10.0, 0.0, 600.0));
         let mut p = [[0.0; 2]; N_LANDMARKS];
         FaceModel::builtin().project_into(
             &[0.0; N_SHAPE],

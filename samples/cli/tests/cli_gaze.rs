@@ -29,7 +29,27 @@ fn check_face(f: &Value) {
         (200.0..3000.0).contains(&origin[2].as_f64().unwrap()),
         "{origin:?}"
     );
+    // The target is where the printed ray lands: `point_mm` measured from corner 0 along the
+    // phone's first edge (+x) and across it (+y), on its plane z = 0.
+    let dir: Vec<f64> = f["gaze"]["direction"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!((dir.iter().map(|v| v * v).sum::<f64>().sqrt() - 1.0).abs() < 1e-5);
+    let o: Vec<f64> = origin.iter().map(|v| v.as_f64().unwrap()).collect();
     let t = &f["target"];
+    if t["hit"].as_bool().unwrap() {
+        let s = -o[2] / dir[2];
+        let (x, y) = (o[0] + s * dir[0], o[1] + s * dir[1]);
+        let p = t["point_mm"].as_array().unwrap();
+        let (u, v) = (p[0].as_f64().unwrap(), p[1].as_f64().unwrap());
+        assert!(
+            (x + 35.0 - u).abs() < 0.05 && (y - 8.0 - v).abs() < 0.05,
+            "the ray lands at ({x}, {y}), the target says {p:?}"
+        );
+    }
     let keys: Vec<&str> = t.as_object().unwrap().keys().map(|k| k.as_str()).collect();
     assert_eq!(keys, ["distance_mm", "hit", "id", "nearest", "point_mm"]);
     assert_eq!(t["point_mm"].as_array().unwrap().len(), 2);

@@ -17,9 +17,11 @@ import androidx.camera.lifecycle.ProcessCameraProvider
 import androidx.camera.view.PreviewView
 import androidx.core.content.ContextCompat
 import io.monotrack.MonotrackException
-import io.monotrack.android.FaceTracker
+import io.monotrack.FaceTracker
+import io.monotrack.FaceTrackerOptions
+import io.monotrack.RunningMode
+import io.monotrack.android.detectForVideo
 import io.monotrack.android.monotrackIntrinsics
-import io.monotrack.defaultTrackerConfig
 import java.util.concurrent.ExecutorService
 import java.util.concurrent.Executors
 import java.util.concurrent.TimeUnit
@@ -86,7 +88,7 @@ class MainActivity : AppCompatActivity() {
             // the tracker exists; until then CameraX drops the frames.
             analysisExecutor.execute {
                 val tracker = try {
-                    FaceTracker(defaultTrackerConfig().copy(camera = intrinsics))
+                    FaceTracker(FaceTrackerOptions(runningMode = RunningMode.VIDEO, camera = intrinsics))
                 } catch (e: MonotrackException) {
                     runOnUiThread { status.text = getString(R.string.tracker_failed, e.message) }
                     return@execute
@@ -101,9 +103,12 @@ class MainActivity : AppCompatActivity() {
         image.use {
             try {
                 // The front preview is mirrored; mirror the results the same way.
-                val result = tracker.process(it, mirrored = front)
+                val result = tracker.detectForVideo(it, mirrored = front)
                 val rate = fps.tick(System.nanoTime())
                 overlay.post { overlay.show(result, rate) }
+            } catch (e: MonotrackException.InvalidTimestamp) {
+                // The camera restarted and its clock went back: start the tracks again.
+                tracker.reset()
             } catch (e: MonotrackException) {
                 // Every error the SDK raises, a caught internal fault included: skip the frame.
                 Log.w(TAG, "frame skipped", e)

@@ -12,7 +12,6 @@ import io.monotrack.android.ViewMapping
 import io.monotrack.android.axes
 import io.monotrack.android.brows
 import io.monotrack.android.copyLandmarksTo
-import io.monotrack.android.defaultIntrinsics
 import io.monotrack.android.gazeArrows
 import io.monotrack.android.mouth
 import java.util.Locale
@@ -63,7 +62,8 @@ class OverlayView @JvmOverloads constructor(context: Context, attrs: AttributeSe
         val w = r.frameWidth.toInt()
         val h = r.frameHeight.toInt()
         val m = ViewMapping.centered(w, h, width, height, fill = true)
-        val camera = defaultIntrinsics(w, h)
+        // The intrinsics the tracker used for this upright image.
+        val camera = r.camera
 
         for (face in r.faces) {
             val n = face.copyLandmarksTo(points)
@@ -77,8 +77,8 @@ class OverlayView @JvmOverloads constructor(context: Context, attrs: AttributeSe
                     canvas.drawLine(ox, oy, m.x(tip.x), m.y(tip.y), axisPaints[i])
                 }
             }
-            face.gazeArrows(GAZE_ARROW_PX)?.let { (right, left) ->
-                for (a in listOf(right, left)) {
+            face.gazeArrows(GAZE_ARROW_PX)?.let { arrows ->
+                for (a in listOf(arrows.right, arrows.left)) {
                     canvas.drawLine(m.x(a.from.x), m.y(a.from.y), m.x(a.to.x), m.y(a.to.y), gazePaint)
                 }
             }
