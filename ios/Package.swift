@@ -2,7 +2,8 @@
 // The monotrack Swift package: the uniffi-generated Swift (module MonotrackFFI, generated into
 // Sources/MonotrackFFI by build-xcframework.sh) over the Rust static library in
 // MonotrackFFIFFI.xcframework (also built by that script), plus the idiomatic wrapper module
-// Monotrack (CVPixelBuffer → frame, orientation, FaceTracker). Apps depend on the "Monotrack" product.
+// Monotrack (CVPixelBuffer → frame, orientation, the generated FaceTracker's CMSampleBuffer calls,
+// LiveEvents). Apps depend on the "Monotrack" product.
 import PackageDescription
 
 let package = Package(

@@ -1,5 +1,6 @@
 // Pure mapping logic (no CoreVideo calls) so it is unit-testable without a camera, and builds on
-// Linux too (bindings/tests/run-swift.sh): only the EXIF orientation needs ImageIO.
+// Linux too (bindings/tests/run-swift.sh): only the EXIF orientation needs ImageIO. Sizes and
+// strides are checked by the SDK's own rule (`frameByteCount`), not here.
 import Foundation
 import MonotrackFFI
 #if canImport(ImageIO)
@@ -13,7 +14,7 @@ public typealias OSType = UInt32
 #endif
 
 /// Errors raised by the wrapper before a frame reaches the SDK. Errors from the SDK itself are
-/// `MonotrackError` (invalid frame, invalid config, model load, internal).
+/// `MonotrackError` (invalid frame, timestamp, state or config, model load, internal).
 public enum FrameError: Error, Equatable, CustomStringConvertible {
     /// The pixel buffer's format is not one the wrapper maps without converting (BGRA, NV12, gray).
     case unsupportedPixelFormat(OSType)
@@ -21,8 +22,10 @@ public enum FrameError: Error, Equatable, CustomStringConvertible {
     case lockFailed(Int32)
     /// The locked pixel buffer has no CPU-accessible base address (e.g. a GPU-only IOSurface).
     case noBaseAddress
-    /// Sizes or strides are not positive or not consistent.
+    /// The buffer's sizes do not fit a `FrameDesc`, or it has no image.
     case invalidLayout(String)
+    /// A sample buffer without a valid presentation time, which video and live-stream tracking need.
+    case noPresentationTime
     /// A rotation that is not a multiple of 90 degrees.
     case invalidRotation(Double)
 
@@ -33,6 +36,7 @@ public enum FrameError: Error, Equatable, CustomStringConvertible {
         case .lockFailed(let s): return "CVPixelBufferLockBaseAddress failed (\(s))"
         case .noBaseAddress: return "pixel buffer has no CPU base address"
         case .invalidLayout(let m): return "invalid frame layout: \(m)"
+        case .noPresentationTime: return "sample buffer has no valid presentation time"
         case .invalidRotation(let d): return "rotation \(d)° is not a multiple of 90°"
         }
     }
@@ -112,11 +116,6 @@ public struct FrameOrientation: Equatable, Sendable {
     public init(videoRotationAngle: CGFloat, frontCamera: Bool) throws {
         try self.init(rotationDegrees: Double(videoRotationAngle), mirrored: frontCamera)
     }
-
-    /// The upright size of a `width`×`height` buffer: width and height swap for 90° and 270°.
-    public func uprightSize(width: Int, height: Int) -> (width: Int, height: Int) {
-        rotationDegrees % 180 == 0 ? (width, height) : (height, width)
-    }
 }
 
 /// Pixel format codes the wrapper accepts (`kCVPixelFormatType_*` values, repeated so that this file
@@ -138,8 +137,8 @@ struct PlaneChoice: Equatable {
     let plane: Int
     /// Whether the buffer is planar (read the base address of `plane`, not of the buffer).
     let planar: Bool
+    /// The SDK's format for the plane.
     let format: PixelFormat
-    let bytesPerPixel: Int
 }
 
 enum FrameLayout {
@@ -149,40 +148,36 @@ enum FrameLayout {
     /// - Throws: `FrameError.unsupportedPixelFormat` for other formats.
     static func choice(for code: OSType) throws -> PlaneChoice {
         switch code {
-        case PixelFormatCode.bgra: return PlaneChoice(plane: 0, planar: false, format: .bgra8, bytesPerPixel: 4)
+        case PixelFormatCode.bgra: return PlaneChoice(plane: 0, planar: false, format: .bgra8)
         case PixelFormatCode.nv12Full, PixelFormatCode.nv12Video:
-            return PlaneChoice(plane: 0, planar: true, format: .gray8, bytesPerPixel: 1)
-        case PixelFormatCode.gray: return PlaneChoice(plane: 0, planar: false, format: .gray8, bytesPerPixel: 1)
+            return PlaneChoice(plane: 0, planar: true, format: .gray8)
+        case PixelFormatCode.gray: return PlaneChoice(plane: 0, planar: false, format: .gray8)
         default: throw FrameError.unsupportedPixelFormat(code)
         }
     }
 
-    /// The number of bytes the SDK reads: the last row may end right after its pixels.
-    static func byteCount(height: Int, bytesPerRow: Int, rowBytes: Int) -> Int {
-        height <= 0 ? 0 : bytesPerRow * (height - 1) + rowBytes
-    }
-
-    /// Describes one plane of `width`×`height` pixels spaced `bytesPerRow` apart.
+    /// Describes one plane of `width`×`height` pixels spaced `bytesPerRow` apart, and the bytes
+    /// the SDK reads of it (`frameByteCount`: the last row may end right after its pixels).
     ///
-    /// - Throws: `FrameError.invalidLayout` when a size is not positive or the stride is too small.
+    /// - Throws: `FrameError.invalidLayout` for a size a `FrameDesc` cannot hold;
+    ///   `MonotrackError.InvalidFrame` for a zero size or a stride shorter than a row.
     static func describe(
         _ choice: PlaneChoice, width: Int, height: Int, bytesPerRow: Int, orientation: FrameOrientation
     ) throws -> (desc: FrameDesc, byteCount: Int) {
-        guard width > 0, height > 0 else { throw FrameError.invalidLayout("size \(width)x\(height)") }
-        let rowBytes = width * choice.bytesPerPixel
-        guard bytesPerRow >= rowBytes else {
-            throw FrameError.invalidLayout("bytesPerRow \(bytesPerRow) < \(rowBytes) for width \(width)")
-        }
+        guard let w = UInt32(exactly: width), let h = UInt32(exactly: height),
+              let stride = UInt32(exactly: bytesPerRow)
+        else { throw FrameError.invalidLayout("size \(width)x\(height), bytesPerRow \(bytesPerRow)") }
         let desc = FrameDesc(
-            width: UInt32(width),
-            height: UInt32(height),
+            width: w,
+            height: h,
             format: choice.format,
-            rowStride: UInt32(bytesPerRow),
+            rowStride: stride,
             uvRowStride: 0,
             uvPixelStride: 0,
             rotationDegrees: orientation.rotationDegrees,
             mirrored: orientation.mirrored
         )
-        return (desc, byteCount(height: height, bytesPerRow: bytesPerRow, rowBytes: rowBytes))
+        let count = try frameByteCount(desc: desc)
+        return (desc, Int(count))
     }
 }

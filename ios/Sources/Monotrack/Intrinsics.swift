@@ -6,7 +6,7 @@ import CoreMedia
 import simd
 #endif
 
-/// Camera intrinsics for `TrackerConfig.camera`. The SDK wants them for the buffer as delivered
+/// Camera intrinsics for `FaceTrackerOptions.camera`. The SDK wants them for the buffer as delivered
 /// (before rotation and mirroring), in that buffer's pixels; it turns them with each frame.
 extension CameraIntrinsics {
     #if canImport(CoreMedia)

@@ -14,8 +14,9 @@ extension CVPixelBuffer {
     /// not escape `body`.
     ///
     /// - Parameter orientation: how to make the buffer upright (see `FrameOrientation`).
-    /// - Throws: `FrameError` when the format is unsupported or the buffer cannot be locked; whatever
-    ///   `body` throws.
+    /// - Throws: `FrameError` when the format is unsupported or the buffer cannot be locked;
+    ///   `MonotrackError.InvalidFrame` when its sizes and stride describe no frame
+    ///   (`frameByteCount`); whatever `body` throws.
     public func withMonotrackFrame<R>(
         orientation: FrameOrientation, _ body: (Data, FrameDesc) throws -> R
     ) throws -> R {

@@ -1,6 +1,9 @@
-// Helpers for drawing results. Conventions (CONTRACT.md at the repository root): image pixels of the upright,
-// mirrored-as-asked frame, x right, y down, origin at the top-left corner of the top-left pixel;
-// camera frame x right, y down, z forward, millimetres; the pose maps model X to R·X + t.
+// Helpers for showing results with Apple types. The geometry itself (default intrinsics, upright
+// size, projections, head axes, gaze arrows, the OpenGL transform) is the SDK's: `defaultCamera`,
+// `uprightSize`, `projectPoint`, `headAxes`, `gazeArrows`, `openglTransform`, so that Swift keeps
+// no copy that could drift from Kotlin's or the CLI's. Conventions (CONTRACT.md at the repository
+// root): image pixels of the upright, mirrored-as-asked frame, x right, y down, origin at the
+// top-left corner of the top-left pixel.
 // CGPoint, CGSize and CGFloat come from CoreGraphics on Apple platforms, from Foundation elsewhere.
 #if canImport(CoreGraphics)
 import CoreGraphics
@@ -8,93 +11,20 @@ import CoreGraphics
 import Foundation
 import MonotrackFFI
 
-/// Number of landmarks in a `Face` (the 68-point iBUG / 300-W order).
-public let landmarkCount = 68
-
-/// Focal length in units of the larger image side when intrinsics are unknown (CONTRACT: ≈58° FOV).
-public let defaultFocalPerMaxSide = 0.9
-
-/// iBUG indices of the subject's right eye (image left for a frontal face).
-public let rightEyeIndices = 36...41
-/// iBUG indices of the subject's left eye (image right for a frontal face).
-public let leftEyeIndices = 42...47
-
-/// The intrinsics the SDK assumes when none are given: f = 0.9 · max(width, height), centred.
-public func defaultIntrinsics(width: Int, height: Int) -> CameraIntrinsics {
-    let f = defaultFocalPerMaxSide * Double(max(width, height))
-    return CameraIntrinsics(fx: f, fy: f, cx: Double(width) / 2, cy: Double(height) / 2)
-}
-
-extension CameraIntrinsics {
-    /// Projects a camera-frame point (mm) to pixels; nil on or behind the camera plane.
-    public func project(x: Double, y: Double, z: Double) -> CGPoint? {
-        guard z > 0 else { return nil }
-        return CGPoint(x: fx * x / z + cx, y: fy * y / z + cy)
-    }
-}
-
-/// The head's model axes in the image: x towards the subject's left, y down, z away from the camera.
-public struct HeadAxes: Equatable {
-    /// The model origin (the pose's translation), projected.
-    public let origin: CGPoint
-    /// Tip of the model x axis (towards the subject's left).
-    public let x: CGPoint
-    /// Tip of the model y axis (down the face).
-    public let y: CGPoint
-    /// Tip of the model z axis (into the head, away from the camera).
-    public let z: CGPoint
-}
-
-extension HeadPose {
-    /// The rotation as a row-major 3×3 array, or nil when it is not 9 finite values.
-    public var rotationMatrix: [Double]? {
-        rotation.count == 9 && rotation.allSatisfy(\.isFinite) ? rotation : nil
-    }
-
-    /// Projects the model axes, `lengthMm` long, for a pose gizmo.
-    ///
-    /// - Parameter camera: intrinsics of the upright result image (`defaultIntrinsics` with the
-    ///   result's `frameWidth`/`frameHeight` when the tracker has no `camera`).
-    /// - Returns: nil when the rotation is malformed or an endpoint is behind the camera.
-    public func axes(camera: CameraIntrinsics, lengthMm: Double) -> HeadAxes? {
-        guard let r = rotationMatrix else { return nil }
-        let t = translationMm
-        // Column j of R is model axis j in the camera frame.
-        func tip(_ j: Int) -> CGPoint? {
-            camera.project(x: t.x + lengthMm * r[j], y: t.y + lengthMm * r[3 + j], z: t.z + lengthMm * r[6 + j])
-        }
-        guard let o = camera.project(x: t.x, y: t.y, z: t.z), let x = tip(0), let y = tip(1), let z = tip(2)
-        else { return nil }
-        return HeadAxes(origin: o, x: x, y: y, z: z)
-    }
+extension Point2 {
+    /// The point as a `CGPoint`.
+    public var cgPoint: CGPoint { CGPoint(x: CGFloat(x), y: CGFloat(y)) }
 }
 
 extension Face {
     /// The landmarks as `CGPoint`s.
-    public var landmarkPoints: [CGPoint] { landmarks.map { CGPoint(x: CGFloat($0.x), y: CGFloat($0.y)) } }
-
-    /// Gaze arrows (from, to) for the subject's right and left eye: from each eye's landmark centroid
-    /// along the gaze direction's image-plane part, `lengthPx` long for a gaze across the optical
-    /// axis (an orthographic sketch for overlays). Nil without 68 landmarks or without gaze
-    /// (`TrackerConfig.gaze` off, or the ultra-light mode).
-    public func gazeArrows(lengthPx: CGFloat) -> (right: (CGPoint, CGPoint), left: (CGPoint, CGPoint))? {
-        guard landmarks.count == landmarkCount, let gaze = gaze else { return nil }
-        func centroid(_ r: ClosedRange<Int>) -> CGPoint {
-            let pts = landmarks[r]
-            let n = CGFloat(pts.count)
-            return CGPoint(x: pts.reduce(0) { $0 + CGFloat($1.x) } / n, y: pts.reduce(0) { $0 + CGFloat($1.y) } / n)
-        }
-        func arrow(_ eye: CGPoint, _ g: Vec3) -> (CGPoint, CGPoint) {
-            (eye, CGPoint(x: eye.x + lengthPx * CGFloat(g.x), y: eye.y + lengthPx * CGFloat(g.y)))
-        }
-        return (arrow(centroid(rightEyeIndices), gaze.right), arrow(centroid(leftEyeIndices), gaze.left))
-    }
+    public var landmarkPoints: [CGPoint] { landmarks.map(\.cgPoint) }
 }
 
 extension Gestures {
-    /// The most probable mouth gesture ("smile", "frown", "kiss", "neutral") and its probability.
+    /// The most probable mouth gesture ("smile", "kiss", "neutral") and its probability.
     public var mouth: (name: String, probability: Float) {
-        [("smile", smile), ("frown", frown), ("kiss", kiss), ("neutral", mouthNeutral)].max { $0.1 < $1.1 }!
+        [("smile", smile), ("kiss", kiss), ("neutral", mouthNeutral)].max { $0.1 < $1.1 }!
     }
 
     /// The most probable brow gesture ("raise", "frown", "neutral") and its probability.
@@ -104,7 +34,7 @@ extension Gestures {
 }
 
 extension BenchReport {
-    /// The per-stage table like the thesis' Tables 4.4/4.5: stage, median ms, p90 ms.
+    /// The per-stage table: stage, median ms, p90 ms.
     public var table: String {
         let w = max(5, stages.map(\.name.count).max() ?? 0)
         func pad(_ s: String, _ n: Int) -> String { s.padding(toLength: max(n, s.count), withPad: " ", startingAt: 0) }
@@ -138,6 +68,15 @@ public struct ViewMapping: Equatable {
                          y: (viewSize.height - scale * imageSize.height) / 2)
     }
 
+    /// The mapping for a result's upright image (`frameWidth`×`frameHeight`) shown in `viewSize`.
+    public init?(result: TrackingResult, viewSize: CGSize, fill: Bool) {
+        self.init(imageSize: CGSize(width: CGFloat(result.frameWidth), height: CGFloat(result.frameHeight)),
+                  viewSize: viewSize, fill: fill)
+    }
+
     /// The view point of image point `p`.
     public func map(_ p: CGPoint) -> CGPoint { CGPoint(x: offset.x + scale * p.x, y: offset.y + scale * p.y) }
+
+    /// The view point of an SDK image point (a landmark, a projection, an arrow's end).
+    public func map(_ p: Point2) -> CGPoint { map(p.cgPoint) }
 }

@@ -1,7 +1,8 @@
-// The live-stream mode (the wrapper's LiveTracker and the generated LiveFaceTracker) and the intrinsics
-// convention against the real library (the port of bindings/tests/kotlin/LiveStreamTest.kt): events in
-// timestamp order, frames dropped while the worker is busy and each counted once, shutdown while
-// busy, bad frames refused at once, taps on the worker.
+// The live-stream running mode (the generated FaceTracker with a listener of its own, and the wrapper's
+// LiveEvents) and the intrinsics convention against the real library (the port of
+// bindings/tests/kotlin/LiveStreamTest.kt): events in timestamp order, frames dropped while the
+// worker is busy and each counted once, shutdown while busy, bad frames and timestamps refused at
+// once, reset, taps on the worker.
 import Foundation
 import XCTest
 @testable import Monotrack
@@ -50,14 +51,14 @@ private func turned(_ k: CameraIntrinsics, w: Int, h: Int, rot: Int) -> CameraIn
 
 /// One delivery of the generated listener.
 private struct Delivery {
-    let timestampNs: Int64
+    let timestampMs: Int64
     let framesDropped: UInt64
     let faces: Int?
     let error: MonotrackError?
 }
 
-/// A listener of the generated LiveFaceTracker that records each delivery, optionally sleeping on the
-/// worker's thread (a slow consumer), and signals when the delivery of `until` arrives.
+/// A listener of the generated API that records each delivery, optionally sleeping on the worker's
+/// thread (a slow consumer), and signals when the delivery of `until` arrives.
 private final class Recorder: LiveStreamListener, @unchecked Sendable {
     private let lock = NSLock()
     private var list: [Delivery] = []
@@ -77,49 +78,42 @@ private final class Recorder: LiveStreamListener, @unchecked Sendable {
         list.append(d)
         lock.unlock()
         if sleepMs > 0 { usleep(sleepMs * 1000) }
-        if d.timestampNs == until { arrived.signal() }
+        if d.timestampMs == until { arrived.signal() }
     }
 
     func onResult(result: LiveStreamResult) {
-        record(Delivery(timestampNs: result.timestampNs, framesDropped: result.framesDropped,
+        record(Delivery(timestampMs: result.timestampMs, framesDropped: result.framesDropped,
                         faces: result.result.faces.count, error: nil))
     }
 
-    func onError(timestampNs: Int64, framesDropped: UInt64, error: MonotrackError) {
-        record(Delivery(timestampNs: timestampNs, framesDropped: framesDropped, faces: nil, error: error))
+    func onError(timestampMs: Int64, framesDropped: UInt64, error: MonotrackError) {
+        record(Delivery(timestampMs: timestampMs, framesDropped: framesDropped, faces: nil, error: error))
     }
 }
 
-extension LiveEvent {
-    var timestampNs: Int64 {
-        switch self {
-        case .faces(let r): return r.timestampNs
-        case .failed(let t, _, _): return t
-        }
-    }
-
-    var framesDropped: UInt64 {
-        switch self {
-        case .faces(let r): return r.framesDropped
-        case .failed(_, let d, _): return d
-        }
-    }
+/// A live-stream tracker delivering to `events`, with the default options otherwise.
+private func liveTracker(_ events: LiveStreamListener) throws -> FaceTracker {
+    try FaceTracker(options: options(.liveStream), listener: events)
 }
 
-/// Shuts `tracker` down (ending its events) after `seconds` unless cancelled: a stuck test fails.
-private func watchdog(_ tracker: LiveTracker, seconds: Double = 60) -> Task<Void, Never> {
+/// Shuts `tracker` down and ends `events` after `seconds` unless cancelled: a stuck test fails
+/// instead of hanging.
+private func watchdog(_ tracker: FaceTracker, _ events: LiveEvents, seconds: Double = 60) -> Task<Void, Never> {
     Task {
         try? await Task.sleep(nanoseconds: UInt64(seconds * 1e9))
-        if !Task.isCancelled { tracker.shutdown() }
+        if !Task.isCancelled {
+            tracker.shutdown()
+            events.finish()
+        }
     }
 }
 
 final class LiveStreamTests: XCTestCase {
     private func facePose(_ b: (width: Int, height: Int, pixels: [UInt8]), rot: Int, mirrored: Bool,
                           _ k: CameraIntrinsics) throws -> HeadPose {
-        let t = try Monotrack.FaceTracker(config: with(defaultTrackerConfig()) { $0.runningMode = .image; $0.camera = k })
+        let t = try FaceTracker(options: with(FaceTrackerOptions()) { $0.camera = k })
         let f = grayFrame(b.pixels, width: b.width, height: b.height, rot: UInt32(rot), mirrored: mirrored)
-        let r = try t.processFrame(bytes: f.bytes, desc: f.desc, timestampNs: 0)
+        let r = try t.detect(bytes: f.bytes, desc: f.desc)
         XCTAssertEqual(r.faces.count, 1, "rotation \(rot) mirrored \(mirrored)")
         return try XCTUnwrap(r.faces.first).pose
     }
@@ -140,6 +134,15 @@ final class LiveStreamTests: XCTestCase {
                 for i in 0..<9 { XCTAssertEqual(pose.rotation[i], ref.rotation[i], accuracy: 1e-6, "rot \(rot) mirrored \(mirrored): R") }
             }
         }
+        // The result names the upright image's intrinsics: the sensor's turned with the frame.
+        let b = sensorBuffer(u, rot: 90, mirrored: false)
+        let k90 = turned(ku, w: u.width, h: u.height, rot: 270)
+        let f = grayFrame(b.pixels, width: b.width, height: b.height, rot: 90)
+        let r = try FaceTracker(options: with(FaceTrackerOptions()) { $0.camera = k90 }).detect(bytes: f.bytes, desc: f.desc)
+        XCTAssertEqual(r.camera.fx, ku.fx, accuracy: 1e-9)
+        XCTAssertEqual(r.camera.fy, ku.fy, accuracy: 1e-9)
+        XCTAssertEqual(r.camera.cx, ku.cx, accuracy: 1e-9)
+        XCTAssertEqual(r.camera.cy, ku.cy, accuracy: 1e-9)
         // The wrapper's field-of-view intrinsics: f from the horizontal angle, centred.
         let k = try XCTUnwrap(CameraIntrinsics(fieldOfViewDegrees: 90, width: 640, height: 480))
         XCTAssertEqual(k.fx, 320, accuracy: 1e-9)
@@ -152,18 +155,18 @@ final class LiveStreamTests: XCTestCase {
     func testFramesAreDroppedWhileBusyAndEventsStayInOrder() throws {
         let u = try upright()
         let submitted: Int64 = 40
-        let recorder = Recorder(sleepMs: 15, until: submitted * 1_000_000)
-        let t = try LiveFaceTracker(config: defaultTrackerConfig(), listener: recorder)
+        let recorder = Recorder(sleepMs: 15, until: submitted)
+        let t = try liveTracker(recorder)
         var replaced: UInt64 = 0
         let f = grayFrame(u.pixels, width: u.width, height: u.height)
         for i in 1...submitted {
-            if try t.processAsync(bytes: f.bytes, desc: f.desc, timestampNs: i * 1_000_000) { replaced += 1 }
+            if try t.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: i) { replaced += 1 }
             usleep(2000)
         }
         XCTAssertEqual(recorder.arrived.wait(timeout: .now() + 60), .success, "the newest frame is always delivered")
         t.shutdown()
         let list = recorder.deliveries
-        let ts = list.map(\.timestampNs)
+        let ts = list.map(\.timestampMs)
         XCTAssertEqual(ts, ts.sorted(), "in timestamp order")
         XCTAssertEqual(Set(ts).count, ts.count)
         XCTAssertTrue(list.allSatisfy { $0.faces == 1 }, "every event found the face")
@@ -174,137 +177,164 @@ final class LiveStreamTests: XCTestCase {
     }
 
     /// The wrapper's stream: the same accounting, the events in timestamp order.
-    func testTheWrapperStreamKeepsOrderAndCountsEveryFrame() async throws {
+    func testLiveEventsKeepOrderAndCountEveryFrame() async throws {
         let u = try upright()
-        let tracker = try LiveTracker()
-        let dog = watchdog(tracker)
+        let events = LiveEvents()
+        let tracker = try FaceTracker(options: FaceTrackerOptions(runningMode: .liveStream), listener: events)
+        let dog = watchdog(tracker, events)
         let submitted: Int64 = 30
         let collector = Task { () -> [LiveEvent] in
             var got: [LiveEvent] = []
-            for await e in tracker.events {
+            for await e in events.events {
                 got.append(e)
-                if e.timestampNs == submitted * 1_000_000 { break }
+                if e.timestampMs == submitted { break }
             }
             return got
         }
         var replaced: UInt64 = 0
         let f = grayFrame(u.pixels, width: u.width, height: u.height)
         for i in 1...submitted {
-            if try tracker.process(bytes: f.bytes, desc: f.desc, timestampNs: i * 1_000_000) { replaced += 1 }
+            if try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: i) { replaced += 1 }
             usleep(2000)
         }
-        let events = await collector.value
+        let got = await collector.value
         dog.cancel()
         tracker.shutdown()
-        XCTAssertEqual(events.last?.timestampNs, submitted * 1_000_000, "the newest frame is always delivered")
-        let ts = events.map(\.timestampNs)
+        events.finish()
+        XCTAssertEqual(got.last?.timestampMs, submitted, "the newest frame is always delivered")
+        let ts = got.map(\.timestampMs)
         XCTAssertEqual(ts, ts.sorted(), "in timestamp order")
         XCTAssertEqual(Set(ts).count, ts.count)
-        for e in events {
+        for e in got {
             guard case .faces(let r) = e else { XCTFail("\(e)"); continue }
             XCTAssertEqual(r.result.faces.count, 1, "every event found the face")
         }
-        let dropped = events.map(\.framesDropped).reduce(0, +)
+        let dropped = got.map(\.framesDropped).reduce(0, +)
         XCTAssertEqual(dropped, replaced, "each replaced frame counted once")
-        XCTAssertEqual(UInt64(events.count) + dropped, UInt64(submitted), "every frame delivered or counted dropped")
+        XCTAssertEqual(UInt64(got.count) + dropped, UInt64(submitted), "every frame delivered or counted dropped")
     }
 
-    func testShutdownWhileBusyStopsDeliveriesAndLaterFramesAreRefused() async throws {
+    func testShutdownWhileBusyStopsDeliveriesAndLaterCallsAreRefused() async throws {
         let u = try upright()
         let f = grayFrame(u.pixels, width: u.width, height: u.height)
         // The generated API: nothing is delivered after shutdown returns.
         let recorder = Recorder()
-        let raw = try LiveFaceTracker(config: defaultTrackerConfig(), listener: recorder)
-        _ = try raw.processAsync(bytes: f.bytes, desc: f.desc, timestampNs: 1)
-        _ = try raw.processAsync(bytes: f.bytes, desc: f.desc, timestampNs: 2)
+        let raw = try liveTracker(recorder)
+        _ = try raw.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 1)
+        _ = try raw.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 2)
         raw.shutdown()
         let atShutdown = recorder.deliveries.count
         XCTAssertLessThanOrEqual(atShutdown, 2)
         usleep(300_000)
         XCTAssertEqual(recorder.deliveries.count, atShutdown, "no delivery after shutdown returns")
         raw.shutdown()
-        assertInvalidFrame(try raw.processAsync(bytes: f.bytes, desc: f.desc, timestampNs: 3), "after shutdown")
+        assertInvalidState(try raw.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 3), "after shutdown")
+        assertInvalidState(try raw.addCalibrationPoint(targetId: "phone", point: PlanePoint(uMm: 1, vMm: 1), timestampMs: 3),
+                           "a tap after shutdown")
 
-        // The wrapper: shutdown ends the stream (a frame in flight may still arrive) and is idempotent.
-        let tracker = try LiveTracker()
-        let dog = watchdog(tracker, seconds: 30)
-        try tracker.process(bytes: f.bytes, desc: f.desc, timestampNs: 1)
-        try tracker.process(bytes: f.bytes, desc: f.desc, timestampNs: 2)
+        // The wrapper: finishing after shutdown ends the stream with whatever was in flight, and
+        // both are idempotent.
+        let events = LiveEvents()
+        let tracker = try liveTracker(events)
+        let dog = watchdog(tracker, events, seconds: 30)
+        _ = try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 1)
+        _ = try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 2)
         tracker.shutdown()
+        events.finish()
         var seen = 0
-        for await _ in tracker.events { seen += 1 }
+        for await _ in events.events { seen += 1 }
         dog.cancel()
         XCTAssertLessThanOrEqual(seen, 2)
         tracker.shutdown()
-        assertInvalidFrame(try tracker.process(bytes: f.bytes, desc: f.desc, timestampNs: 3), "after shutdown")
+        events.finish()
+        assertInvalidState(try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 3), "after shutdown")
     }
 
-    func testBadFramesThrowAtOnceAndTheStreamGoesOn() async throws {
+    /// Bad frames, repeated timestamps and another mode's call are refused at once and leave no
+    /// event; `reset()` lets a restarted camera's earlier clock in.
+    func testBadCallsThrowAtOnceAndResetRestartsTheClock() async throws {
         let u = try upright()
         let f = grayFrame(u.pixels, width: u.width, height: u.height)
-        let tracker = try LiveTracker()
-        let dog = watchdog(tracker)
-        assertInvalidFrame(try tracker.process(bytes: Data(count: 10), desc: f.desc, timestampNs: 5))
-        var it = tracker.events.makeAsyncIterator()
-        try tracker.process(bytes: f.bytes, desc: f.desc, timestampNs: 10)
+        let events = LiveEvents()
+        let tracker = try liveTracker(events)
+        let dog = watchdog(tracker, events)
+        assertInvalidFrame(try tracker.detectAsync(bytes: Data(count: 10), desc: f.desc, timestampMs: 5))
+        assertInvalidState(try tracker.detectForVideo(bytes: f.bytes, desc: f.desc, timestampMs: 5), "a video call")
+        assertInvalidState(try tracker.detect(bytes: f.bytes, desc: f.desc), "a still call")
+        var it = events.events.makeAsyncIterator()
+        _ = try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 10)
+        assertInvalidTimestamp(try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 10), "a repeated time")
         let first = await it.next()
-        try tracker.process(bytes: f.bytes, desc: f.desc, timestampNs: 20)
+        _ = try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 20)
         let second = await it.next()
+        tracker.reset()
+        _ = try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 3)
+        let third = await it.next()
         dog.cancel()
         tracker.shutdown()
-        XCTAssertEqual(first?.timestampNs, 10, "the bad frame left no event")
-        XCTAssertEqual(second?.timestampNs, 20)
+        events.finish()
+        XCTAssertEqual(first?.timestampMs, 10, "the refused calls left no event")
+        XCTAssertEqual(second?.timestampMs, 20)
+        XCTAssertEqual(third?.timestampMs, 3, "after reset an earlier time is taken")
         guard case .faces(let r) = second else { return XCTFail("\(String(describing: second))") }
         XCTAssertEqual(r.result.faces.count, 1)
+        guard case .faces(let again) = third else { return XCTFail("\(String(describing: third))") }
+        XCTAssertEqual(again.result.faces.first?.state, .detected, "reset ended the track")
     }
 
     func testEventsFlowToCollectors() async throws {
         let u = try upright()
         let f = grayFrame(u.pixels, width: u.width, height: u.height)
-        let tracker = try LiveTracker()
-        let dog = watchdog(tracker)
+        let events = LiveEvents()
+        let tracker = try liveTracker(events)
+        let dog = watchdog(tracker, events)
         let first = Task { () -> LiveEvent? in
-            for await e in tracker.events { return e }
+            for await e in events.events { return e }
             return nil
         }
-        try tracker.process(bytes: f.bytes, desc: f.desc, timestampNs: 7)
+        _ = try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 7)
         let e = await first.value
         dog.cancel()
         tracker.shutdown()
-        XCTAssertEqual(e?.timestampNs, 7)
+        events.finish()
+        XCTAssertEqual(e?.timestampMs, 7)
         guard case .faces(let r) = e else { return XCTFail("\(String(describing: e))") }
         XCTAssertEqual(r.result.faces.count, 1)
         XCTAssertEqual(r.framesDropped, 0)
+        XCTAssertEqual(r.result.frameWidth, UInt32(u.width))
     }
 
     func testTapsCalibrateTheLiveTrackerAndUnusableOnesArriveAsFailures() async throws {
         let u = try upright()
         let f = grayFrame(u.pixels, width: u.width, height: u.height)
-        let tracker = try LiveTracker()
-        let dog = watchdog(tracker)
-        var it = tracker.events.makeAsyncIterator()
-        try tracker.setGazeTargets([screenTarget(id: "phone", widthMm: 70, heightMm: 150, cameraRightMm: 35, cameraDownMm: -8)])
-        try tracker.process(bytes: f.bytes, desc: f.desc, timestampNs: 10_000_000)
+        let events = LiveEvents()
+        let tracker = try liveTracker(events)
+        let dog = watchdog(tracker, events)
+        var it = events.events.makeAsyncIterator()
+        try tracker.setGazeTargets(targets: [screenTarget(id: "phone", widthMm: 70, heightMm: 150, cameraRightMm: 35, cameraDownMm: -8)])
+        _ = try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 10)
         let e1 = await it.next()
         guard case .faces = e1 else { dog.cancel(); return XCTFail("\(String(describing: e1))") }
-        assertInvalidConfig(try tracker.addCalibrationPoint(targetId: "tv", point: PlanePoint(uMm: 35, vMm: 50), timestampNs: 10_000_000))
-        try tracker.addCalibrationPoint(targetId: "phone", point: PlanePoint(uMm: 35, vMm: 50), timestampNs: 12_000_000)
-        try tracker.process(bytes: f.bytes, desc: f.desc, timestampNs: 43_000_000)
+        assertInvalidConfig(try tracker.addCalibrationPoint(targetId: "tv", point: PlanePoint(uMm: 35, vMm: 50), timestampMs: 10))
+        XCTAssertNil(try tracker.addCalibrationPoint(targetId: "phone", point: PlanePoint(uMm: 35, vMm: 50), timestampMs: 12),
+                     "the worker learns the tap later: no count yet")
+        _ = try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 43)
         let after = await it.next()
         guard case .faces(let r) = after else { dog.cancel(); return XCTFail("\(String(describing: after))") }
         let hit = try XCTUnwrap(r.result.faces.first?.pointOfGaze?.target)
         XCTAssertTrue(hit.hit && abs(hit.point.uMm - 35) < 10 && abs(hit.point.vMm - 50) < 10, "\(hit)")
         // No face near this tap's time: the stream says so, then brings the frame's faces.
-        try tracker.addCalibrationPoint(targetId: "phone", point: PlanePoint(uMm: 35, vMm: 50), timestampNs: 900_000_000)
-        try tracker.process(bytes: f.bytes, desc: f.desc, timestampNs: 950_000_000)
+        _ = try tracker.addCalibrationPoint(targetId: "phone", point: PlanePoint(uMm: 35, vMm: 50), timestampMs: 900)
+        _ = try tracker.detectAsync(bytes: f.bytes, desc: f.desc, timestampMs: 950)
         let failed = await it.next()
         let last = await it.next()
+        tracker.resetGazeCalibration()
         dog.cancel()
         tracker.shutdown()
+        events.finish()
         guard case .failed(let ts, _, let error) = failed else { return XCTFail("\(String(describing: failed))") }
-        XCTAssertEqual(ts, 900_000_000)
+        XCTAssertEqual(ts, 900)
         guard case .InvalidFrame = error else { return XCTFail("\(error)") }
         guard case .faces = last else { return XCTFail("\(String(describing: last))") }
-        tracker.resetGazeCalibration()
     }
 }

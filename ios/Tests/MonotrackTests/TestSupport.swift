@@ -195,11 +195,16 @@ func with(_ desc: FrameDesc, _ change: (inout FrameDesc) -> Void) -> FrameDesc {
     return d
 }
 
-/// `config` with other fields.
-func with(_ config: TrackerConfig, _ change: (inout TrackerConfig) -> Void) -> TrackerConfig {
-    var c = config
-    change(&c)
-    return c
+/// `options` with other fields.
+func with(_ options: FaceTrackerOptions, _ change: (inout FaceTrackerOptions) -> Void) -> FaceTrackerOptions {
+    var o = options
+    change(&o)
+    return o
+}
+
+/// The default options in `mode`.
+func options(_ mode: RunningMode) -> FaceTrackerOptions {
+    FaceTrackerOptions(runningMode: mode)
 }
 
 /// The line's JSON object.
@@ -246,6 +251,36 @@ func assertInvalidConfig<T>(_ body: @autoclosure () throws -> T, _ what: String 
         return msg
     } catch {
         XCTFail("\(error): expected InvalidConfig \(what)", file: file, line: line)
+    }
+    return nil
+}
+
+/// Asserts that `body` throws `MonotrackError.InvalidTimestamp`; returns its message.
+@discardableResult
+func assertInvalidTimestamp<T>(_ body: @autoclosure () throws -> T, _ what: String = "",
+                               file: StaticString = #filePath, line: UInt = #line) -> String? {
+    do {
+        _ = try body()
+        XCTFail("no error: expected InvalidTimestamp \(what)", file: file, line: line)
+    } catch MonotrackError.InvalidTimestamp(let msg) {
+        return msg
+    } catch {
+        XCTFail("\(error): expected InvalidTimestamp \(what)", file: file, line: line)
+    }
+    return nil
+}
+
+/// Asserts that `body` throws `MonotrackError.InvalidState`; returns its message.
+@discardableResult
+func assertInvalidState<T>(_ body: @autoclosure () throws -> T, _ what: String = "",
+                           file: StaticString = #filePath, line: UInt = #line) -> String? {
+    do {
+        _ = try body()
+        XCTFail("no error: expected InvalidState \(what)", file: file, line: line)
+    } catch MonotrackError.InvalidState(let msg) {
+        return msg
+    } catch {
+        XCTFail("\(error): expected InvalidState \(what)", file: file, line: line)
     }
     return nil
 }

@@ -2,10 +2,11 @@ import AVFoundation
 import Monotrack
 import SwiftUI
 
-/// Owns the capture session and the tracker (built on `frameQueue`, which is also the only queue
-/// that reads it). Frames arrive on `frameQueue` (a serial queue), are
-/// tracked there synchronously and the results are published on the main queue. Late frames are
-/// dropped (`alwaysDiscardsLateVideoFrames`), so a slow frame costs frames, not latency.
+/// Owns the capture session and the tracker, a video-mode `FaceTracker` (built on `frameQueue`,
+/// which is also the only queue that reads it). Frames arrive on `frameQueue` (a serial queue), are
+/// tracked there synchronously at their presentation time and the results are published on the
+/// main queue. Late frames are dropped (`alwaysDiscardsLateVideoFrames`), so a slow frame costs
+/// frames, not latency.
 final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSampleBufferDelegate {
     @Published private(set) var result: TrackingResult?
     @Published private(set) var fps: Double = 0
@@ -14,7 +15,7 @@ final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSam
 
     let session = AVCaptureSession()
     private let frameQueue = DispatchQueue(label: "io.monotrack.sample.frames")
-    private var tracker: Monotrack.FaceTracker?
+    private var tracker: FaceTracker?
     private var coordinator: AVCaptureDevice.RotationCoordinator?
     private var observations: [NSKeyValueObservation] = []
     private var isFront = true
@@ -45,10 +46,10 @@ final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSam
         // Loading the models takes a while: on the frame queue, never the main thread. Frames that
         // arrive before it is done find no tracker and are skipped.
         frameQueue.async { [weak self, session] in
-            var config = defaultTrackerConfig()
-            config.camera = intrinsics
+            var options = FaceTrackerOptions(runningMode: .video)
+            options.camera = intrinsics
             do {
-                self?.tracker = try Monotrack.FaceTracker(config: config)
+                self?.tracker = try FaceTracker(options: options)
             } catch {
                 DispatchQueue.main.async { self?.message = "Could not load the tracker: \(error)" }
                 return
@@ -58,7 +59,11 @@ final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSam
     }
 
     func stop() {
-        frameQueue.async { [session] in session.stopRunning() }
+        frameQueue.async { [weak self, session] in
+            session.stopRunning()
+            // A restarted camera begins new tracks; its clock may also start over.
+            self?.tracker?.reset()
+        }
     }
 
     /// Sets up the session; returns the intrinsics of the 640×480 buffers the camera will deliver
@@ -118,7 +123,7 @@ final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSam
         angleLock.unlock()
         do {
             let orientation = try FrameOrientation(videoRotationAngle: angle, frontCamera: isFront)
-            let result = try tracker.process(sampleBuffer, orientation: orientation)
+            let result = try tracker.detectForVideo(sampleBuffer, orientation: orientation)
             let rate = tick()
             DispatchQueue.main.async {
                 self.result = result

@@ -2,7 +2,9 @@ import Monotrack
 import SwiftUI
 
 /// Draws a result over the aspect-fill preview: landmarks, head axes (x red, y green, z blue), gaze
-/// arrows, the most probable mouth and brow gestures, and the frame rate.
+/// arrows, the most probable mouth and brow gestures, the eyes' openness, and the frame rate. The
+/// geometry is the SDK's (`headAxes`, `gazeArrows` through the result's own `camera`); this view
+/// only maps it to the screen.
 struct OverlayView: View {
     let result: TrackingResult?
     let fps: Double
@@ -10,7 +12,7 @@ struct OverlayView: View {
     /// Axis length: about half a face width, so the gizmo stays inside the head.
     private static let axisLengthMm = 70.0
     /// Gaze arrow length in result-image pixels: visible at 640x480 without covering the face.
-    private static let gazeArrowPx: CGFloat = 60
+    private static let gazeArrowPx: Float = 60
 
     var body: some View {
         Canvas { context, size in
@@ -18,23 +20,23 @@ struct OverlayView: View {
             let ms = Double(result.timings.totalUs) / 1000
             context.draw(Text(String(format: "%.1f fps  %.1f ms", fps, ms)).font(.headline).foregroundColor(.white),
                          at: CGPoint(x: 16, y: 60), anchor: .topLeading)
-            let w = Int(result.frameWidth), h = Int(result.frameHeight)
-            guard let m = ViewMapping(imageSize: CGSize(width: w, height: h), viewSize: size, fill: true) else { return }
-            let camera = defaultIntrinsics(width: w, height: h)
+            guard let m = ViewMapping(result: result, viewSize: size, fill: true) else { return }
 
             for face in result.faces {
-                for p in face.landmarkPoints {
+                for p in face.landmarks {
                     let v = m.map(p)
                     context.fill(Path(ellipseIn: CGRect(x: v.x - 2, y: v.y - 2, width: 4, height: 4)), with: .color(.cyan))
                 }
-                if let a = face.pose.axes(camera: camera, lengthMm: Self.axisLengthMm) {
+                // Both calls fail only on malformed input, which a tracker's own result never is.
+                if let a = try? headAxes(pose: face.pose, camera: result.camera, lengthMm: Self.axisLengthMm) {
                     for (tip, color) in [(a.x, Color.red), (a.y, .green), (a.z, .blue)] {
                         context.stroke(line(m.map(a.origin), m.map(tip)), with: .color(color), lineWidth: 3)
                     }
                 }
-                if let g = face.gazeArrows(lengthPx: Self.gazeArrowPx) {
-                    for (from, to) in [g.right, g.left] {
-                        context.stroke(line(m.map(from), m.map(to)), with: .color(.yellow), lineWidth: 2)
+                if let gaze = face.gaze,
+                   let g = try? gazeArrows(landmarks: face.landmarks, gaze: gaze, lengthPx: Self.gazeArrowPx) {
+                    for arrow in [g.right, g.left] {
+                        context.stroke(line(m.map(arrow.from), m.map(arrow.to)), with: .color(.yellow), lineWidth: 2)
                     }
                 }
                 var label = String(format: "yaw %.0f°", face.pose.yawDeg)
@@ -42,6 +44,10 @@ struct OverlayView: View {
                     let mouth = g.mouth, brows = g.brows
                     label = String(format: "%@ %.2f  brows %@ %.2f  ", mouth.name, mouth.probability,
                                    brows.name, brows.probability) + label
+                }
+                if let eyes = face.eyes {
+                    // The subject's own eyes, 1 open: which side of the image each is on depends on mirroring.
+                    label += String(format: "  eyes L %.2f R %.2f", eyes.leftOpen, eyes.rightOpen)
                 }
                 let corner = m.map(CGPoint(x: CGFloat(face.bbox.x), y: CGFloat(face.bbox.y)))
                 context.draw(Text(label).font(.caption).foregroundColor(.white), at: corner, anchor: .bottomLeading)
