@@ -893,7 +893,7 @@ def _(data):
 def _(data):
     p = peers(data)["detectors"]
     det = criterion(data, "detect")["entries"]
-    out = header("`min_face_size_px`, `min_detection_score`", "recall (faces68 validation)", "false positives / image",
+    out = header("`tuning.min_face_size_px`, `min_face_detection_confidence`", "recall (faces68 validation)", "false positives / image",
                  "whole detection per 640×480 frame (Intel Xeon, native)")
     for key, bench, label in [(SDK_POINTS[0][0], "detect_cascade_640x480", "24, 0.4 (default)"),
                               (SDK_POINTS[1][0], "detect_cascade_640x480_small_faces", "16, 0.25 (small-faces point)")]:
@@ -908,7 +908,7 @@ def _(data):
     port = next(r for r in f["forms"] if r["env"] == "portable")
     es = criterion(data, "landmarks")["entries"]
     t = lambda b, path: rng(crit_us(es, b, "AMD EPYC Zen 4", path)["us"])
-    out = header("`mirror_average`", "NME, faces68 validation (f32, the phone's form)",
+    out = header("`tuning.mirror_average`", "NME, faces68 validation (f32, the phone's form)",
                  "M3 per face, AMD EPYC Zen 4 native / portable (µs)")
     out.append(row("off (single-pass; video mode's default)", f"{num(port['single_pass_pct'], 3)} %",
                    f"{t('m3_per_face', 'native')} / {t('m3_per_face', 'portable')}"))
