@@ -33,7 +33,20 @@ pub enum MonotrackError {
         /// What was wrong.
         msg: String,
     },
-    /// Model bytes could not be loaded.
+    /// A model bundle of a format version this library does not read.
+    #[error("model bundle version: {msg}")]
+    BundleVersion {
+        /// What was wrong.
+        msg: String,
+    },
+    /// A model bundle whose checksum does not match its bytes (a damaged file).
+    #[error("model bundle checksum: {msg}")]
+    BundleChecksum {
+        /// What was wrong.
+        msg: String,
+    },
+    /// Model bytes could not be loaded (a corrupt or incompatible network, a bundle that is no
+    /// bundle).
     #[error("model load: {msg}")]
     ModelLoad {
         /// What was wrong.
@@ -57,6 +70,8 @@ impl From<CoreError> for MonotrackError {
             | CoreError::InvalidInput(_)
             | CoreError::InvalidConfig(_) => Self::InvalidConfig { msg },
             CoreError::ModelLoad(_) => Self::ModelLoad { msg },
+            CoreError::BundleVersion(_) => Self::BundleVersion { msg },
+            CoreError::BundleChecksum(_) => Self::BundleChecksum { msg },
             CoreError::Internal(_) => Self::Internal { msg },
         }
     }

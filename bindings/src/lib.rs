@@ -15,6 +15,7 @@
 uniffi::setup_scaffolding!();
 
 mod body;
+mod bundle;
 mod error;
 mod gaze;
 mod live;
@@ -25,6 +26,7 @@ mod tracker;
 mod types;
 
 pub use body::*;
+pub use bundle::*;
 pub use error::MonotrackError;
 use error::guard;
 pub use gaze::*;

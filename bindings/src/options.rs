@@ -3,12 +3,14 @@
 //! grouped apart in `TrackerTuning`. Converted to the core's `TrackerConfig` here only.
 
 use crate::MonotrackError;
+use crate::bundle::ModelBundle;
 use crate::types::CameraIntrinsics;
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::detect::DetectorConfig;
 use monotrack_core::fit::MsbpConfig;
 use monotrack_core::gaze::{GazeConfig, GazeFilter};
 use monotrack_core::track::{self as core_track, Tracker};
+use std::sync::Arc;
 
 /// How frames reach the tracker (MediaPipe's `RunningMode`); each mode has its call.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
@@ -68,7 +70,7 @@ pub struct TrackerTuning {
 /// The tracker's options. The names and meanings are MediaPipe Face Landmarker's where it has the
 /// setting (`bindings/API.md` has the migration table); every field has a default, so Kotlin's
 /// `FaceTrackerOptions()` and Swift's `FaceTrackerOptions()` are a working tracker.
-#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
 pub struct FaceTrackerOptions {
     /// `None`: `RunningMode::Image`, MediaPipe's default.
     #[uniffi(default = None)]
@@ -109,6 +111,10 @@ pub struct FaceTrackerOptions {
     /// mirroring: `CameraIntrinsics`); `None`: `default_camera` of the upright image.
     #[uniffi(default = None)]
     pub camera: Option<CameraIntrinsics>,
+    /// The networks to run (MediaPipe's `base_options` model asset): `None`, the ones built into
+    /// the library; a `ModelBundle` a product trained itself (`core/models/train`).
+    #[uniffi(default = None)]
+    pub models: Option<Arc<ModelBundle>>,
     /// Settings MediaPipe has no word for.
     #[uniffi(default)]
     pub tuning: TrackerTuning,
@@ -144,6 +150,7 @@ impl Default for FaceTrackerOptions {
             output_gestures: true,
             output_gaze: true,
             camera: None,
+            models: None,
             tuning: TrackerTuning::default(),
         }
     }
@@ -206,7 +213,10 @@ impl From<&FaceTrackerOptions> for Outputs {
 /// The embedded models' tracker for `options` (video tracking for both stream modes).
 pub(crate) fn build_tracker(options: &FaceTrackerOptions) -> Result<Tracker, MonotrackError> {
     let (core, det) = to_core(options)?;
-    let mut t = Tracker::with_detector_config(core, det)?;
+    let mut t = match &options.models {
+        Some(bundle) => Tracker::with_bundle(core, det, &bundle.inner)?,
+        None => Tracker::with_detector_config(core, det)?,
+    };
     // The core's choice by mode unless the caller made one.
     if let Some(on) = options.tuning.mirror_average {
         t.estimator_mut().set_mirror_average(on);

@@ -525,7 +525,7 @@ impl FaceTracker {
 
     /// The options this tracker was built with.
     pub fn options(&self) -> FaceTrackerOptions {
-        self.options
+        self.options.clone()
     }
 
     /// Sets the targets each face's point of gaze is located among (screens, mirrors, zones),

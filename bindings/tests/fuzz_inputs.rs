@@ -172,6 +172,7 @@ fn frames_and_trackers_never_panic() {
             output_gestures: r.below(2) == 0,
             output_gaze: r.below(2) == 0,
             camera: (r.below(2) == 0).then(|| intrinsics(&mut r)),
+            models: None,
             tuning: TrackerTuning {
                 min_face_size_px: r.small(),
                 min_match_score: r.float(3.0) as f32 - 1.0,

@@ -26,6 +26,12 @@ pub enum Error {
     /// An embedded or supplied model (network weights, face model data) that cannot be loaded.
     #[error("model load: {0}")]
     ModelLoad(String),
+    /// A model bundle of a format version this library does not read.
+    #[error("model bundle version: {0}")]
+    BundleVersion(String),
+    /// A model bundle whose checksum does not match its bytes (a damaged file).
+    #[error("model bundle checksum: {0}")]
+    BundleChecksum(String),
     /// A broken internal invariant; a bug if it ever surfaces.
     #[error("internal: {0}")]
     Internal(String),

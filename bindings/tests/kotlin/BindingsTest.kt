@@ -12,6 +12,7 @@ import io.monotrack.defaultBodyTrackerConfig
 import io.monotrack.FaceState
 import io.monotrack.FaceTracker
 import io.monotrack.FaceTrackerOptions
+import io.monotrack.ModelBundle
 import io.monotrack.RunningMode
 import io.monotrack.TrackerTuning
 import io.monotrack.defaultCamera
@@ -297,6 +298,26 @@ class BindingsTest {
                 t.detectForVideo(nv, FrameDesc(size.first.toUInt(), size.second.toUInt(), PixelFormat.NV21, s2.toUInt(), s2.toUInt(), 2u, 90u, false), 1L)
             }
         }
+    }
+
+    @Test
+    fun aModelBundleRoundTripTracksAsTheBuiltinModelsAndDamageIsTyped() {
+        val file = File.createTempFile("monotrack", ".mtb")
+        file.writeBytes(ModelBundle.builtin().toBytes())
+        val bundle = ModelBundle.fromPath(file.path)
+        file.delete()
+        assertEquals(1u, bundle.formatVersion())
+        assertTrue("face_model.json" in bundle.fileNames())
+        val (buf, stride) = rgbaFrame()
+        val d = desc(PixelFormat.RGBA8, stride, 0)
+        val own = FaceTracker(stills.copy(models = bundle)).use { it.detect(buf, d).faces }
+        val builtin = FaceTracker(stills).use { it.detect(buf, d).faces }
+        assertEquals(builtin, own)
+        val damaged = ModelBundle.builtin().toBytes().also { it[it.size / 2] = (it[it.size / 2].toInt() xor 1).toByte() }
+        assertThrows(MonotrackException.BundleChecksum::class.java) { ModelBundle.fromBytes(damaged) }
+        val newer = ModelBundle.builtin().toBytes().also { it[8] = 9 }
+        assertThrows(MonotrackException.BundleVersion::class.java) { ModelBundle.fromBytes(newer) }
+        assertThrows(MonotrackException.ModelLoad::class.java) { ModelBundle.fromPath("/nonexistent/models.mtb") }
     }
 
     @Test

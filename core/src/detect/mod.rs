@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 /// The network, embedded (≈ 216 KB: float16 weight storage, float32 compute).
 pub(crate) static MODEL_ONNX: &[u8] = include_bytes!("../../models/detector/detector.onnx");
 /// The network's description written by the training script (strides, minimum face size).
-static MODEL_JSON: &str = include_str!("../../models/detector/detector.json");
+pub(crate) static MODEL_JSON: &str = include_str!("../../models/detector/detector.json");
 
 /// Face size (max side of the tight landmark box, network pixels) the network was trained to find
 /// reliably: training samples faces from 7 px up, heads start at 6 px (`train.py`, `SIZE_RANGE`,
@@ -180,11 +180,20 @@ impl FaceDetector {
     /// [`Error::InvalidConfig`] for an out-of-range config; [`Error::ModelLoad`] when the embedded
     /// model or its description do not parse or disagree with this decoder.
     pub fn with_config(config: DetectorConfig) -> Result<Self> {
+        Self::from_bytes(config, MODEL_JSON.as_bytes(), MODEL_ONNX)
+    }
+
+    /// A detector over other weights: `detector.json` (its description) and `detector.onnx`
+    /// (a model bundle's), with `config`.
+    ///
+    /// # Errors
+    /// As [`Self::with_config`], for the given bytes.
+    pub fn from_bytes(config: DetectorConfig, json: &[u8], onnx: &[u8]) -> Result<Self> {
         config.validate()?;
-        let desc: ModelDesc = serde_json::from_str(MODEL_JSON)
+        let desc: ModelDesc = serde_json::from_slice(json)
             .map_err(|e| Error::ModelLoad(format!("detector.json: {e}")))?;
         let window_head = check_desc(&desc)?;
-        let net = FullyConvNet::load("detector.onnx", MODEL_ONNX, [WINDOW_INPUT, WINDOW_INPUT])?;
+        let net = FullyConvNet::load("detector.onnx", onnx, [WINDOW_INPUT, WINDOW_INPUT])?;
         Ok(Self {
             config,
             net,

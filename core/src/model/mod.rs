@@ -6,6 +6,8 @@
 //! embedded here); each unit also lists the landmarks it influences, which MSBP's shape and
 //! animation steps use as their landmark subsets.
 
+pub mod bundle;
+
 use crate::error::{Error, Result};
 use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
@@ -45,7 +47,7 @@ pub const ANIM_UNIT_NAMES: [&str; N_ANIM] = [
 
 const MODEL_FORMAT: &str = "monotrack-face-model";
 const MODEL_VERSION: u32 = 1;
-static BUILTIN_JSON: &[u8] = include_bytes!("../../models/face_model/face_model.json");
+pub(crate) static BUILTIN_JSON: &[u8] = include_bytes!("../../models/face_model/face_model.json");
 
 /// One deformation unit: a displacement per landmark vertex (mm at τ = 1) and the landmarks it moves.
 #[derive(Debug, Clone)]

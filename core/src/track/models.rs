@@ -4,9 +4,11 @@
 
 use super::{FaceTracker, LandmarkEstimator, LandmarkMode, Mode, RegionDetector, TrackerConfig};
 use crate::detect::{Detection, DetectorConfig, FaceDetector};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::image::{GrayImage, Rect};
 use crate::landmarks::{FaceLandmarks, GradientDetector, GradientPoints, M3};
+use crate::model::bundle::ModelBundle;
+use crate::model::{BUILTIN_JSON, FaceModel};
 
 impl LandmarkEstimator for M3 {
     fn estimate(&mut self, image: &GrayImage, face: &Rect, out: &mut FaceLandmarks) -> Result<()> {
@@ -187,8 +189,12 @@ impl ModelDetector {
     /// [`crate::Error::InvalidConfig`] for a bad config, [`crate::Error::ModelLoad`] if the embedded
     /// model cannot be loaded.
     pub fn new(config: DetectorConfig) -> Result<Self> {
+        Self::from_detector(FaceDetector::with_config(config)?)
+    }
+
+    fn from_detector(detector: FaceDetector) -> Result<Self> {
         Ok(Self {
-            detector: FaceDetector::with_config(config)?,
+            detector,
             found: Vec::with_capacity(64),
         })
     }
@@ -249,6 +255,47 @@ impl FaceTracker<ModelDetector, Landmarker> {
             LandmarkMode::Gradient => Landmarker::Gradient(Box::default()),
         };
         FaceTracker::new(ModelDetector::new(detector)?, landmarker, config)
+    }
+}
+
+impl Tracker {
+    /// A tracker over a model bundle's networks ([`ModelBundle`]), with detector settings as
+    /// [`Tracker::with_detector_config`]. The bundle's face model must be the built-in one: the
+    /// fit, vertices and projections run on it.
+    ///
+    /// # Errors
+    /// As [`Tracker::with_detector_config`]; [`crate::Error::ModelLoad`] when a network in the
+    /// bundle does not load or does not fit its contract, or the face model differs.
+    pub fn with_bundle(
+        config: TrackerConfig,
+        detector: DetectorConfig,
+        bundle: &ModelBundle,
+    ) -> Result<Self> {
+        config.validate()?;
+        let face_model = bundle.required("face_model.json")?;
+        if face_model != BUILTIN_JSON {
+            FaceModel::from_json(face_model)?;
+            return Err(Error::ModelLoad(
+                "the bundle's face model is not the built-in one: this version fits the built-in \
+                 face model only"
+                    .into(),
+            ));
+        }
+        let landmarker = match config.landmarks {
+            LandmarkMode::M3 => {
+                let files: Vec<(&str, &[u8])> = bundle.files().collect();
+                let mut m3 = M3::from_bytes(bundle.required("m3.json")?, &files)?;
+                m3.set_mirror_average(config.mode == Mode::Image);
+                Landmarker::M3(Box::new(m3))
+            }
+            LandmarkMode::Gradient => Landmarker::Gradient(Box::default()),
+        };
+        let net = FaceDetector::from_bytes(
+            detector,
+            bundle.required("detector.json")?,
+            bundle.required("detector.onnx")?,
+        )?;
+        FaceTracker::new(ModelDetector::from_detector(net)?, landmarker, config)
     }
 }
 

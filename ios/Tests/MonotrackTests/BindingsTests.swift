@@ -164,7 +164,8 @@ final class BindingsTests: XCTestCase {
         XCTAssertEqual(t.mirrorAverage, r.mirrorAverage)
         XCTAssertEqual(t.ultraLight, r.ultraLight)
         XCTAssertEqual(t, TrackerTuning())
-        XCTAssertEqual(swift, rust)
+        XCTAssertNil(swift.models, "the built-in models")
+        XCTAssertNil(rust.models)
         // The ultra-light options differ from the defaults only where they say so.
         let light = ultraLightFaceTrackerOptions(runningMode: .video)
         XCTAssertEqual(light.runningMode, .video)
@@ -298,6 +299,32 @@ final class BindingsTests: XCTestCase {
         XCTAssertGreaterThan(eyes.leftOpen, 0.5, "\(eyes)")
         XCTAssertGreaterThan(eyes.rightOpen, 0.5, "\(eyes)")
         XCTAssertLessThanOrEqual(max(eyes.leftOpen, eyes.rightOpen), 1)
+    }
+
+    func testAModelBundleRoundTripTracksAsTheBuiltinModelsAndDamageIsTyped() throws {
+        let url = FileManager.default.temporaryDirectory.appendingPathComponent("monotrack-\(getpid()).mtb")
+        try Data(ModelBundle.builtin().toBytes()).write(to: url)
+        defer { try? FileManager.default.removeItem(at: url) }
+        let bundle = try ModelBundle.fromPath(path: url.path)
+        XCTAssertEqual(bundle.formatVersion(), 1)
+        XCTAssertTrue(bundle.fileNames().contains("face_model.json"))
+        let (buf, d) = sampleFrame(try sample(), .rgba8)
+        let own = try FaceTracker(options: FaceTrackerOptions(models: bundle)).detect(bytes: buf, desc: d)
+        let builtin = try FaceTracker(options: FaceTrackerOptions()).detect(bytes: buf, desc: d)
+        XCTAssertEqual(own.faces, builtin.faces)
+        var bytes = ModelBundle.builtin().toBytes()
+        bytes[bytes.count / 2] ^= 1
+        XCTAssertThrowsError(try ModelBundle.fromBytes(bytes: bytes)) { e in
+            guard case MonotrackError.BundleChecksum = e else { return XCTFail("\(e)") }
+        }
+        var newer = ModelBundle.builtin().toBytes()
+        newer[8] = 9
+        XCTAssertThrowsError(try ModelBundle.fromBytes(bytes: newer)) { e in
+            guard case MonotrackError.BundleVersion = e else { return XCTFail("\(e)") }
+        }
+        XCTAssertThrowsError(try ModelBundle.fromPath(path: "/nonexistent/models.mtb")) { e in
+            guard case MonotrackError.ModelLoad = e else { return XCTFail("\(e)") }
+        }
     }
 
     func testMirrorAverageIsTheStillsDefaultAndATrackerSetting() throws {

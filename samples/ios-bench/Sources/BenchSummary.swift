@@ -110,8 +110,12 @@ enum BenchSummary {
     static func describe(_ error: Error) -> String {
         switch error as? MonotrackError {
         case .InvalidFrame(let msg)?: return "invalid frame: \(msg)"
+        case .InvalidTimestamp(let msg)?: return "invalid timestamp: \(msg)"
+        case .InvalidState(let msg)?: return "invalid state: \(msg)"
         case .InvalidConfig(let msg)?: return "invalid configuration: \(msg)"
         case .ModelLoad(let msg)?: return "model load failed: \(msg)"
+        case .BundleVersion(let msg)?: return "model bundle version: \(msg)"
+        case .BundleChecksum(let msg)?: return "model bundle checksum: \(msg)"
         case .Internal(let msg)?: return "internal error: \(msg)"
         case nil: return String(describing: error)
         }

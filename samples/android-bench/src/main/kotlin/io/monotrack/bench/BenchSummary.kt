@@ -118,6 +118,8 @@ object BenchSummary {
         is MonotrackException.InvalidTimestamp -> "invalid timestamp: ${e.msg}"
         is MonotrackException.InvalidState -> "invalid state: ${e.msg}"
         is MonotrackException.ModelLoad -> "model load failed: ${e.msg}"
+        is MonotrackException.BundleVersion -> "model bundle version: ${e.msg}"
+        is MonotrackException.BundleChecksum -> "model bundle checksum: ${e.msg}"
         is MonotrackException.Internal -> "internal error: ${e.msg}"
     }
 }

@@ -1,0 +1,52 @@
+//! A model bundle made by `core/models/train/make_bundle.py` (the packer `build_bundle.py` ends
+//! with) loads, and a tracker over it tracks exactly as the built-in models do.
+
+use monotrack_core::image::{Frame, FrameDesc, PixelFormat};
+use monotrack_core::model::bundle::ModelBundle;
+use monotrack_core::track::{Tracker, TrackerConfig, detector_config_for};
+use std::path::PathBuf;
+use std::process::Command;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+#[test]
+fn a_bundle_from_the_packer_tracks_as_the_builtin_models() {
+    let out = std::env::temp_dir().join(format!("monotrack-{}.mtb", std::process::id()));
+    let status = Command::new("python3")
+        .arg(repo().join("core/models/train/make_bundle.py"))
+        .arg(&out)
+        .status()
+        .expect("python3 runs make_bundle.py");
+    assert!(status.success(), "make_bundle.py: {status}");
+    let bytes = std::fs::read(&out).unwrap();
+    let _ = std::fs::remove_file(&out);
+    let bundle = ModelBundle::from_bytes(&bytes).unwrap();
+    assert_eq!(
+        bundle,
+        ModelBundle::builtin(),
+        "the packer writes what the library embeds"
+    );
+    assert_eq!(bundle.to_bytes(), bytes, "and in the same layout");
+
+    let img = image::open(repo().join("samples/data/astronaut.jpg"))
+        .unwrap()
+        .to_luma8();
+    let (w, h) = img.dimensions();
+    let desc = FrameDesc::packed(w, h, PixelFormat::Gray8);
+    let config = TrackerConfig::default();
+    let det = detector_config_for(&config, Default::default());
+    let mut own = Tracker::with_bundle(config, det, &bundle).unwrap();
+    let mut builtin = Tracker::with_detector_config(config, det).unwrap();
+    for ts in 1..=3 {
+        let frame = Frame::new(img.as_raw(), desc).unwrap();
+        let a = own.process_frame(&frame, ts).unwrap().faces.clone();
+        let b = builtin.process_frame(&frame, ts).unwrap().faces.clone();
+        assert_eq!(a.len(), 1);
+        for (x, y) in a.iter().zip(&b) {
+            assert_eq!(x.landmarks.points, y.landmarks.points, "frame {ts}");
+            assert_eq!(x.fit.pose, y.fit.pose, "frame {ts}");
+        }
+    }
+}
