@@ -535,6 +535,36 @@ def _(data):
     return out
 
 
+@table("card_head_frame", "core/models/MODEL_CARD.md", "core/models/face_model/head_frame_metrics.json")
+def _(data):
+    m = data.json("core/models/face_model/head_frame_metrics.json")
+    sg = lambda v: ("+" if v > 0 else "") + num(v, 2)
+    out = header("head pose minus the MediaPipe teacher, degrees (mean ± SD)", "faces", "yaw", "pitch", "roll",
+                 "pitch of the model frame (before the head frame)")
+    for split, label in [("train", "training split (sets the head frame)"), ("val", "validation split")]:
+        for mode in ("single_pass", "mirror_average"):
+            r = m[split][mode]
+            cell = lambda k: f"{sg(r['all'][k]['mean_deg'])} ± {num(r['all'][k]['sd_deg'], 2)}"
+            out.append(row(f"{label}, {mode.replace('_', ' ')}", r["all"]["yaw"]["n"], cell("yaw"), cell("pitch"),
+                           cell("roll"), sg(r["model_frame_pitch"]["mean_deg"])))
+    return out
+
+
+@table("card_eye_openness", "core/models/MODEL_CARD.md", "core/models/m3/eye_openness_metrics.json")
+def _(data):
+    m = data.json("core/models/m3/eye_openness_metrics.json")
+    out = header("eye openness against the annotated eye aspect ratio", "eyes", "Spearman",
+                 f"closed eyes (ratio < {m['closed_ear_below']}) reading < 0.5",
+                 f"open eyes (ratio > {m['open_ear_above']}) reading > 0.5")
+    for split, label in [("train", "training split (fits the logistic)"), ("val", "validation split")]:
+        for mode in ("single_pass", "mirror_average"):
+            r = m[split][mode]
+            out.append(row(f"{label}, {mode.replace('_', ' ')}", r["eyes"], num(r["spearman_openness_vs_annotated_ear"], 3),
+                           f"{r['closed_reading_below_half']} of {r['closed_eyes']}",
+                           f"{r['open_reading_above_half']} of {r['open_eyes']}"))
+    return out
+
+
 @table("card_face_check", "core/models/MODEL_CARD.md", "metrics/m3_face_check.json")
 def _(data):
     f = data.json("metrics/m3_face_check.json")
