@@ -2096,7 +2096,10 @@ mod tests {
         assert_eq!(r.state(), FrameState::Lost);
         assert!(r.detector_ran);
         for bad in [1_000, 999, -5] {
-            assert!(matches!(t.process(&img, bad), Err(Error::InvalidTimestamp(_))));
+            assert!(matches!(
+                t.process(&img, bad),
+                Err(Error::InvalidTimestamp(_))
+            ));
         }
         assert!(t.process(&img, 1_001).is_ok());
         assert!(matches!(
