@@ -2,8 +2,8 @@
 # Coverage-guided fuzzing (cargo-fuzz, libFuzzer, AddressSanitizer) of what the SDK takes from apps.
 # Usage: fuzz/run.sh [SECONDS_PER_TARGET=600] [TARGET...]
 # Needs the nightly toolchain and cargo-fuzz: installed here when missing. Each target starts from
-# its committed corpus (fuzz/corpus/<target>/, minimised) plus generated seeds (model_bytes: the
-# shipped ONNX files; frames: a few valid frames); new inputs go to a scratch copy, and a crash
+# its committed corpus (fuzz/corpus/<target>/, minimised) plus generated seeds (model_bundle: the
+# built-in bundle, make_bundle.py; frames: a few valid frames); new inputs go to a scratch copy, and a crash
 # stops the run with the input under fuzz/artifacts/<target>/. Prints one line per target:
 # executions, seconds, corpus size, crashes.
 set -euo pipefail
@@ -11,7 +11,7 @@ cd "$(dirname "$0")"
 SECS=${1:-600}
 shift || true
 TARGETS=("$@")
-[ ${#TARGETS[@]} -eq 0 ] && TARGETS=(frames json_inputs fit_inputs model_bytes)
+[ ${#TARGETS[@]} -eq 0 ] && TARGETS=(frames json_inputs fit_inputs model_bundle)
 # Missing tools are installed; where that cannot be done (no network to the registries), the run
 # is skipped with a line rather than failed: nothing about the SDK was tested or found wrong.
 skip() { echo "SKIPPED: fuzzing ($1)"; exit 0; }
@@ -27,11 +27,8 @@ for t in "${TARGETS[@]}"; do
   scratch="$WORK/$t"; rm -rf "$scratch"; mkdir -p "$scratch"
   [ -d "corpus/$t" ] && cp -r "corpus/$t/." "$scratch/"
   case $t in
-    model_bytes)
-      i=0
-      for f in ../core/models/m3/*.onnx; do
-        { printf "\\x$(printf %02x $i)"; cat "$f"; } > "$scratch/seed-$(basename "$f")"; i=$((i + 1))
-      done ;;
+    model_bundle)
+      python3 ../core/models/train/make_bundle.py "$scratch/seed-builtin" > /dev/null ;;
     json_inputs)
       { printf '\x02'; cat ../core/models/face_model/face_model.json; } > "$scratch/seed-face-model"
       { printf '\x03'; cat ../core/models/body/pose_prior.json; } > "$scratch/seed-pose-prior"

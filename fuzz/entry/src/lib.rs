@@ -8,7 +8,7 @@ pub mod bytes;
 pub mod fit_inputs;
 pub mod frames;
 pub mod json_inputs;
-pub mod model_bytes;
+pub mod model_bundle;
 
 /// What a target runs on one input.
 pub type Entry = fn(&[u8]);
@@ -18,22 +18,34 @@ pub const TARGETS: [(&str, Entry); 4] = [
     ("frames", frames::run),
     ("json_inputs", json_inputs::run),
     ("fit_inputs", fit_inputs::run),
-    ("model_bytes", model_bytes::run),
+    ("model_bundle", model_bundle::run),
 ];
 
 /// The inputs `fuzz/run.sh` seeds a target with besides its committed corpus, built from the
-/// shipped files: for `model_bytes` each network's ONNX in its own place (the selector byte picks
-/// the network), for `json_inputs` the shipped face model, pose prior and M3 configuration and the
+/// shipped files: for `model_bundle` the built-in bundle and, per network, the bundle with that
+/// network cut to half its bytes (sealed with a right checksum), for `json_inputs` the shipped face model, pose prior and M3 configuration and the
 /// default configs behind their selector bytes.
 pub fn seeds(target: &str) -> Vec<(String, Vec<u8>)> {
     let with = |selector: u8, bytes: &[u8]| [&[selector], bytes].concat();
     match target {
-        "model_bytes" => monotrack_core::landmarks::EMBEDDED_FILES
-            .iter()
-            .filter(|(n, _)| n.ends_with(".onnx"))
-            .enumerate()
-            .map(|(i, (n, b))| (format!("seed-{n}"), with(i as u8, b)))
-            .collect(),
+        "model_bundle" => {
+            use monotrack_core::model::bundle::ModelBundle;
+            let builtin = ModelBundle::builtin();
+            let mut seeds = vec![("seed-builtin".to_string(), builtin.to_bytes())];
+            for (name, _) in builtin.files().filter(|(n, _)| n.ends_with(".onnx")) {
+                let files = builtin
+                    .files()
+                    .map(|(n, b)| {
+                        let b = if n == name { &b[..b.len() / 2] } else { b };
+                        (n.to_string(), b.to_vec())
+                    })
+                    .collect();
+                if let Ok(b) = ModelBundle::from_files(files) {
+                    seeds.push((format!("seed-half-{name}"), b.to_bytes()));
+                }
+            }
+            seeds
+        }
         "json_inputs" => {
             let file = |rel: &str| {
                 let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../core");

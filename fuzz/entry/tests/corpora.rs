@@ -51,6 +51,6 @@ fn json_inputs_seeds() {
 }
 
 #[test]
-fn model_bytes_seeds() {
-    assert!(replay("model_bytes") >= 5);
+fn model_bundle_seeds() {
+    assert!(replay("model_bundle") >= 5);
 }

@@ -1,0 +1,5 @@
+//! The `model_bundle` target: its body is `monotrack_fuzz_entry::model_bundle` (fuzz/entry), which
+//! the stable test `fuzz/entry/tests/corpora.rs` also runs on the committed corpus.
+#![no_main]
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| monotrack_fuzz_entry::model_bundle::run(data));
