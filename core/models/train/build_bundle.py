@@ -35,7 +35,23 @@ def data_root(faces, work):
             target = os.path.join(root, name)
             if name != "faces68" and not os.path.lexists(target):
                 os.symlink(os.path.abspath(os.path.join(shared, name)), target)
+    # The shared tools beside the data (pseudo_genki.py runs DATA/../tools/peer_landmarks.py).
+    tools = os.path.join(shared, "..", "tools")
+    if os.path.isdir(tools) and not os.path.lexists(os.path.join(work, "tools")):
+        os.symlink(os.path.abspath(tools), os.path.join(work, "tools"))
     return root
+
+
+def pseudo_path(work):
+    """The teacher-labelled GENKI-4K faces (pseudo_genki.py) the face net learns from: MONOTRACK_PSEUDO,
+    else the shared cache when it exists, else a file in `work` (made there: its image paths point
+    into `work`, so it must not take the shared cache's place)."""
+    import pseudo_genki
+    if os.environ.get("MONOTRACK_PSEUDO"):
+        return os.environ["MONOTRACK_PSEUDO"]
+    if os.path.exists(pseudo_genki.default_path()):
+        return pseudo_genki.default_path()
+    return os.path.join(work, "genki_pfld.jsonl")
 
 
 def main():
@@ -49,7 +65,8 @@ def main():
             raise SystemExit(f"{a.data} is not laid out like faces68: no {need}")
     work = a.work or tempfile.mkdtemp(prefix="monotrack-bundle-")
     m3_out = os.path.join(work, "m3")
-    env = dict(os.environ, MONOTRACK_SHARED_DATA=data_root(a.data, work), MONOTRACK_M3_OUT=m3_out)
+    env = dict(os.environ, MONOTRACK_SHARED_DATA=data_root(a.data, work), MONOTRACK_M3_OUT=m3_out,
+               MONOTRACK_PSEUDO=pseudo_path(work))
     subprocess.run([sys.executable, os.path.join(HERE, "train_m3.py"), *train_args], env=env, check=True)
     n, size = make_bundle.write(a.out, m3_out,
                                 os.path.join(make_bundle.MODELS, "detector"),
