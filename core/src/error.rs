@@ -32,6 +32,17 @@ pub enum Error {
     /// A model bundle whose checksum does not match its bytes (a damaged file).
     #[error("model bundle checksum: {0}")]
     BundleChecksum(String),
+    /// A recording file ([`crate::record`]) that is not one this library reads: no magic, another
+    /// format version, a chunk cut off or out of place, a field out of range.
+    #[error("invalid recording: {0}")]
+    InvalidRecording(String),
+    /// A call the object cannot take in its present state (a recording started while one runs,
+    /// stopped while none does).
+    #[error("invalid state: {0}")]
+    InvalidState(String),
+    /// Writing a recording failed (the disk is full, the file cannot be created).
+    #[error("i/o: {0}")]
+    Io(String),
     /// A broken internal invariant; a bug if it ever surfaces.
     #[error("internal: {0}")]
     Internal(String),

@@ -9,7 +9,7 @@
 //!
 //! Modules follow the pipeline (see `ARCHITECTURE.md`):
 //! [`image`] → `detect` → `landmarks` → `track` → [`model`] / [`fit`] → results; and apart from
-//! faces, `body` and `motion`.
+//! faces, `body` and `motion`. [`record`] writes what a tracker was given to a file and replays it.
 
 pub mod bench;
 pub mod body;
@@ -26,6 +26,7 @@ pub mod model;
 pub mod motion;
 pub mod nn;
 pub mod overlay;
+pub mod record;
 pub mod track;
 
 pub use error::{Error, Result};

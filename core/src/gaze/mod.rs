@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 use crate::fit::FaceFit;
 use crate::landmarks::FaceLandmarks;
 use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
 
 /// Corners further than this from their best-fit plane make a target non-planar, mm.
 pub const PLANARITY_TOLERANCE_MM: f64 = 1.0;
@@ -333,7 +334,7 @@ fn rotate_by(d: &Vector3<f64>, offset: [f64; 2]) -> Vector3<f64> {
 pub const MAX_CALIBRATION_TAPS: usize = 64;
 
 /// A per-user correction of the gaze direction, per eye, learnt from taps (see the module docs).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct GazeCalibration {
     /// Per tap: (yaw, pitch) offsets, radians, of the right eye then the left eye.
     taps: Vec<[[f64; 2]; 2]>,
@@ -366,13 +367,51 @@ impl GazeCalibration {
             self.taps.remove(0);
         }
         self.taps.push(tap);
+        self.update_offset();
+        Ok(())
+    }
+
+    fn update_offset(&mut self) {
+        if self.taps.is_empty() {
+            self.offset = [[0.0; 2]; 2];
+            return;
+        }
         for eye in 0..2 {
             for k in 0..2 {
                 let mut v: Vec<f64> = self.taps.iter().map(|t| t[eye][k]).collect();
                 self.offset[eye][k] = median(&mut v);
             }
         }
-        Ok(())
+    }
+
+    /// Every tap's (yaw, pitch) offsets, radians, right eye then left eye, oldest first: what
+    /// [`Self::from_tap_offsets`] rebuilds the calibration from (a recording's start holds them).
+    pub fn tap_offsets(&self) -> &[[[f64; 2]; 2]] {
+        &self.taps
+    }
+
+    /// The calibration of taps with these offsets ([`Self::tap_offsets`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidInput`] for more than [`MAX_CALIBRATION_TAPS`] taps or a non-finite offset.
+    pub fn from_tap_offsets(taps: &[[[f64; 2]; 2]]) -> Result<Self> {
+        if taps.len() > MAX_CALIBRATION_TAPS {
+            return Err(Error::InvalidInput(format!(
+                "{} calibration taps; at most {MAX_CALIBRATION_TAPS} are kept",
+                taps.len()
+            )));
+        }
+        if taps.iter().flatten().flatten().any(|v| !v.is_finite()) {
+            return Err(Error::InvalidInput(
+                "calibration tap offsets must be finite".into(),
+            ));
+        }
+        let mut c = Self {
+            taps: taps.to_vec(),
+            offset: [[0.0; 2]; 2],
+        };
+        c.update_offset();
+        Ok(c)
     }
 
     /// Taps recorded.
@@ -417,7 +456,8 @@ fn median(v: &mut [f64]) -> f64 {
 /// Optional temporal smoothing of the gaze direction: an exponential average that jumps straight
 /// to the new direction when it moved more than `saccade_deg` (saccades stay sharp; fixation
 /// jitter is smoothed).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct GazeFilter {
     /// Weight of the newest direction, 0 < alpha ≤ 1.
     pub alpha: f64,
@@ -457,8 +497,9 @@ pub enum GazeSource {
     Head,
 }
 
-/// Point-of-gaze settings.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Point-of-gaze settings (serde: a recording's header holds them, `crate::record`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct GazeConfig {
     /// Below this confidence the head direction replaces the eyes'.
     pub min_eye_confidence: f64,
@@ -486,7 +527,8 @@ pub struct GazeConfig {
 /// correction made the validation error worse, with equal eye weights and with a dominant eye
 /// (`core/models/m3/gaze_metrics.json`; `core/models/train/RESEARCH_LOG.md`, "Gaze against an
 /// iris teacher"), as M3's eye network already sees the head's turn in its patches.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct HeadCorrection {
     /// K_x: degrees of eye-in-head yaw added per degree of head yaw away from `ref_yaw_deg`.
     pub gain_yaw: f64,

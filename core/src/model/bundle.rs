@@ -68,17 +68,22 @@ impl ModelBundle {
 
     /// The models built into the library.
     pub fn builtin() -> Self {
-        let mut files: Vec<(String, Vec<u8>)> = crate::landmarks::EMBEDDED_FILES
-            .iter()
-            .map(|(n, b)| ((*n).to_string(), b.to_vec()))
+        let files = builtin_files()
+            .map(|(n, b)| (n.to_string(), b.to_vec()))
             .collect();
-        files.push((
-            "detector.json".into(),
-            crate::detect::MODEL_JSON.as_bytes().to_vec(),
-        ));
-        files.push(("detector.onnx".into(), crate::detect::MODEL_ONNX.to_vec()));
-        files.push(("face_model.json".into(), super::BUILTIN_JSON.to_vec()));
         Self { files }
+    }
+
+    /// The CRC-32 a bundle file of these files ends with ([`Self::to_bytes`]): the bundle's
+    /// identity, which a recording's header names (`crate::record`) so that a replay can tell
+    /// the models it ran on.
+    pub fn checksum(&self) -> u32 {
+        checksum_of(self.files.iter().map(|(n, b)| (n.as_str(), b.as_slice())))
+    }
+
+    /// [`Self::checksum`] of [`Self::builtin`], without copying the models.
+    pub fn builtin_checksum() -> u32 {
+        checksum_of(builtin_files())
     }
 
     /// A bundle of `files` (name, bytes).
@@ -161,6 +166,7 @@ impl ModelBundle {
 
     /// The bundle as a file ([`Self::from_bytes`] reads it back).
     pub fn to_bytes(&self) -> Vec<u8> {
+        // The layout is also walked by `checksum_of`: a change here changes both.
         let mut out = MAGIC.to_vec();
         out.extend_from_slice(&Self::FORMAT_VERSION.to_le_bytes());
         out.extend_from_slice(&(self.files.len() as u32).to_le_bytes());
@@ -197,6 +203,32 @@ impl ModelBundle {
     }
 }
 
+/// The files of [`ModelBundle::builtin`], borrowed from the library's embedded bytes.
+fn builtin_files() -> impl Iterator<Item = (&'static str, &'static [u8])> + Clone {
+    crate::landmarks::EMBEDDED_FILES.iter().copied().chain([
+        ("detector.json", crate::detect::MODEL_JSON.as_bytes()),
+        ("detector.onnx", crate::detect::MODEL_ONNX),
+        ("face_model.json", super::BUILTIN_JSON),
+    ])
+}
+
+/// The CRC-32 of the bundle file of `files` ([`ModelBundle::to_bytes`]'s layout), streamed.
+fn checksum_of<'a>(files: impl Iterator<Item = (&'a str, &'a [u8])> + Clone) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    h.update(MAGIC);
+    h.update(&ModelBundle::FORMAT_VERSION.to_le_bytes());
+    h.update(&(files.clone().count() as u32).to_le_bytes());
+    for (name, bytes) in files.clone() {
+        h.update(&(name.len() as u16).to_le_bytes());
+        h.update(name.as_bytes());
+        h.update(&(bytes.len() as u64).to_le_bytes());
+    }
+    for (_, bytes) in files {
+        h.update(bytes);
+    }
+    h.finalize()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -207,6 +239,16 @@ mod tests {
         let bytes = b.to_bytes();
         assert_eq!(ModelBundle::from_bytes(&bytes).unwrap(), b);
         assert!(REQUIRED.iter().all(|r| b.file(r).is_some()));
+        // The checksum is the one the file ends with, streamed or not.
+        let tail = u32::from_le_bytes(bytes[bytes.len() - 4..].try_into().unwrap());
+        assert_eq!(b.checksum(), tail);
+        assert_eq!(ModelBundle::builtin_checksum(), tail);
+        let mut other = b
+            .files()
+            .map(|(n, x)| (n.to_string(), x.to_vec()))
+            .collect::<Vec<_>>();
+        other[0].1.push(b' ');
+        assert_ne!(ModelBundle::from_files(other).unwrap().checksum(), tail);
     }
 
     #[test]

@@ -12,6 +12,7 @@ use super::{FaceTracker, LandmarkEstimator, RegionDetector, TrackingResult};
 use crate::error::{Error, Result};
 use crate::gaze::Target;
 use crate::image::{Frame, FrameDesc};
+use crate::record::MAX_DROPPED_TIMESTAMPS;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::{self, JoinHandle, ThreadId};
@@ -69,6 +70,13 @@ pub trait FrameProcessor: Send + 'static {
 
     /// Forgets the tap calibration ([`FaceTracker::reset_gaze_calibration`]).
     fn reset_gaze_calibration(&mut self);
+
+    /// `frames` frames were dropped before the one about to be processed; `timestamps_ns` are the
+    /// first of their timestamps (at most [`MAX_DROPPED_TIMESTAMPS`]). For a recorder
+    /// ([`crate::record::RecordingTracker`]); nothing by default.
+    fn frames_dropped(&mut self, frames: u64, timestamps_ns: &[i64]) {
+        let _ = (frames, timestamps_ns);
+    }
 }
 
 impl<D, L> FrameProcessor for FaceTracker<D, L>
@@ -133,6 +141,8 @@ struct Slot {
     waiting: Pending,
     /// Frames replaced in the slot since the last delivery.
     dropped: u64,
+    /// The first of their timestamps (capacity [`MAX_DROPPED_TIMESTAMPS`], never grown).
+    dropped_ns: Vec<i64>,
     /// The last accepted timestamp: submitted frames must come after it.
     last_timestamp_ns: Option<i64>,
     /// Gaze targets for the worker to take before its next frame.
@@ -150,6 +160,16 @@ struct Slot {
 struct Shared {
     slot: Mutex<Slot>,
     wake: Condvar,
+}
+
+impl Slot {
+    /// Counts the waiting frame, taken at `timestamp_ns`, as dropped.
+    fn drop_waiting(&mut self, timestamp_ns: i64) {
+        self.dropped += 1;
+        if self.dropped_ns.len() < self.dropped_ns.capacity() {
+            self.dropped_ns.push(timestamp_ns);
+        }
+    }
 }
 
 impl Shared {
@@ -176,6 +196,10 @@ impl LiveStream {
     /// [`Error::Internal`] when the operating system refuses a thread.
     pub fn start(tracker: impl FrameProcessor, listener: Box<dyn LiveListener>) -> Result<Self> {
         let shared = Arc::new(Shared::default());
+        shared
+            .lock()
+            .dropped_ns
+            .reserve_exact(MAX_DROPPED_TIMESTAMPS);
         let for_worker = Arc::clone(&shared);
         let worker = thread::Builder::new()
             .name("monotrack-live".into())
@@ -210,7 +234,8 @@ impl LiveStream {
         }
         slot.last_timestamp_ns = Some(timestamp_ns);
         let outcome = if slot.waiting.desc.is_some() {
-            slot.dropped += 1;
+            let replaced = slot.waiting.timestamp_ns;
+            slot.drop_waiting(replaced);
             Submitted::Replaced
         } else {
             Submitted::Queued
@@ -257,7 +282,8 @@ impl LiveStream {
         slot.reset_tracks = true;
         slot.last_timestamp_ns = None;
         if slot.waiting.desc.take().is_some() {
-            slot.dropped += 1;
+            let dropped = slot.waiting.timestamp_ns;
+            slot.drop_waiting(dropped);
         }
     }
 
@@ -289,6 +315,7 @@ fn run_worker(
 ) {
     let mut working = Pending::default();
     let mut taps = Vec::new();
+    let mut dropped_ns = Vec::with_capacity(MAX_DROPPED_TIMESTAMPS);
     loop {
         let (dropped, targets) = {
             let mut slot = shared.lock();
@@ -306,6 +333,8 @@ fn run_worker(
                 tracker.reset_gaze_calibration();
             }
             std::mem::swap(&mut slot.taps, &mut taps);
+            dropped_ns.clear();
+            std::mem::swap(&mut slot.dropped_ns, &mut dropped_ns);
             (std::mem::take(&mut slot.dropped), slot.targets.take())
         };
         if let Some(t) = targets {
@@ -319,6 +348,9 @@ fn run_worker(
         let Some(desc) = working.desc.take() else {
             continue;
         };
+        if dropped > 0 {
+            tracker.frames_dropped(dropped, &dropped_ns);
+        }
         let ts = working.timestamp_ns;
         let delivered = catch_unwind(AssertUnwindSafe(|| {
             match Frame::new(&working.bytes, desc).and_then(|f| tracker.process(&f, ts).map(|_| ()))
@@ -365,6 +397,8 @@ mod tests {
         delay: Duration,
         result: TrackingResult,
         resets: Arc<Mutex<u32>>,
+        /// Per `frames_dropped` call: the count and the timestamps kept.
+        drops: Drops,
     }
 
     impl FrameProcessor for Slow {
@@ -394,6 +428,12 @@ mod tests {
             }
         }
         fn reset_gaze_calibration(&mut self) {}
+        fn frames_dropped(&mut self, frames: u64, timestamps_ns: &[i64]) {
+            self.drops
+                .lock()
+                .unwrap()
+                .push((frames, timestamps_ns.to_vec()));
+        }
     }
 
     struct ToChannel(mpsc::Sender<Event>);
@@ -414,15 +454,26 @@ mod tests {
         }
     }
 
-    fn stream(delay_ms: u64) -> (LiveStream, mpsc::Receiver<Event>, Arc<Mutex<u32>>) {
+    type Drops = Arc<Mutex<Vec<(u64, Vec<i64>)>>>;
+
+    fn stream_with_drops(
+        delay_ms: u64,
+    ) -> (LiveStream, mpsc::Receiver<Event>, Arc<Mutex<u32>>, Drops) {
         let resets = Arc::new(Mutex::new(0));
+        let drops = Drops::default();
         let slow = Slow {
             delay: Duration::from_millis(delay_ms),
             result: TrackingResult::default(),
             resets: Arc::clone(&resets),
+            drops: Arc::clone(&drops),
         };
         let (tx, rx) = mpsc::channel();
         let live = LiveStream::start(slow, Box::new(ToChannel(tx))).unwrap();
+        (live, rx, resets, drops)
+    }
+
+    fn stream(delay_ms: u64) -> (LiveStream, mpsc::Receiver<Event>, Arc<Mutex<u32>>) {
+        let (live, rx, resets, _) = stream_with_drops(delay_ms);
         (live, rx, resets)
     }
 
@@ -473,6 +524,45 @@ mod tests {
             "every frame is delivered or counted dropped"
         );
         assert!(live.submit(&frame, 31).is_err(), "closed");
+    }
+
+    /// The tracker hears of every drop before the frame taken after it, with the dropped
+    /// frames' own timestamps (a recorder writes them), a reset's dropped frame included.
+    #[test]
+    fn the_tracker_is_told_of_each_drop_with_its_timestamps() {
+        let (mut live, rx, _, drops) = stream_with_drops(15);
+        let (bytes, desc) = gray(0);
+        let frame = Frame::new(&bytes, desc).unwrap();
+        for ts in 1..=20 {
+            live.submit(&frame, ts).unwrap();
+            thread::sleep(Duration::from_millis(1));
+        }
+        // A reset drops the frame waiting (if one is), and the next frame tells of it.
+        live.reset();
+        live.submit(&frame, 1_000).unwrap();
+        let mut delivered = Vec::new();
+        while delivered.last() != Some(&1_000) {
+            match rx.recv_timeout(Duration::from_secs(10)).unwrap() {
+                Event::Result(ts, _) => delivered.push(ts),
+                e => panic!("unexpected {e:?}"),
+            }
+        }
+        live.close();
+        let drops = drops.lock().unwrap();
+        let told: Vec<i64> = drops.iter().flat_map(|(_, t)| t.iter().copied()).collect();
+        assert_eq!(
+            drops.iter().map(|(n, _)| *n).sum::<u64>(),
+            told.len() as u64,
+            "few drops at a time: every timestamp is kept"
+        );
+        assert!(
+            !told.is_empty(),
+            "a 15 ms tracker fed every millisecond drops frames"
+        );
+        let mut all: Vec<i64> = delivered.iter().chain(&told).copied().collect();
+        all.sort_unstable();
+        let submitted: Vec<i64> = (1..=20).chain([1_000]).collect();
+        assert_eq!(all, submitted, "each frame delivered or told dropped, once");
     }
 
     #[test]

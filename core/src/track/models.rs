@@ -5,6 +5,7 @@
 use super::{FaceTracker, LandmarkEstimator, LandmarkMode, Mode, RegionDetector, TrackerConfig};
 use crate::detect::{Detection, DetectorConfig, FaceDetector};
 use crate::error::{Error, Result};
+use crate::gaze::{GazeCalibration, GazeConfig};
 use crate::image::{GrayImage, Rect};
 use crate::landmarks::{FaceLandmarks, GradientDetector, GradientPoints, M3};
 use crate::model::bundle::ModelBundle;
@@ -305,5 +306,62 @@ pub fn detector_config_for(config: &TrackerConfig, detector: DetectorConfig) -> 
     DetectorConfig {
         score_threshold: config.min_detection_score.clamp(0.01, 0.99),
         ..detector
+    }
+}
+
+impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
+    /// The point-of-gaze settings ([`FaceTracker::set_gaze_config`]).
+    pub fn gaze_config(&self) -> &GazeConfig {
+        &self.gaze.config
+    }
+}
+
+/// Where a recorded stream starts ([`crate::record`]): what a tracker keeps across
+/// [`FaceTracker::reset`] and a freshly built one lacks. A recording starts by ending every track
+/// ([`Tracker::begin_recorded_stream`]), so that a replay built from the recorded settings and
+/// this ([`Tracker::resume_recorded_stream`]) is in the same state before the first frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StreamStart {
+    /// The id the next new face gets (ids go on counting across resets).
+    pub next_face_id: u64,
+    /// [`crate::track::TrackingResult::frame_index`] of the next frame.
+    pub frame_index: u64,
+    /// Frames the whole frame was searched turned so far (it picks the next turn).
+    pub whole_frame_turns: u32,
+    /// The user's tap calibration.
+    pub calibration: GazeCalibration,
+}
+
+impl Tracker {
+    /// Ends every track, as [`FaceTracker::reset`] does, forgets the eye rays kept for taps and
+    /// the gradient detector's last roll, and returns what a replay needs to start from the same
+    /// state ([`Self::resume_recorded_stream`]).
+    pub fn begin_recorded_stream(&mut self) -> StreamStart {
+        self.restart_stream();
+        StreamStart {
+            next_face_id: self.next_id,
+            frame_index: self.frame_index,
+            whole_frame_turns: self.whole_frame_turns,
+            calibration: self.gaze.calibration.clone(),
+        }
+    }
+
+    /// Puts this tracker where [`Self::begin_recorded_stream`] left the recorded one.
+    pub fn resume_recorded_stream(&mut self, start: &StreamStart) {
+        self.restart_stream();
+        self.next_id = start.next_face_id;
+        self.frame_index = start.frame_index;
+        self.whole_frame_turns = start.whole_frame_turns;
+        self.gaze.calibration = start.calibration.clone();
+    }
+
+    fn restart_stream(&mut self) {
+        self.reset();
+        self.gaze.history.clear();
+        self.gaze.next = 0;
+        if let Landmarker::Gradient(g) = &mut self.estimator {
+            g.points = GradientPoints::default();
+            g.last = Rect::default();
+        }
     }
 }
