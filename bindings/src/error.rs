@@ -52,6 +52,13 @@ pub enum MonotrackError {
         /// What was wrong.
         msg: String,
     },
+    /// Writing a recording failed (`FaceTracker::start_recording`, `stop_recording`): the file
+    /// cannot be created, or the disk is full.
+    #[error("i/o: {msg}")]
+    Io {
+        /// What was wrong.
+        msg: String,
+    },
     /// A bug: an internal invariant broke or a panic was caught.
     #[error("internal: {msg}")]
     Internal {
@@ -66,9 +73,14 @@ impl From<CoreError> for MonotrackError {
         match e {
             CoreError::InvalidFrame(_) => Self::InvalidFrame { msg },
             CoreError::InvalidTimestamp(_) => Self::InvalidTimestamp { msg },
+            CoreError::InvalidState(_) => Self::InvalidState { msg },
+            CoreError::Io(_) => Self::Io { msg },
+            // Apps hand the FFI no recording to read (`monotrack replay` reads them): should one
+            // reach it, it is input that cannot be used.
             CoreError::InvalidCamera(_)
             | CoreError::InvalidInput(_)
-            | CoreError::InvalidConfig(_) => Self::InvalidConfig { msg },
+            | CoreError::InvalidConfig(_)
+            | CoreError::InvalidRecording(_) => Self::InvalidConfig { msg },
             CoreError::ModelLoad(_) => Self::ModelLoad { msg },
             CoreError::BundleVersion(_) => Self::BundleVersion { msg },
             CoreError::BundleChecksum(_) => Self::BundleChecksum { msg },

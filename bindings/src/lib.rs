@@ -22,6 +22,7 @@ mod live;
 mod motion;
 mod options;
 mod overlay;
+mod record;
 mod tracker;
 mod types;
 
@@ -34,6 +35,7 @@ pub use live::*;
 pub use motion::*;
 pub use options::*;
 pub use overlay::*;
+pub use record::*;
 pub use tracker::*;
 pub use types::*;
 

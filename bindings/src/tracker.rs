@@ -14,8 +14,9 @@ use monotrack_core::gaze::Target;
 use monotrack_core::image::{Frame, FrameDesc as CoreFrameDesc, Rect as CoreRect};
 use monotrack_core::landmarks::eyes::eye_openness;
 use monotrack_core::model::FaceModel;
+use monotrack_core::record::{ModelIdentity, RecordingSwitch, RecordingTracker};
 use monotrack_core::track::live::{LiveStream, Submitted};
-use monotrack_core::track::{self as core_track, TrackedFace, Tracker};
+use monotrack_core::track::{self as core_track, TrackedFace};
 use std::sync::{Arc, Mutex, MutexGuard};
 
 /// An axis-aligned box, pixels of the upright image.
@@ -304,11 +305,14 @@ pub(crate) fn result(
 
 /// What runs the frames: the tracker itself (image, video), or its worker (live stream).
 enum Engine {
-    Sync(Box<Tracker>),
+    /// The tracker, with its recorder (off until `start_recording`).
+    Sync(Box<RecordingTracker>),
     Live {
         stream: LiveStream,
         /// The ids of the gaze targets set, in order (taps name their target by id).
         target_ids: Vec<String>,
+        /// The recorder of the worker's tracker.
+        recording: RecordingSwitch,
     },
 }
 
@@ -365,9 +369,18 @@ impl FaceTracker {
     }
 
     /// Runs `call` on the synchronous tracker, or says why it cannot.
+    /// The switch of the tracker's recorder, or `InvalidState` after `shutdown`.
+    pub(crate) fn recording(&self) -> Result<RecordingSwitch, MonotrackError> {
+        match self.lock().as_ref() {
+            Some(Engine::Sync(t)) => Ok(t.switch()),
+            Some(Engine::Live { recording, .. }) => Ok(recording.clone()),
+            None => Err(shut_down()),
+        }
+    }
+
     fn with_sync<T>(
         &self,
-        call: impl FnOnce(&mut Tracker) -> Result<T, MonotrackError>,
+        call: impl FnOnce(&mut RecordingTracker) -> Result<T, MonotrackError>,
     ) -> Result<T, MonotrackError> {
         match self.lock().as_mut() {
             Some(Engine::Sync(t)) => call(t),
@@ -387,6 +400,7 @@ impl FaceTracker {
         let frame = Frame::new(bytes, desc.try_into()?)?;
         self.with_sync(|t| {
             t.process_frame(&frame, timestamp_ns)?;
+            let t = t.tracker();
             result(t.result(), frame.desc(), t.gaze_targets(), self.shape)
         })
     }
@@ -413,10 +427,15 @@ impl FaceTracker {
         listener: Option<Arc<dyn LiveStreamListener>>,
     ) -> Result<Arc<Self>, MonotrackError> {
         guard(|| {
-            let tracker = build_tracker(&options)?;
+            let models = options
+                .models
+                .as_ref()
+                .map_or_else(ModelIdentity::builtin, |b| ModelIdentity::of(&b.inner));
+            let tracker = RecordingTracker::new(build_tracker(&options)?, models);
             let shape = ResultShape::from(&options);
             let engine = match (options.mode(), listener) {
                 (RunningMode::LiveStream, Some(listener)) => Engine::Live {
+                    recording: tracker.switch(),
                     stream: LiveStream::start(tracker, Box::new(Forward::new(listener, shape)))?,
                     target_ids: Vec::new(),
                 },
@@ -540,7 +559,9 @@ impl FaceTracker {
             let core = crate::gaze::to_core(&targets)?;
             match self.lock().as_mut() {
                 Some(Engine::Sync(t)) => t.set_gaze_targets(core),
-                Some(Engine::Live { stream, target_ids }) => {
+                Some(Engine::Live {
+                    stream, target_ids, ..
+                }) => {
                     *target_ids = targets.iter().map(|t| t.id.clone()).collect();
                     stream.set_gaze_targets(core);
                 }
@@ -581,14 +602,16 @@ impl FaceTracker {
             let at = [point.u_mm, point.v_mm];
             match self.lock().as_mut() {
                 Some(Engine::Sync(t)) => {
-                    let ids = t.gaze_targets().iter().map(|t| t.id.as_str());
+                    let ids = t.tracker().gaze_targets().iter().map(|t| t.id.as_str());
                     let index = crate::gaze::tap_target(ids, &target_id, &point)?;
                     let n = t
                         .add_calibration_point(index, at, ts)
                         .map_err(crate::error::input_as_frame)?;
                     Ok(Some(n as u32))
                 }
-                Some(Engine::Live { stream, target_ids }) => {
+                Some(Engine::Live {
+                    stream, target_ids, ..
+                }) => {
                     let ids = target_ids.iter().map(String::as_str);
                     let index = crate::gaze::tap_target(ids, &target_id, &point)?;
                     stream.add_calibration_point(index, at, ts);

@@ -116,6 +116,7 @@ enum BenchSummary {
         case .ModelLoad(let msg)?: return "model load failed: \(msg)"
         case .BundleVersion(let msg)?: return "model bundle version: \(msg)"
         case .BundleChecksum(let msg)?: return "model bundle checksum: \(msg)"
+        case .Io(let msg)?: return "i/o: \(msg)"
         case .Internal(let msg)?: return "internal error: \(msg)"
         case nil: return String(describing: error)
         }

@@ -120,6 +120,7 @@ object BenchSummary {
         is MonotrackException.ModelLoad -> "model load failed: ${e.msg}"
         is MonotrackException.BundleVersion -> "model bundle version: ${e.msg}"
         is MonotrackException.BundleChecksum -> "model bundle checksum: ${e.msg}"
+        is MonotrackException.Io -> "i/o: ${e.msg}"
         is MonotrackException.Internal -> "internal error: ${e.msg}"
     }
 }
