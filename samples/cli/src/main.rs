@@ -10,6 +10,7 @@ mod json;
 mod landmarks;
 mod luma;
 mod motion;
+mod replay;
 // Some frame-source helpers are used by tests only.
 #[allow(dead_code)]
 mod track;
@@ -117,6 +118,27 @@ enum Command {
         /// (`TrackerConfig::ultra_light`'s thresholds unless --config gives a file).
         #[arg(long, value_enum, default_value = "m3")]
         landmarks: landmarks::Landmarker,
+        /// Also write a recording of what was tracked here (core/src/record/FORMAT.md), for
+        /// `monotrack replay`.
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// The most bytes the recording may take: recording stops (truncated) before the frame
+        /// that would pass it.
+        #[arg(long, default_value_t = 1 << 30, requires = "record")]
+        record_max_bytes: u64,
+    },
+    /// Re-run a recording (`track --record`, an app's `FaceTracker.start_recording`) through a
+    /// tracker built from its settings, print what `track` prints for its frames, and check each
+    /// result bit for bit against the recorded one (exit 1 when any differs).
+    Replay {
+        /// The recording.
+        input: PathBuf,
+        /// Output JSON lines, one per recorded frame (default: stdout).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// The model bundle the recording was made on, when it was not the built-in models.
+        #[arg(long)]
+        models: Option<PathBuf>,
     },
     /// The whole pipeline on a clip made from the committed sample image: overlays + timing table.
     Demo {
@@ -241,7 +263,14 @@ impl Drop for LineSink {
     }
 }
 
-/// `monotrack track`: the tracker over the shipped models, configured from an optional JSON file.
+/// Where and how large `monotrack track --record` writes.
+struct RecordTo<'a> {
+    path: &'a Path,
+    max_bytes: u64,
+}
+
+/// `monotrack track`: the tracker over the shipped models, configured from an optional JSON file,
+/// recorded with `record`.
 fn run_track(
     input: &Path,
     out: Option<&Path>,
@@ -249,6 +278,7 @@ fn run_track(
     config: Option<&Path>,
     targets: Option<&Path>,
     landmarker: landmarks::Landmarker,
+    record: Option<RecordTo<'_>>,
 ) -> Result<bool, String> {
     let gradient = landmarker == landmarks::Landmarker::Gradient;
     if gradient && targets.is_some() {
@@ -271,12 +301,41 @@ fn run_track(
             "--targets needs the gaze stage, which the --config turns off (\"gaze\": false)".into(),
         );
     }
-    let mut tracker =
+    let tracker =
         monotrack_core::track::Tracker::with_default_models(cfg).map_err(|e| e.to_string())?;
+    let mut tracker = monotrack_core::record::RecordingTracker::new(
+        tracker,
+        monotrack_core::record::ModelIdentity::builtin(),
+    );
     if let Some(p) = targets {
         tracker.set_gaze_targets(json::load_targets(p)?);
     }
-    track::run(&mut tracker, input, out, overlay)
+    let switch = tracker.switch();
+    if let Some(r) = &record {
+        let file = std::fs::File::create(r.path)
+            .map_err(|e| format!("cannot create {}: {e}", r.path.display()))?;
+        switch
+            .start(Box::new(BufWriter::new(file)), r.max_bytes)
+            .map_err(|e| format!("{}: {e}", r.path.display()))?;
+    }
+    let all_ok = track::run(&mut tracker, input, out, overlay)?;
+    if let Some(r) = &record {
+        let s = switch
+            .stop()
+            .map_err(|e| format!("{}: {e}", r.path.display()))?;
+        eprintln!(
+            "monotrack: recorded {} frames ({} bytes) to {}{}",
+            s.frames,
+            s.bytes,
+            r.path.display(),
+            if s.truncated {
+                ", truncated at --record-max-bytes"
+            } else {
+                ""
+            }
+        );
+    }
+    Ok(all_ok)
 }
 
 fn main() -> ExitCode {
@@ -337,6 +396,8 @@ fn main() -> ExitCode {
             config,
             targets,
             landmarks: landmarker,
+            record,
+            record_max_bytes,
         } => run_track(
             &input,
             out.as_deref(),
@@ -344,6 +405,16 @@ fn main() -> ExitCode {
             config.as_deref(),
             targets.as_deref(),
             landmarker,
+            record.as_deref().map(|path| RecordTo {
+                path,
+                max_bytes: record_max_bytes,
+            }),
+        ),
+        Command::Replay { input, out, models } => replay::run(
+            &input,
+            out.as_deref(),
+            models.as_deref(),
+            cli.kernels.is_some(),
         ),
         Command::Demo {
             overlay,

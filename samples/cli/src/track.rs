@@ -2,8 +2,7 @@
 //! that do not depend on which detector and landmark estimator the tracker holds — frame input (a
 //! directory of PNG/JPEG frames in file-name order, or a video piped through `ffmpeg`), a progress
 //! bar on stderr, the CONTRACT JSON line of a [`TrackingResult`], overlay drawing (landmarks,
-//! projected model mesh, head axes) and the loop [`run`], generic over the tracker's detector and
-//! estimator.
+//! projected model mesh, head axes) and the loop [`run`], through the recorder (`--record`).
 
 use crate::LineSink;
 use crate::json::{put_eyes, put_fit, put_point_of_gaze};
@@ -13,10 +12,8 @@ use monotrack_core::image::GrayImage;
 use monotrack_core::landmarks::{BROW_GESTURES, MOUTH_GESTURES};
 use monotrack_core::model::{FaceModel, N_LANDMARKS};
 use monotrack_core::overlay;
-use monotrack_core::track::{
-    FaceState, FaceTracker, FrameState, LandmarkEstimator, RegionDetector, TrackedFace,
-    TrackingResult,
-};
+use monotrack_core::record::RecordingTracker;
+use monotrack_core::track::{FaceState, FrameState, TrackedFace, TrackingResult};
 use serde_json::{Map, Value, json};
 use std::io::{IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
@@ -752,14 +749,15 @@ pub fn draw_overlay(canvas: &mut Canvas, result: &TrackingResult, camera: &Intri
     }
 }
 
-/// Tracks every frame of `input` with `tracker`, writing one CONTRACT JSON line per frame to `out`
-/// (stdout when `None`) and, with `overlay`, `frame_NNNNNN.png` overlays there. Returns whether
-/// every frame succeeded (a failed frame writes `{"frame": i, "error": ...}` and goes on).
+/// Tracks every frame of `input` with `tracker` (recorded when its recording runs), writing one
+/// CONTRACT JSON line per frame to `out` (stdout when `None`) and, with `overlay`,
+/// `frame_NNNNNN.png` overlays there. Returns whether every frame succeeded (a failed frame writes
+/// `{"frame": i, "error": ...}` and goes on).
 ///
 /// # Errors
 /// A message when the input cannot be opened or an output cannot be written.
-pub fn run<D: RegionDetector, L: LandmarkEstimator>(
-    tracker: &mut FaceTracker<D, L>,
+pub fn run(
+    tracker: &mut RecordingTracker,
     input: &Path,
     out: Option<&Path>,
     overlay: Option<&Path>,
@@ -777,8 +775,9 @@ pub fn run<D: RegionDetector, L: LandmarkEstimator>(
     let mut all_ok = true;
     let mut done = 0;
     while let Some((i, ts)) = source.next_frame_with(&mut frame, overlay.map(|_| &mut rgb))? {
-        match tracker.process(&frame, ts).map(|_| ()) {
+        match tracker.process_image(&frame, ts).map(|_| ()) {
             Ok(()) => {
+                let tracker = tracker.tracker();
                 // Point of gaze only with --targets (CONTRACT.md).
                 let targets = Some(tracker.gaze_targets()).filter(|t| !t.is_empty());
                 let mut line = frame_json(tracker.result(), targets);
