@@ -312,6 +312,8 @@ pub struct ReplayedFrame<'r> {
     pub desc: FrameDesc,
     /// What this replay's tracker made of it.
     pub result: std::result::Result<&'r TrackingResult, Error>,
+    /// The gaze targets its points of gaze were located among.
+    pub targets: &'r [Target],
     /// The recorded outcome: `Some(Some(digest))` a result, `Some(None)` an error, `None` not
     /// recorded (the recording tracker panicked on the frame).
     pub recorded: Option<Option<u64>>,
@@ -443,14 +445,17 @@ impl<'a> Replay<'a> {
                     };
                     let index = self.frames;
                     self.frames += 1;
-                    let result = f
-                        .frame()
-                        .and_then(|frame| self.tracker.process_frame(&frame, f.timestamp_ns));
+                    let tracked = f.frame().and_then(|frame| {
+                        self.tracker
+                            .process_frame(&frame, f.timestamp_ns)
+                            .map(|_| ())
+                    });
                     return Ok(Some(ReplayedFrame {
                         index,
                         timestamp_ns: f.timestamp_ns,
                         desc: f.desc,
-                        result,
+                        result: tracked.map(|()| self.tracker.result()),
+                        targets: self.tracker.gaze_targets(),
                         recorded,
                     }));
                 }
