@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Takes monotrack-ffi from the workspace's test build, generates the Kotlin bindings (uniffi library mode), compiles
-# them with the JVM tests in bindings/tests/kotlin, runs the tests on the JVM through JNA, prints
+# them with the JVM tests in bindings/tests/kotlin, runs the tests on the JVM through JNA, then
+# replays the recordings the tests made (RecordingTest.kt) with `monotrack replay` of the same build,
+# each of which must find every frame identical (counted as one test each), prints
 # "N passed, N failed" and exits non-zero on any failure. Installs what it needs:
 # kotlinc (npm package kotlin-compiler), JNA (Debian libjna-java), JUnit 5 console (Debian junit5).
 set -euo pipefail
@@ -32,8 +34,9 @@ cargo test -q --workspace --no-run --message-format=json-render-diagnostics |
   python3 "$ROOT/tests/scripts/cargo_artifacts.py" > "$WORK/artifacts.txt"
 LIB=$(awk '$1 == "cdylib" && $2 == "monotrack_ffi" {print $4}' "$WORK/artifacts.txt" | head -1)
 BINDGEN=$(awk '$1 == "bin" && $2 == "uniffi-bindgen" {print $4}' "$WORK/artifacts.txt" | head -1)
-if [ -z "$LIB" ] || [ ! -f "$LIB" ] || [ -z "$BINDGEN" ]; then
-  echo "the test build made no FFI library or uniffi-bindgen"; echo "kotlin: 0 passed, 1 failed"; exit 1
+MONOTRACK=$(awk '$1 == "bin" && $2 == "monotrack" {print $4}' "$WORK/artifacts.txt" | head -1)
+if [ -z "$LIB" ] || [ ! -f "$LIB" ] || [ -z "$BINDGEN" ] || [ -z "$MONOTRACK" ]; then
+  echo "the test build made no FFI library, uniffi-bindgen or monotrack"; echo "kotlin: 0 passed, 1 failed"; exit 1
 fi
 LIBDIR=$(dirname "$LIB")
 
@@ -60,8 +63,10 @@ if [ "$krc" -ne 0 ] || [ ! -d "$WORK/classes" ]; then
 fi
 
 echo "== running JVM tests"
+RECORDINGS="$WORK/recordings"
+rm -rf "$RECORDINGS" && mkdir -p "$RECORDINGS"
 set +e
-java -Djna.library.path="$LIBDIR" -Dmonotrack.root="$ROOT" \
+java -Djna.library.path="$LIBDIR" -Dmonotrack.root="$ROOT" -Dmonotrack.recordings="$RECORDINGS" \
   -jar "$JUNIT" --disable-banner --disable-ansi-colors --details=tree \
   --class-path "$WORK/classes:$JNA:$KOTLIN_LIB/kotlin-stdlib.jar:$KOTLIN_LIB/kotlinx-coroutines-core-jvm.jar" \
   --scan-class-path "$WORK/classes" > "$WORK/junit.log" 2>&1
@@ -72,6 +77,24 @@ passed=$(sed -n 's/.*\[ *\([0-9]*\) tests successful.*/\1/p' "$WORK/junit.log" |
 failed=$(sed -n 's/.*\[ *\([0-9]*\) tests failed.*/\1/p' "$WORK/junit.log" | head -1)
 passed=${passed:-0}; failed=${failed:-0}
 [ "$rc" -ne 0 ] && [ "$failed" -eq 0 ] && failed=1
+
+echo "== monotrack replay of the recordings the JVM tests made"
+for name in kotlin-video kotlin-live kotlin-small; do
+  set +e
+  "$MONOTRACK" replay "$RECORDINGS/$name.mtrec" --out "$RECORDINGS/$name.jsonl" \
+    > "$RECORDINGS/$name.log" 2>&1
+  replay_rc=$?
+  set -e
+  identical=$(grep -E '^monotrack: [0-9]+ of [0-9]+ frames identical' "$RECORDINGS/$name.log" | tail -1 || true)
+  echo "$name.mtrec: ${identical#monotrack: }"
+  # Every frame identical, and at least one frame.
+  if [ "$replay_rc" -eq 0 ] && [[ "$identical" =~ ^monotrack:\ ([1-9][0-9]*)\ of\ ([0-9]+)\ frames ]] &&
+     [ "${BASH_REMATCH[1]}" = "${BASH_REMATCH[2]}" ]; then
+    passed=$((passed + 1))
+  else
+    cat "$RECORDINGS/$name.log"; failed=$((failed + 1))
+  fi
+done
 [ "$passed" -eq 0 ] && [ "$failed" -eq 0 ] && failed=1
 echo "kotlin: $passed passed, $failed failed"
 [ "$failed" -eq 0 ]
