@@ -3,7 +3,8 @@
 # Usage: fuzz/run.sh [SECONDS_PER_TARGET=600] [TARGET...]
 # Needs the nightly toolchain and cargo-fuzz: installed here when missing. Each target starts from
 # its committed corpus (fuzz/corpus/<target>/, minimised) plus generated seeds (model_bundle: the
-# built-in bundle, make_bundle.py; frames: a few valid frames); new inputs go to a scratch copy, and a crash
+# built-in bundle, make_bundle.py; frames: a few valid frames; recording: the corpus is written by
+# make_recording_corpus.py from the format's document); new inputs go to a scratch copy, and a crash
 # stops the run with the input under fuzz/artifacts/<target>/. Prints one line per target:
 # executions, seconds, corpus size, crashes.
 set -euo pipefail
@@ -11,7 +12,7 @@ cd "$(dirname "$0")"
 SECS=${1:-600}
 shift || true
 TARGETS=("$@")
-[ ${#TARGETS[@]} -eq 0 ] && TARGETS=(frames json_inputs fit_inputs model_bundle)
+[ ${#TARGETS[@]} -eq 0 ] && TARGETS=(frames json_inputs fit_inputs model_bundle recording)
 # Missing tools are installed; where that cannot be done (no network to the registries), the run
 # is skipped with a line rather than failed: nothing about the SDK was tested or found wrong.
 skip() { echo "SKIPPED: fuzzing ($1)"; exit 0; }

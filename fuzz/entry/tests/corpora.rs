@@ -54,3 +54,33 @@ fn json_inputs_seeds() {
 fn model_bundle_seeds() {
     assert!(replay("model_bundle") >= 5);
 }
+
+#[test]
+fn recording_corpus() {
+    assert!(
+        replay("recording") >= 10,
+        "the committed recording corpus is missing"
+    );
+    // The corpus was written from FORMAT.md alone (fuzz/make_recording_corpus.py): its valid
+    // files read, its invalid ones are refused, so the document and the reader agree.
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../corpus/recording");
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        let parsed = std::fs::read(&path).map(|b| {
+            monotrack_core::record::Recording::parse(&b)
+                .map(|r| r.frames())
+                .map_err(|e| e.to_string())
+        });
+        match parsed.unwrap() {
+            Ok(frames) => assert!(name.starts_with("valid-"), "{name} reads ({frames} frames)"),
+            Err(e) => assert!(name.starts_with("invalid-"), "{name}: {e}"),
+        }
+    }
+    let every = std::fs::read(dir.join("valid-every-kind")).unwrap();
+    let rec = monotrack_core::record::Recording::parse(&every).unwrap();
+    assert_eq!(
+        (rec.frames(), rec.checked_frames(), rec.dropped_frames()),
+        (3, 2, 3)
+    );
+}
