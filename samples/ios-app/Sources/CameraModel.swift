@@ -6,12 +6,17 @@ import SwiftUI
 /// which is also the only queue that reads it). Frames arrive on `frameQueue` (a serial queue), are
 /// tracked there synchronously at their presentation time and the results are published on the
 /// main queue. Late frames are dropped (`alwaysDiscardsLateVideoFrames`), so a slow frame costs
-/// frames, not latency.
+/// frames, not latency. The record switch writes what the tracker is given to
+/// `Documents/recordings/` (on `frameQueue`, between frames), for `monotrack replay` on a desktop.
 final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSampleBufferDelegate {
     @Published private(set) var result: TrackingResult?
     @Published private(set) var fps: Double = 0
     @Published private(set) var message: String?
     @Published private(set) var previewRotationAngle: CGFloat = 90
+    @Published private(set) var isRecording = false
+
+    /// A recording's limit: about half a minute of 640×480 NV12 frames at 30 fps.
+    private static let maxRecordingBytes: UInt64 = 512 << 20
 
     let session = AVCaptureSession()
     private let frameQueue = DispatchQueue(label: "io.monotrack.sample.frames")
@@ -63,6 +68,39 @@ final class CameraModel: NSObject, ObservableObject, AVCaptureVideoDataOutputSam
             session.stopRunning()
             // A restarted camera begins new tracks; its clock may also start over.
             self?.tracker?.reset()
+        }
+    }
+
+    /// Starts a recording into a new file of `Documents/recordings/`, or stops the one running.
+    func setRecording(_ on: Bool) {
+        frameQueue.async { [weak self] in
+            guard let self, let tracker = self.tracker else { return }
+            let note: String
+            do {
+                if on && !tracker.isRecording() {
+                    let dir = try FileManager.default.url(for: .documentDirectory, in: .userDomainMask,
+                                                          appropriateFor: nil, create: true)
+                        .appendingPathComponent("recordings", isDirectory: true)
+                    try FileManager.default.createDirectory(at: dir, withIntermediateDirectories: true)
+                    let file = dir.appendingPathComponent("monotrack-\(Int(Date().timeIntervalSince1970)).mtrec")
+                    try tracker.startRecording(path: file.path, maxBytes: Self.maxRecordingBytes)
+                    note = "Recording to \(file.lastPathComponent)"
+                } else if !on && tracker.isRecording() {
+                    let s = try tracker.stopRecording()
+                    let mb = Double(s.bytes) / 1e6
+                    note = String(format: "Recorded %llu frames (%.1f MB)", s.frames, mb)
+                        + (s.truncated ? ", stopped at the size limit" : "")
+                } else {
+                    return
+                }
+            } catch {
+                note = "Recording failed: \(error)"
+            }
+            let recording = tracker.isRecording()
+            DispatchQueue.main.async {
+                self.isRecording = recording
+                self.message = note
+            }
         }
     }
 

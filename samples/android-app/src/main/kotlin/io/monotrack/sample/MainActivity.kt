@@ -7,6 +7,7 @@ import android.util.Log
 import android.widget.TextView
 import androidx.activity.result.contract.ActivityResultContracts
 import androidx.appcompat.app.AppCompatActivity
+import androidx.appcompat.widget.SwitchCompat
 import androidx.camera.core.CameraSelector
 import androidx.camera.core.ImageAnalysis
 import androidx.camera.core.ImageProxy
@@ -22,6 +23,7 @@ import io.monotrack.FaceTrackerOptions
 import io.monotrack.RunningMode
 import io.monotrack.android.detectForVideo
 import io.monotrack.android.monotrackIntrinsics
+import java.io.File
 import java.util.concurrent.ExecutorService
 import java.util.concurrent.Executors
 import java.util.concurrent.TimeUnit
@@ -29,12 +31,14 @@ import java.util.concurrent.TimeUnit
 /**
  * Front camera preview with the tracker's results drawn on top. The tracker runs on CameraX's
  * analysis executor (one thread), only ever on the newest frame (STRATEGY_KEEP_ONLY_LATEST), so a
- * slow frame drops frames instead of queueing latency.
+ * slow frame drops frames instead of queueing latency. The record switch writes what the tracker
+ * is given to the app's files dir (`recordings/`), for `monotrack replay` on a desktop.
  */
 class MainActivity : AppCompatActivity() {
     private lateinit var previewView: PreviewView
     private lateinit var overlay: OverlayView
     private lateinit var status: TextView
+    private lateinit var record: SwitchCompat
     private lateinit var analysisExecutor: ExecutorService
     @Volatile
     private var tracker: FaceTracker? = null
@@ -50,7 +54,12 @@ class MainActivity : AppCompatActivity() {
         previewView = findViewById(R.id.preview)
         overlay = findViewById(R.id.overlay)
         status = findViewById(R.id.status)
+        record = findViewById(R.id.record)
         analysisExecutor = Executors.newSingleThreadExecutor()
+        // Enabled once the tracker exists; the switch's calls run on the analysis thread, between
+        // frames (they open and flush a file).
+        record.isEnabled = false
+        record.setOnCheckedChangeListener { _, on -> analysisExecutor.execute { setRecording(on) } }
 
         if (ContextCompat.checkSelfPermission(this, Manifest.permission.CAMERA) == PackageManager.PERMISSION_GRANTED) {
             startCamera()
@@ -94,6 +103,7 @@ class MainActivity : AppCompatActivity() {
                     return@execute
                 }
                 this.tracker = tracker
+                runOnUiThread { record.isEnabled = true }
                 analysis.setAnalyzer(analysisExecutor) { image -> analyze(tracker, image, front) }
             }
         }, ContextCompat.getMainExecutor(this))
@@ -118,11 +128,36 @@ class MainActivity : AppCompatActivity() {
         }
     }
 
+    /** Starts a recording into a new file of the files dir, or stops the one running. */
+    private fun setRecording(on: Boolean) {
+        val tracker = tracker ?: return
+        try {
+            if (on && !tracker.isRecording()) {
+                val dir = File(filesDir, "recordings").also { it.mkdirs() }
+                val file = File(dir, "monotrack-${System.currentTimeMillis()}.mtrec")
+                tracker.startRecording(file.path, MAX_RECORDING_BYTES)
+                runOnUiThread { status.text = getString(R.string.recording_to, file.name) }
+            } else if (!on && tracker.isRecording()) {
+                val s = tracker.stopRecording()
+                val note = if (s.truncated) getString(R.string.recording_truncated) else ""
+                runOnUiThread {
+                    status.text = getString(R.string.recording_saved, s.frames.toLong(), s.bytes.toLong() / 1e6, note)
+                }
+            }
+        } catch (e: MonotrackException) {
+            runOnUiThread {
+                status.text = getString(R.string.recording_failed, e.message)
+                record.isChecked = false
+            }
+        }
+    }
+
     override fun onDestroy() {
         super.onDestroy()
         // Let the in-flight frame finish before freeing the native tracker it is using.
         analysisExecutor.shutdown()
         analysisExecutor.awaitTermination(EXECUTOR_DRAIN_MS, TimeUnit.MILLISECONDS)
+        // Closing ends a running recording too, its file complete.
         tracker?.close()
         tracker = null
     }
@@ -130,6 +165,9 @@ class MainActivity : AppCompatActivity() {
     private companion object {
         const val TAG = "monotrack"
         val ANALYSIS_SIZE = android.util.Size(640, 480)
+
+        /** A recording's limit: about half a minute of 640x480 NV21 frames at 30 fps. */
+        val MAX_RECORDING_BYTES = 512UL shl 20
 
         /** Longer than any frame takes; the executor only ever holds one. */
         const val EXECUTOR_DRAIN_MS = 500L
