@@ -9,6 +9,7 @@ use monotrack_core::camera::Intrinsics;
 use monotrack_core::detect::DetectorConfig;
 use monotrack_core::fit::MsbpConfig;
 use monotrack_core::gaze::{GazeConfig, GazeFilter};
+use monotrack_core::track::quality::QualityConfig;
 use monotrack_core::track::{self as core_track, Tracker};
 use std::sync::Arc;
 
@@ -65,6 +66,86 @@ pub struct TrackerTuning {
     /// `ultra_light_face_tracker_options()`.
     #[uniffi(default = false)]
     pub ultra_light: bool,
+    /// The thresholds of the quality reasons (`Face.quality`, `TrackingResult.reasons`).
+    #[uniffi(default)]
+    pub quality: QualityThresholds,
+}
+
+/// Where each quality reason starts (`QualityReason`; every field has a default,
+/// `monotrack_core::track::quality` documents each measurement). A face's factor for a
+/// measurement is 0.5 at its threshold; the reason is listed below 0.5.
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct QualityThresholds {
+    /// `Dark` below this mean luma of the face (or the frame), 0..=255.
+    #[uniffi(default = 40.0)]
+    pub dark_luma: f32,
+    /// `Overexposed` above this fraction of saturated samples, 0..=1.
+    #[uniffi(default = 0.25)]
+    pub overexposed_fraction: f32,
+    /// `Blurred` below this sharpness, whatever the face's recent frames.
+    #[uniffi(default = 0.08)]
+    pub min_sharpness: f32,
+    /// `Blurred` below this fraction of the face's (or the stream's) recent sharpness, 0..=1.
+    #[uniffi(default = 0.6)]
+    pub blur_drop: f32,
+    /// `Small` below this larger side of the landmarks' box, pixels.
+    #[uniffi(default = 64.0)]
+    pub min_face_px: f32,
+    /// `PartlyOutside` above this fraction of the face's box outside the frame, 0..=1.
+    #[uniffi(default = 0.1)]
+    pub max_outside_fraction: f32,
+    /// `Turned` past this yaw either way, degrees.
+    #[uniffi(default = 45.0)]
+    pub max_yaw_deg: f32,
+    /// `Turned` past this pitch either way, degrees.
+    #[uniffi(default = 30.0)]
+    pub max_pitch_deg: f32,
+    /// `Occluded` below this face probability of the landmark network, 0..=1.
+    #[uniffi(default = 0.7)]
+    pub min_face_probability: f32,
+    /// `Occluded` above this fit residual (RMS pixels over the outer-eye distance).
+    #[uniffi(default = 0.06)]
+    pub max_fit_residual: f32,
+}
+
+impl Default for QualityThresholds {
+    fn default() -> Self {
+        QualityConfig::default().into()
+    }
+}
+
+impl From<QualityConfig> for QualityThresholds {
+    fn from(c: QualityConfig) -> Self {
+        Self {
+            dark_luma: c.dark_luma,
+            overexposed_fraction: c.overexposed_fraction,
+            min_sharpness: c.min_sharpness,
+            blur_drop: c.blur_drop,
+            min_face_px: c.min_face_px,
+            max_outside_fraction: c.max_outside_fraction,
+            max_yaw_deg: c.max_yaw_deg,
+            max_pitch_deg: c.max_pitch_deg,
+            min_face_probability: c.min_face_probability,
+            max_fit_residual: c.max_fit_residual,
+        }
+    }
+}
+
+impl From<QualityThresholds> for QualityConfig {
+    fn from(q: QualityThresholds) -> Self {
+        Self {
+            dark_luma: q.dark_luma,
+            overexposed_fraction: q.overexposed_fraction,
+            min_sharpness: q.min_sharpness,
+            blur_drop: q.blur_drop,
+            min_face_px: q.min_face_px,
+            max_outside_fraction: q.max_outside_fraction,
+            max_yaw_deg: q.max_yaw_deg,
+            max_pitch_deg: q.max_pitch_deg,
+            min_face_probability: q.min_face_probability,
+            max_fit_residual: q.max_fit_residual,
+        }
+    }
 }
 
 /// The tracker's options. The names and meanings are MediaPipe Face Landmarker's where it has the
@@ -132,6 +213,7 @@ impl Default for TrackerTuning {
             shape_frames: c.shape_frames as u32,
             mirror_average: None,
             ultra_light: false,
+            quality: QualityThresholds::default(),
         }
     }
 }
@@ -264,6 +346,7 @@ pub(crate) fn to_core(
         min_ncc_score: t.min_match_score,
         search_margin: t.search_margin,
         gaze: out.gaze,
+        quality: t.quality.into(),
         msbp: MsbpConfig {
             animation_units: out.action_units,
             ..MsbpConfig::default()
@@ -307,6 +390,27 @@ mod tests {
         );
         assert_eq!(t.shape_frames, 10);
         assert!(t.flow_filter && !t.gaze_filter && !t.ultra_light);
+        let q = t.quality;
+        assert_eq!(
+            (
+                q.dark_luma,
+                q.overexposed_fraction,
+                q.min_sharpness,
+                q.blur_drop
+            ),
+            (40.0, 0.25, 0.08, 0.6)
+        );
+        assert_eq!(
+            (
+                q.min_face_px,
+                q.max_outside_fraction,
+                q.max_yaw_deg,
+                q.max_pitch_deg
+            ),
+            (64.0, 0.1, 45.0, 30.0)
+        );
+        assert_eq!((q.min_face_probability, q.max_fit_residual), (0.7, 0.06));
+        assert_eq!(QualityConfig::from(q), c.quality);
     }
 
     /// The stream bar follows the presence bar; the ultra-light options take the core's

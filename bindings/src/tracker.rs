@@ -8,7 +8,10 @@ use crate::error::{guard, guard_infallible};
 use crate::gaze::{GazeTarget, PlanePoint, PointOfGaze};
 use crate::live::{Forward, LiveStreamListener};
 use crate::options::{FaceTrackerOptions, Outputs, RunningMode, build_tracker};
-use crate::types::{ActionUnits, CameraIntrinsics, FrameDesc, HeadPose, Point2, ShapeUnits, Vec3};
+use crate::types::{
+    ActionUnits, CameraIntrinsics, FaceQuality, FrameDesc, HeadPose, Point2, PoseUncertainty,
+    QualityReason, ShapeUnits, Vec3,
+};
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::gaze::Target;
 use monotrack_core::image::{Frame, FrameDesc as CoreFrameDesc, Rect as CoreRect};
@@ -118,6 +121,11 @@ pub struct Face {
     pub gaze: Option<Gaze>,
     /// Head pose: zero yaw, pitch and roll is a face looking straight into the camera, upright.
     pub pose: HeadPose,
+    /// How far to trust `pose`: standard deviations of its angles and translation.
+    pub uncertainty: PoseUncertainty,
+    /// How good the face is for tracking, and the reasons that make it worse (for guiding the
+    /// user: "more light", "come closer", "hold still").
+    pub quality: FaceQuality,
     /// The 4×4 head-to-camera transform, row-major: `[R | t; 0 0 0 1]` with `pose`'s rotation and
     /// translation (mm), OpenCV camera axes (x right, y down, z forward). `opengl_transform` turns
     /// it into OpenGL / ARKit / SceneKit axes. `None` when
@@ -185,6 +193,8 @@ impl Face {
                 combined: v3(&l.gaze_combined),
             }),
             pose: HeadPose::from(&f.fit.pose),
+            uncertainty: PoseUncertainty::from(&f.fit.uncertainty),
+            quality: FaceQuality::from(&f.quality),
             transform: out.transform.then(|| f.fit.pose.transform().to_vec()),
             shape_units: ShapeUnits::from(&f.fit.shape[..]),
             action_units: out
@@ -250,6 +260,9 @@ pub struct TrackingResult {
     pub camera: CameraIntrinsics,
     /// Faces, in a stable order while tracks last.
     pub faces: Vec<Face>,
+    /// The frame's own quality reasons: its light and sharpness, `NoFace`, `Lost` (a dark frame
+    /// with no face found still says `Dark`).
+    pub reasons: Vec<QualityReason>,
     /// Per-stage timings.
     pub timings: StageTimings,
 }
@@ -290,6 +303,7 @@ pub(crate) fn result(
             .iter()
             .map(|f| Face::from_tracked(f, targets, shape.outputs, shape.ultra_light))
             .collect(),
+        reasons: crate::types::reasons(r.reasons),
         timings: StageTimings {
             convert_us: t.image_us,
             detect_us: t.detect_us,

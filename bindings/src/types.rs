@@ -3,8 +3,11 @@
 
 use crate::MonotrackError;
 use monotrack_core::camera::{Intrinsics, Rotation};
-use monotrack_core::fit::{FaceFit, Pose};
+use monotrack_core::fit::{FaceFit, Pose, PoseUncertainty as CorePoseUncertainty};
 use monotrack_core::image::{FrameDesc as CoreFrameDesc, PixelFormat as CorePixelFormat};
+use monotrack_core::track::quality::{
+    FaceQuality as CoreFaceQuality, QualityReason as CoreQualityReason, QualityReasons,
+};
 
 /// Pixel formats a frame may arrive in (see `FrameDesc`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, uniffi::Enum)]
@@ -288,6 +291,98 @@ pub struct FitResult {
     pub iterations: u32,
     /// Whether the solver ended at a minimum.
     pub converged: bool,
+    /// How far to trust `pose`: standard deviations of its angles and translation.
+    pub uncertainty: PoseUncertainty,
+}
+
+/// Standard deviations of a fitted head pose, from the fit's covariance, calibrated so that
+/// about 68 % of the pose errors fall within one (`monotrack_core::fit::uncertainty`).
+#[derive(Debug, Clone, Copy, PartialEq, uniffi::Record)]
+pub struct PoseUncertainty {
+    /// Of `HeadPose.yaw_deg`, degrees.
+    pub yaw_deg: f64,
+    /// Of `HeadPose.pitch_deg`, degrees.
+    pub pitch_deg: f64,
+    /// Of `HeadPose.roll_deg`, degrees.
+    pub roll_deg: f64,
+    /// Of `HeadPose.translation_mm`, per axis, millimetres.
+    pub translation_mm: Vec3,
+}
+
+impl From<&CorePoseUncertainty> for PoseUncertainty {
+    fn from(u: &CorePoseUncertainty) -> Self {
+        let [yaw_deg, pitch_deg, roll_deg] = u.rotation_deg;
+        let [x, y, z] = u.translation_mm;
+        Self {
+            yaw_deg,
+            pitch_deg,
+            roll_deg,
+            translation_mm: Vec3 { x, y, z },
+        }
+    }
+}
+
+/// Why a face or a frame is poor (`monotrack_core::track::quality` documents each measurement;
+/// `TrackerTuning.quality` holds the thresholds).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, uniffi::Enum)]
+pub enum QualityReason {
+    /// Too little light.
+    Dark,
+    /// Too much light: much of the face (or frame) saturated.
+    Overexposed,
+    /// Motion or focus blur, or sharpness well below the recent frames'.
+    Blurred,
+    /// The face is too small in the frame: come closer.
+    Small,
+    /// Part of the face is outside the frame.
+    PartlyOutside,
+    /// The head is turned further than the landmarks hold.
+    Turned,
+    /// The landmarks are unsure (a hand, a mask, hair over the face).
+    Occluded,
+    /// No face in the frame (frame reasons only).
+    NoFace,
+    /// A face tracked on the previous frame is gone (frame reasons only).
+    Lost,
+}
+
+impl From<CoreQualityReason> for QualityReason {
+    fn from(r: CoreQualityReason) -> Self {
+        match r {
+            CoreQualityReason::Dark => Self::Dark,
+            CoreQualityReason::Overexposed => Self::Overexposed,
+            CoreQualityReason::Blurred => Self::Blurred,
+            CoreQualityReason::Small => Self::Small,
+            CoreQualityReason::PartlyOutside => Self::PartlyOutside,
+            CoreQualityReason::Turned => Self::Turned,
+            CoreQualityReason::Occluded => Self::Occluded,
+            CoreQualityReason::NoFace => Self::NoFace,
+            CoreQualityReason::Lost => Self::Lost,
+        }
+    }
+}
+
+/// The reasons of a set, in their fixed order.
+pub(crate) fn reasons(r: QualityReasons) -> Vec<QualityReason> {
+    r.iter().map(QualityReason::from).collect()
+}
+
+/// A face's quality: a score and the reasons that lower it.
+#[derive(Debug, Clone, PartialEq, uniffi::Record)]
+pub struct FaceQuality {
+    /// 0..1, the product of every measurement's factor (each 0.5 at its threshold).
+    pub score: f32,
+    /// The measurements past their thresholds (empty for a good face).
+    pub reasons: Vec<QualityReason>,
+}
+
+impl From<&CoreFaceQuality> for FaceQuality {
+    fn from(q: &CoreFaceQuality) -> Self {
+        Self {
+            score: q.score,
+            reasons: reasons(q.reasons),
+        }
+    }
 }
 
 /// Unit values paired with their names (shared by every record that lists units).
@@ -311,6 +406,7 @@ impl From<&FaceFit> for FitResult {
             fit_rms_px: f.report.rms_px,
             iterations: f.report.iterations,
             converged: f.report.converged,
+            uncertainty: PoseUncertainty::from(&f.uncertainty),
         }
     }
 }

@@ -182,6 +182,12 @@ fn frames_and_trackers_never_panic() {
                 shape_frames: r.small(),
                 mirror_average: [None, Some(false), Some(true)][r.below(3) as usize],
                 ultra_light: r.below(2) == 0,
+                quality: QualityThresholds {
+                    dark_luma: r.float(300.0) as f32 - 20.0,
+                    blur_drop: r.float(1.5) as f32,
+                    max_yaw_deg: r.float(200.0) as f32,
+                    ..QualityThresholds::default()
+                },
             },
         };
         no_panic("FaceTracker::new", case, || {

@@ -23,6 +23,7 @@ fn bench(c: &mut Criterion) {
             termination: Termination::CostConverged,
             converged: true,
         },
+        uncertainty: Default::default(),
     };
     let lm = FaceLandmarks {
         gaze_right: [0.05, 0.1, -0.99],

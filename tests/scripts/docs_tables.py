@@ -565,6 +565,39 @@ def _(data):
     return out
 
 
+@table("card_quality", "core/models/MODEL_CARD.md", "metrics/quality_eval.json")
+def _(data):
+    q = data.json("metrics/quality_eval.json")
+    out = header(f"fault ({q['clips_per_fault']} clips of {q['frames_per_clip']} frames)", "frames", "with a face",
+                 "its reason fires (clean: any reason)", "mean face score")
+    for name, f in q["faults"].items():
+        out.append(row(name.replace("_", " "), f["frames"], f["with_face"], f"{num(100 * f['rate'], 1)} %",
+                       num(f["mean_score"], 3)))
+    t = q["turned"]
+    out.append(row("turned: faces fitted past 45° yaw or 30° pitch, as stills", t["faces_past_thresholds"], t["found"],
+                   f"{t['fired']} of {t['faces_past_thresholds']}", "–"))
+    out.append(row("turned: faces within 15° of frontal, as stills", t["frontal_faces"], "–",
+                   f"{t['frontal_fired']} of {t['frontal_faces']}", "–"))
+    return out
+
+
+@table("card_uncertainty", "core/models/MODEL_CARD.md", "core/models/m3/uncertainty_metrics.json")
+def _(data):
+    u = data.json("core/models/m3/uncertainty_metrics.json")
+    names = ["yaw", "pitch", "roll", "x", "y", "z"]
+    out = header("mode, faces", *[f"{n} 1 sd / 2 sd" for n in names])
+    for key, label in [("m3", "M3"), ("ultra_light", "ultra-light")]:
+        m = u[key]
+        cells = [f"{num(100 * m['check_coverage_1sd'][n], 0)} / {num(100 * m['check_coverage_2sd'][n], 0)} %" for n in names]
+        out.append(row(f"{label}, check half ({m['check_faces']} faces)", *cells))
+        cells = [f"{num(100 * m['training_coverage_1sd_fitted'][n], 0)} / {num(100 * m['training_coverage_2sd_fitted'][n], 0)} %"
+                 for n in names]
+        out.append(row(f"{label}, training split ({m['training_faces']} faces, which the networks saw)", *cells))
+        out.append(row(f"{label}, median sd on the check half", *[
+            f"{num(m['check_median_sd'][n], 2)} {'°' if i < 3 else 'mm'}" for i, n in enumerate(names)]))
+    return out
+
+
 @table("card_face_check", "core/models/MODEL_CARD.md", "metrics/m3_face_check.json")
 def _(data):
     f = data.json("metrics/m3_face_check.json")

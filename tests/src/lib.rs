@@ -32,5 +32,7 @@ pub fn shared_data() -> PathBuf {
     p
 }
 
+pub mod poseeval;
+pub mod qualityeval;
 pub mod synth;
 pub mod trackeval;

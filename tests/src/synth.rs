@@ -42,12 +42,26 @@ pub fn load_validation_faces(
     max: usize,
     min_size: f32,
 ) -> std::result::Result<Vec<FaceSample>, String> {
+    load_split_faces(data, true, max, min_size)
+}
+
+/// [`load_validation_faces`] of the validation split (`validation`) or of the training split
+/// (every other line).
+///
+/// # Errors
+/// A message when the manifest or an image cannot be read.
+pub fn load_split_faces(
+    data: &Path,
+    validation: bool,
+    max: usize,
+    min_size: f32,
+) -> std::result::Result<Vec<FaceSample>, String> {
     let dir = data.join("faces68");
     let text = std::fs::read_to_string(dir.join("train.jsonl"))
         .map_err(|e| format!("faces68/train.jsonl: {e}"))?;
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
-        if i % 10 != 0 || line.trim().is_empty() {
+        if (i % 10 == 0) != validation || line.trim().is_empty() {
             continue;
         }
         if out.len() >= max {

@@ -27,6 +27,8 @@ import io.monotrack.FrameDesc
 import io.monotrack.MonotrackException
 import io.monotrack.PixelFormat
 import io.monotrack.PlanePoint
+import io.monotrack.QualityReason
+import io.monotrack.QualityThresholds
 import io.monotrack.Point2
 import io.monotrack.fitLandmarks
 import io.monotrack.lumaImage
@@ -298,6 +300,38 @@ class BindingsTest {
                 t.detectForVideo(nv, FrameDesc(size.first.toUInt(), size.second.toUInt(), PixelFormat.NV21, s2.toUInt(), s2.toUInt(), 2u, 90u, false), 1L)
             }
         }
+    }
+
+    @Test
+    fun qualityNamesWhatIsWrongAndThePoseSaysHowSureItIs() {
+        val (buf, stride) = rgbaFrame()
+        val d = desc(PixelFormat.RGBA8, stride, 0)
+        FaceTracker(video).use { t ->
+            val r = t.detectForVideo(buf, d, 1L)
+            val f = r.faces[0]
+            assertTrue(f.quality.score in 0.5f..1f, "a well lit, sharp, frontal face: ${f.quality}")
+            assertEquals(emptyList<QualityReason>(), f.quality.reasons)
+            assertEquals(emptyList<QualityReason>(), r.reasons)
+            val u = f.uncertainty
+            for (sd in listOf(u.yawDeg, u.pitchDeg, u.rollDeg)) assertTrue(sd > 0.0 && sd < 20.0, "angle sd $sd")
+            assertTrue(u.translationMm.z > 0.0 && u.translationMm.z < 200.0, "depth sd ${u.translationMm.z}")
+            // The same frame in a dark room: the face goes, and the frame says why.
+            val dark = direct(ByteArray(buf.capacity()) { i -> if (i % 4 == 3) 0xff.toByte() else (buf.get(i).toInt() and 0xff shr 4).toByte() })
+            val r2 = t.detectForVideo(dark, d, 2L)
+            assertTrue(QualityReason.DARK in r2.reasons, "dark frame: ${r2.reasons}")
+            if (r2.faces.isEmpty()) {
+                assertTrue(QualityReason.NO_FACE in r2.reasons && QualityReason.LOST in r2.reasons, "${r2.reasons}")
+            } else {
+                assertTrue(QualityReason.DARK in r2.faces[0].quality.reasons, "${r2.faces[0].quality}")
+            }
+        }
+        // The thresholds are the app's: a stricter size bar calls the same face small.
+        val strict = video.copy(tuning = TrackerTuning(quality = QualityThresholds(minFacePx = 4000f)))
+        FaceTracker(strict).use { t ->
+            assertEquals(listOf(QualityReason.SMALL), t.detectForVideo(buf, d, 1L).faces[0].quality.reasons)
+        }
+        val fit = fitLandmarks(exampleLandmarks(0), 640u, 480u, null, FitMethod.MSBP)
+        assertTrue(fit.uncertainty.yawDeg > 0.0 && fit.uncertainty.yawDeg < 10.0, "${fit.uncertainty}")
     }
 
     @Test

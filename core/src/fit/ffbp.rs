@@ -271,10 +271,17 @@ impl Ffbp {
         } else {
             Termination::NonFinite
         };
+        let uncertainty = super::uncertainty::scaled(
+            super::uncertainty::pose_uncertainty_raw(
+                self.model, &shape, &anim, &pose, camera, landmarks, &w,
+            ),
+            &super::uncertainty::POSE_UNCERTAINTY_SCALE_ULTRA_LIGHT,
+        );
         Ok(FaceFit {
             pose,
             shape,
             animation: anim,
+            uncertainty,
             report: FitReport {
                 iterations: rep.iterations,
                 rms_px,

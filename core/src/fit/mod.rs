@@ -11,11 +11,13 @@ mod ffbp;
 mod msbp;
 pub mod pose;
 pub mod solver;
+pub mod uncertainty;
 
 pub use ffbp::{Ffbp, FfbpConfig};
 pub use msbp::{Msbp, MsbpConfig};
 pub use pose::Pose;
 pub use solver::Termination;
+pub use uncertainty::PoseUncertainty;
 
 use crate::camera::Intrinsics;
 use crate::error::{Error, Result};
@@ -52,6 +54,8 @@ pub struct FaceFit {
     pub animation: [f64; N_ANIM],
     /// Solver report.
     pub report: FitReport,
+    /// Standard deviations of the reported pose ([`uncertainty`]).
+    pub uncertainty: PoseUncertainty,
 }
 
 impl FaceFit {

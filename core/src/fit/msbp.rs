@@ -429,10 +429,17 @@ impl Msbp {
         } else {
             Termination::NonFinite
         };
+        let uncertainty = super::uncertainty::scaled(
+            super::uncertainty::pose_uncertainty_raw(
+                model, &shape, &anim, &pose, camera, landmarks, &w,
+            ),
+            &super::uncertainty::POSE_UNCERTAINTY_SCALE,
+        );
         Ok(FaceFit {
             pose,
             shape,
             animation: anim,
+            uncertainty,
             report: FitReport {
                 iterations,
                 rms_px,

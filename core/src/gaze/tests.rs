@@ -324,6 +324,7 @@ fn facing(yaw_deg: f64) -> FaceFit {
             termination: crate::fit::Termination::CostConverged,
             converged: true,
         },
+        uncertainty: crate::fit::PoseUncertainty::default(),
     }
 }
 

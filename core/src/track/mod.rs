@@ -26,6 +26,7 @@ pub mod flow;
 pub mod live;
 pub mod models;
 pub mod ncc;
+pub mod quality;
 
 pub use models::{GradientLandmarks, Landmarker, ModelDetector, Tracker, detector_config_for};
 
@@ -43,6 +44,10 @@ use crate::model::{FaceModel, N_LANDMARKS};
 use flow::{FlowFilter, LkConfig, Pyramid};
 use nalgebra::Vector3;
 use ncc::NccMatcher;
+use quality::{
+    FaceEvidence, FaceQuality, QualityConfig, QualityReasons, SharpnessHistory, face_quality,
+    frame_reasons,
+};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -364,6 +369,9 @@ pub struct TrackerConfig {
     /// [`TrackedFace::gaze`] is `None` and taps are refused. M3's per-eye directions
     /// ([`FaceLandmarks`]) come from the eye networks, which the eye landmarks need anyway.
     pub gaze: bool,
+    /// The thresholds of the quality reasons ([`TrackedFace::quality`],
+    /// [`TrackingResult::reasons`]).
+    pub quality: QualityConfig,
 }
 
 impl TrackerConfig {
@@ -434,6 +442,7 @@ impl Default for TrackerConfig {
             redetect_immediately: true,
             landmarks: LandmarkMode::M3,
             gaze: true,
+            quality: QualityConfig::default(),
         }
     }
 }
@@ -506,6 +515,7 @@ impl TrackerConfig {
             )));
         }
         self.lk.validate()?;
+        self.quality.validate()?;
         if !(1..=1000).contains(&self.shape_frames) {
             return Err(Error::InvalidConfig(format!(
                 "shape_frames must be 1..=1000, got {}",
@@ -605,6 +615,8 @@ pub struct TrackedFace {
     /// calibration), its source and confidence, and the target it lands on when targets are set
     /// ([`FaceTracker::set_gaze_targets`]). `None` when [`TrackerConfig::gaze`] is off.
     pub gaze: Option<PointOfGaze>,
+    /// How far to trust this face, and why not more ([`quality`]).
+    pub quality: FaceQuality,
 }
 
 /// The result of one [`FaceTracker::process`] call; owned by the tracker and refilled each call.
@@ -618,6 +630,9 @@ pub struct TrackingResult {
     pub faces: Vec<TrackedFace>,
     /// Whether the whole-frame detector ran on this frame.
     pub detector_ran: bool,
+    /// The frame's own quality reasons: its light and sharpness, no face, a face lost
+    /// ([`quality::frame_reasons`]).
+    pub reasons: QualityReasons,
     /// Per-stage timings.
     pub timings: StageTimings,
 }
@@ -703,6 +718,9 @@ struct Slot {
     ffbp: Ffbp,
     /// The last frame's gaze direction, for the optional gaze filter.
     gaze_dir: Option<Vector3<f64>>,
+    /// This frame's quality, and the track's recent sharpness it is judged against.
+    quality: FaceQuality,
+    sharpness: SharpnessHistory,
 }
 
 impl Slot {
@@ -731,6 +749,8 @@ impl Slot {
             }),
             ffbp: Ffbp::new(FfbpConfig::default()),
             gaze_dir: None,
+            quality: FaceQuality::default(),
+            sharpness: SharpnessHistory::default(),
         })
     }
 
@@ -751,6 +771,7 @@ impl Slot {
         self.shape_acc.clear();
         self.msbp_init.set_fixed_shape(None);
         self.msbp_track.set_fixed_shape(None);
+        self.sharpness.reset();
     }
 
     fn end(&mut self) {
@@ -904,6 +925,11 @@ pub struct FaceTracker<D: RegionDetector, L: LandmarkEstimator> {
     result: TrackingResult,
     frame_size: (usize, usize),
     gaze: GazeState,
+    /// The stream's recent whole-frame sharpness (the frame's blur reason).
+    frame_sharpness: SharpnessHistory,
+    /// The ids of the faces the previous frame reported (the frame's lost reason).
+    last_ids: [u64; MAX_FACES_LIMIT],
+    last_faces: usize,
 }
 
 /// Frames of eye rays kept for taps ([`FaceTracker::add_calibration_point`]): a tap is matched
@@ -998,6 +1024,9 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             },
             frame_size: (0, 0),
             gaze: GazeState::new(),
+            frame_sharpness: SharpnessHistory::default(),
+            last_ids: [0; MAX_FACES_LIMIT],
+            last_faces: 0,
         })
     }
 
@@ -1126,6 +1155,8 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         self.lost = None;
         self.pyr_prev = Pyramid::new();
         self.frame_size = (0, 0);
+        self.frame_sharpness.reset();
+        self.last_faces = 0;
     }
 
     /// Converts `frame` to upright luma (in a buffer the tracker keeps) and processes it.
@@ -1310,12 +1341,14 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             let t = Instant::now();
             self.fit(i, image, &camera)?;
             timings.fit_us += us(t);
+            self.judge_quality(i, image);
         }
 
         // 5. Result, with each face's point of gaze.
         let t = Instant::now();
         self.report(timestamp_ns);
         timings.gaze_us = us(t);
+        self.judge_frame(image);
         self.end_frame(use_flow);
         self.result.timestamp_ns = timestamp_ns;
         self.result.frame_index = self.frame_index;
@@ -1726,6 +1759,44 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
         Ok(())
     }
 
+    /// Slot `i`'s quality on this frame, from its landmarks and fit.
+    fn judge_quality(&mut self, i: usize, image: &GrayImage) {
+        let m3 = self.config.landmarks == LandmarkMode::M3;
+        let s = &mut self.slots[i];
+        let Some(fit) = s.fit else {
+            return;
+        };
+        if self.config.mode != Mode::Video {
+            // Independent images have no recent frames to compare sharpness with.
+            s.sharpness.reset();
+        }
+        let evidence = FaceEvidence::of(&s.landmarks, &fit, m3);
+        s.quality = face_quality(image, &evidence, &self.config.quality, &mut s.sharpness);
+    }
+
+    /// The frame's own reasons, once its faces are reported; remembers their ids for the next
+    /// frame's lost reason.
+    fn judge_frame(&mut self, image: &GrayImage) {
+        if self.config.mode != Mode::Video {
+            self.frame_sharpness.reset();
+        }
+        let faces = &self.result.faces;
+        let lost = self.last_ids[..self.last_faces]
+            .iter()
+            .any(|id| !faces.iter().any(|f| f.id == *id));
+        self.result.reasons = frame_reasons(
+            image,
+            &self.config.quality,
+            &mut self.frame_sharpness,
+            faces.len(),
+            lost,
+        );
+        self.last_faces = faces.len().min(MAX_FACES_LIMIT);
+        for (o, f) in self.last_ids.iter_mut().zip(faces) {
+            *o = f.id;
+        }
+    }
+
     /// The frame's result: each fitted face, with its point of gaze where gaze is on; the eye
     /// rays are recorded for taps.
     fn report(&mut self, timestamp_ns: i64) {
@@ -1773,6 +1844,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
                     shape_held: s.msbp_track.fixed_shape().is_some(),
                     flow_points: s.flow_points,
                     gaze,
+                    quality: s.quality,
                 });
             }
         }

@@ -301,6 +301,36 @@ final class BindingsTests: XCTestCase {
         XCTAssertLessThanOrEqual(max(eyes.leftOpen, eyes.rightOpen), 1)
     }
 
+    func testQualityNamesWhatIsWrongAndThePoseSaysHowSureItIs() throws {
+        let (buf, d) = sampleFrame(try sample(), .rgba8)
+        let t = try FaceTracker(options: options(.video))
+        let r = try t.detectForVideo(bytes: buf, desc: d, timestampMs: 1)
+        let f = try XCTUnwrap(r.faces.first)
+        XCTAssertGreaterThanOrEqual(f.quality.score, 0.5, "a well lit, sharp, frontal face: \(f.quality)")
+        XCTAssertEqual(f.quality.reasons, [])
+        XCTAssertEqual(r.reasons, [])
+        let u = f.uncertainty
+        for sd in [u.yawDeg, u.pitchDeg, u.rollDeg] { XCTAssertTrue(sd > 0 && sd < 20, "angle sd \(sd)") }
+        XCTAssertTrue(u.translationMm.z > 0 && u.translationMm.z < 200, "depth sd \(u.translationMm.z)")
+        // The same frame in a dark room: the face goes, and the frame says why.
+        var bytes = [UInt8](buf)
+        for i in bytes.indices where i % 4 != 3 { bytes[i] >>= 4 }
+        let r2 = try t.detectForVideo(bytes: Data(bytes), desc: d, timestampMs: 2)
+        XCTAssertTrue(r2.reasons.contains(.dark), "dark frame: \(r2.reasons)")
+        if let dark = r2.faces.first {
+            XCTAssertTrue(dark.quality.reasons.contains(.dark), "\(dark.quality)")
+        } else {
+            XCTAssertTrue(r2.reasons.contains(.noFace) && r2.reasons.contains(.lost), "\(r2.reasons)")
+        }
+        // The thresholds are the app's: a stricter size bar calls the same face small.
+        var strict = options(.video)
+        strict.tuning = TrackerTuning(quality: QualityThresholds(minFacePx: 4000))
+        let s = try FaceTracker(options: strict).detectForVideo(bytes: buf, desc: d, timestampMs: 1)
+        XCTAssertEqual(try XCTUnwrap(s.faces.first).quality.reasons, [.small])
+        let fit = try fitLandmarks(landmarks: exampleLandmarks(0), width: 640, height: 480, camera: nil, method: .msbp)
+        XCTAssertTrue(fit.uncertainty.yawDeg > 0 && fit.uncertainty.yawDeg < 10, "\(fit.uncertainty)")
+    }
+
     func testAModelBundleRoundTripTracksAsTheBuiltinModelsAndDamageIsTyped() throws {
         let url = FileManager.default.temporaryDirectory.appendingPathComponent("monotrack-\(getpid()).mtb")
         try Data(ModelBundle.builtin().toBytes()).write(to: url)

@@ -6,6 +6,7 @@ use monotrack_core::gaze::{PointOfGaze, Target, targets_from_json};
 use monotrack_core::landmarks::N_POINTS;
 use monotrack_core::landmarks::eyes::eye_openness;
 use monotrack_core::model::{ANIM_UNIT_NAMES, SHAPE_UNIT_NAMES};
+use monotrack_core::track::quality::{FaceQuality, QualityReasons};
 use serde::Deserialize;
 use serde_json::{Map, Value, json};
 
@@ -131,6 +132,14 @@ pub fn put_fit(face: &mut Map<String, Value>, fit: &FaceFit) {
         "action_units".into(),
         units(&ANIM_UNIT_NAMES, &fit.animation),
     );
+    let u = &fit.uncertainty;
+    face.insert(
+        "uncertainty".into(),
+        json!({
+            "rotation_deg": u.rotation_deg.iter().map(|v| round(*v, 3)).collect::<Vec<_>>(),
+            "translation_mm": u.translation_mm.iter().map(|v| round(*v, 2)).collect::<Vec<_>>(),
+        }),
+    );
     face.insert("fit_rms_px".into(), json!(round(fit.report.rms_px, 3)));
     face.insert(
         "fit_report".into(),
@@ -139,5 +148,18 @@ pub fn put_fit(face: &mut Map<String, Value>, fit: &FaceFit) {
             "termination": format!("{:?}", fit.report.termination),
             "converged": fit.report.converged,
         }),
+    );
+}
+
+/// CONTRACT's reason names of `reasons`, in their fixed order.
+pub fn reasons_json(reasons: QualityReasons) -> Value {
+    json!(reasons.iter().map(|r| r.name()).collect::<Vec<_>>())
+}
+
+/// A FACE's `"quality": {"score", "reasons"}`.
+pub fn put_quality(face: &mut Map<String, Value>, q: &FaceQuality) {
+    face.insert(
+        "quality".into(),
+        json!({"score": round(f64::from(q.score), 4), "reasons": reasons_json(q.reasons)}),
     );
 }

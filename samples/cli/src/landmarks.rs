@@ -15,7 +15,7 @@
 //! Detected faces are those the detector scores at or above the tracker's detection score (no
 //! face classifier runs).
 
-use crate::json::{CameraJson, intrinsics, put_eyes, put_fit, put_point_of_gaze};
+use crate::json::{CameraJson, intrinsics, put_eyes, put_fit, put_point_of_gaze, put_quality};
 use crate::{LineSink, read_lines};
 use monotrack_core::detect::DetectorConfig;
 use monotrack_core::fit::{Ffbp, FfbpConfig, Msbp, MsbpConfig};
@@ -24,6 +24,7 @@ use monotrack_core::image::{GrayImage, Rect};
 use monotrack_core::landmarks::{
     BROW_GESTURES, FaceLandmarks, GradientDetector, GradientPoints, M3, MOUTH_GESTURES, N_POINTS,
 };
+use monotrack_core::track::quality::{FaceEvidence, QualityConfig, SharpnessHistory, face_quality};
 use monotrack_core::track::{
     DEFAULT_MIN_DETECTION_CONFIDENCE, ModelDetector, RegionDetector,
     SMALL_FACES_MIN_DETECTION_SCORE, SMALL_FACES_MIN_FACE_PX, TrackerConfig, check_detections,
@@ -251,6 +252,21 @@ fn gradient_face_json(
     face
 }
 
+/// A still's face quality, as the tracker judges a face in image mode (no recent frames).
+fn still_quality(
+    gray: &GrayImage,
+    lm: &FaceLandmarks,
+    fit: &monotrack_core::fit::FaceFit,
+    m3: bool,
+) -> monotrack_core::track::quality::FaceQuality {
+    face_quality(
+        gray,
+        &FaceEvidence::of(lm, fit, m3),
+        &QualityConfig::default(),
+        &mut SharpnessHistory::default(),
+    )
+}
+
 fn landmarks_line(
     text: &str,
     base: &Path,
@@ -314,6 +330,7 @@ fn landmarks_line(
                 &p.points32,
             );
             put_fit(&mut face, &fit);
+            put_quality(&mut face, &still_quality(&p.gray, &p.lm, &fit, false));
             faces.push(Value::Object(face));
             continue;
         };
@@ -340,6 +357,7 @@ fn landmarks_line(
         // Given boxes have no detection score: the level-1 face confidence stands in for it.
         let mut face = face_json(rect, det_score.unwrap_or(p.lm.face_prob), &p.lm);
         put_fit(&mut face, &fit);
+        put_quality(&mut face, &still_quality(&p.gray, &p.lm, &fit, true));
         if let Some(t) = targets {
             // A still: no calibration, no filter.
             let g = point_of_gaze(

@@ -5,7 +5,7 @@
 //! projected model mesh, head axes) and the loop [`run`], through the recorder (`--record`).
 
 use crate::LineSink;
-use crate::json::{put_eyes, put_fit, put_point_of_gaze};
+use crate::json::{put_eyes, put_fit, put_point_of_gaze, put_quality, reasons_json};
 use monotrack_core::camera::Intrinsics;
 use monotrack_core::gaze::Target;
 use monotrack_core::image::GrayImage;
@@ -456,6 +456,7 @@ pub fn face_json(face: &TrackedFace, targets: Option<&[Target]>) -> Value {
             m.insert(k.into(), Value::Null);
         }
         put_fit(&mut m, &face.fit);
+        put_quality(&mut m, &face.quality);
         m.insert("shape_held".into(), json!(face.shape_held));
         m.insert("flow_points".into(), json!(face.flow_points));
         return Value::Object(m);
@@ -485,6 +486,7 @@ pub fn face_json(face: &TrackedFace, targets: Option<&[Target]>) -> Value {
         }),
     );
     put_fit(&mut m, &face.fit);
+    put_quality(&mut m, &face.quality);
     if let (Some(t), Some(g)) = (targets, &face.gaze) {
         put_point_of_gaze(&mut m, g, t);
     }
@@ -506,6 +508,7 @@ pub fn frame_json(result: &TrackingResult, targets: Option<&[Target]>) -> Value 
             FrameState::Lost => "lost",
         },
         "faces": result.faces.iter().map(|f| face_json(f, targets)).collect::<Vec<_>>(),
+        "reasons": reasons_json(result.reasons),
         "timings_us": {
             "image": t.image_us, "region": t.region_us, "detect": t.detect_us,
             "landmarks": t.landmarks_us, "flow": t.flow_us, "fit": t.fit_us, "total": t.total_us,
@@ -857,8 +860,10 @@ mod tests {
                     None,
                     &[],
                 )),
+                quality: Default::default(),
             }],
             detector_ran: false,
+            reasons: Default::default(),
             timings: StageTimings {
                 total_us: 900,
                 fit_us: 30,
