@@ -3,8 +3,10 @@
 # mode, as ios/build-xcframework.sh does), builds them with every wrapper file of
 # ios/Sources/Monotrack (their Apple-only parts sit behind `#if canImport(...)`) and the XCTest
 # target ios/Tests/MonotrackTests in a Linux SwiftPM package (target/swift-tests/pkg), runs
-# `swift test` against the real library, prints "swift: N passed, N failed" and exits non-zero on
-# any failure.
+# `swift test` against the real library, then replays the recordings the tests made
+# (RecordingTests.swift) with `monotrack replay` of the same build on the host, each of which must
+# find every frame identical (counted as one test each), prints "swift: N passed, N failed" and
+# exits non-zero on any failure.
 #
 # Swift for Linux comes from Debian trixie (package swiftlang): the script makes a trixie root with
 # debootstrap in target/swift-root (once: about 3 min and 2.6 GB; reused while its marker file says
@@ -89,8 +91,9 @@ cargo test -q --workspace --no-run --message-format=json-render-diagnostics |
   python3 "$ROOT/tests/scripts/cargo_artifacts.py" > "$WORK/artifacts.txt" || fail "the test build failed"
 LIB=$(awk '$1 == "cdylib" && $2 == "monotrack_ffi" {print $4}' "$WORK/artifacts.txt" | head -1)
 BINDGEN=$(awk '$1 == "bin" && $2 == "uniffi-bindgen" {print $4}' "$WORK/artifacts.txt" | head -1)
-if [ -z "$LIB" ] || [ ! -f "$LIB" ] || [ -z "$BINDGEN" ]; then
-  fail "the test build made no FFI library or uniffi-bindgen"
+MONOTRACK=$(awk '$1 == "bin" && $2 == "monotrack" {print $4}' "$WORK/artifacts.txt" | head -1)
+if [ -z "$LIB" ] || [ ! -f "$LIB" ] || [ -z "$BINDGEN" ] || [ -z "$MONOTRACK" ]; then
+  fail "the test build made no FFI library, uniffi-bindgen or monotrack"
 fi
 LIBDIR=$(dirname "$LIB")
 case "$LIBDIR" in "$ROOT"/*) ;; *) fail "the FFI library is outside the repository ($LIB): the root sees the repository only" ;; esac
@@ -140,10 +143,14 @@ EOF
 put "$GEN/Package.swift" "$PKG/Package.swift"
 
 mount_in proc /proc; mount_in /dev /dev; mount_in /sys /sys; mount_in "$ROOT" "$ROOT"
+# Inside the repository, so the root and the host see the same files.
+RECORDINGS="$WORK/recordings"
+rm -rf "$RECORDINGS" && mkdir -p "$RECORDINGS"
 in_root() {
   chroot "$SYSROOT" /usr/bin/env -i HOME=/root LANG=C.UTF-8 \
     PATH=/usr/libexec/swift/bin:/usr/bin:/bin LD_LIBRARY_PATH="$LIBDIR" \
-    MONOTRACK_ROOT="$ROOT" MONOTRACK_SAMPLE_PPM="$WORK/astronaut.ppm" "$@"
+    MONOTRACK_ROOT="$ROOT" MONOTRACK_SAMPLE_PPM="$WORK/astronaut.ppm" \
+    MONOTRACK_RECORDINGS="$RECORDINGS" "$@"
 }
 # The sample image as binary PPM (RGB), which the tests read where ImageIO is missing.
 in_root djpeg -pnm -outfile "$WORK/astronaut.ppm" "$ROOT/samples/data/astronaut.jpg" ||
@@ -170,6 +177,24 @@ total=${total:-0}
 failed=$(grep -cE "^Test Case '.*' failed" "$LOGS/swift-test.log" || true)
 passed=$(( total - failed ))
 [ "$rc" -ne 0 ] && [ "$failed" -eq 0 ] && failed=1
+
+echo "== monotrack replay of the recordings the XCTests made"
+for name in swift-video swift-live swift-small; do
+  set +e
+  "$MONOTRACK" replay "$RECORDINGS/$name.mtrec" --out "$RECORDINGS/$name.jsonl" \
+    > "$RECORDINGS/$name.log" 2>&1
+  replay_rc=$?
+  set -e
+  identical=$(grep -E '^monotrack: [0-9]+ of [0-9]+ frames identical' "$RECORDINGS/$name.log" | tail -1 || true)
+  echo "$name.mtrec: ${identical#monotrack: }"
+  # Every frame identical, and at least one frame.
+  if [ "$replay_rc" -eq 0 ] && [[ "$identical" =~ ^monotrack:\ ([1-9][0-9]*)\ of\ ([0-9]+)\ frames ]] &&
+     [ "${BASH_REMATCH[1]}" = "${BASH_REMATCH[2]}" ]; then
+    passed=$((passed + 1))
+  else
+    cat "$RECORDINGS/$name.log"; failed=$((failed + 1))
+  fi
+done
 [ "$passed" -eq 0 ] && [ "$failed" -eq 0 ] && failed=1
 echo "swift: $passed passed, $failed failed"
 [ "$failed" -eq 0 ]
