@@ -874,6 +874,7 @@ mod tests {
 
     #[test]
     fn frame_json_follows_the_contract() {
+        use monotrack_core::track::quality::QualityReason;
         let cam = Intrinsics::default_for(640, 480).unwrap();
         let r = result(&cam);
         let v = frame_json(&r, None);
@@ -901,6 +902,22 @@ mod tests {
         assert_eq!(f["shape_units"].as_object().unwrap().len(), N_SHAPE);
         assert_eq!(f["action_units"].as_object().unwrap().len(), N_ANIM);
         assert!(f["fit_rms_px"].as_f64().unwrap() < 0.5);
+        assert_eq!(f["uncertainty"]["rotation_deg"].as_array().unwrap().len(), 3);
+        assert_eq!(f["uncertainty"]["translation_mm"].as_array().unwrap().len(), 3);
+        assert!(f["quality"]["score"].is_number());
+        assert_eq!(f["quality"]["reasons"], json!([]));
+        assert_eq!(v["reasons"], json!([]));
+        let mut poor = r.clone();
+        poor.reasons.insert(QualityReason::Dark);
+        poor.reasons.insert(QualityReason::NoFace);
+        poor.faces[0].quality.reasons.insert(QualityReason::PartlyOutside);
+        poor.faces[0].quality.reasons.insert(QualityReason::Turned);
+        let v = frame_json(&poor, None);
+        assert_eq!(v["reasons"], json!(["dark", "no_face"]));
+        assert_eq!(
+            v["faces"][0]["quality"]["reasons"],
+            json!(["partly_outside", "turned"])
+        );
         let mut lost = r.clone();
         lost.faces.clear();
         assert_eq!(frame_json(&lost, None)["state"], "lost");
