@@ -9,7 +9,9 @@
 # core's unit tests (every kernel against its portable reference, the M3 and detector graphs),
 # the M3 golden cases against the Python reference and against the recorded x86-64 outputs, the
 # tracker on a synthetic clip with the shipped models (quality bounds), the fit tests, the FFI
-# input fuzz test.
+# input fuzz test; then a recording made by the aarch64 CLI (`monotrack track --record`, the NEON
+# path) must replay on this host (`monotrack replay`, which picks the portable path) with every
+# frame identical.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 T=aarch64-unknown-linux-gnu
@@ -31,3 +33,19 @@ echo "== aarch64 under $(qemu-aarch64 --version | head -n 1)"
 MONOTRACK_EMULATED=1 cargo test --profile qemu --no-fail-fast --target "$T" \
   -p monotrack-core -p monotrack-tests -p monotrack-ffi --lib \
   --test m3_golden --test track_models --test fit_synthetic --test fit_real --test fuzz_inputs
+
+echo "== a recording made on aarch64 replays bit for bit on this host's portable path"
+cargo build -q --profile qemu --target "$T" -p monotrack-cli
+cargo build -q -p monotrack-cli
+REC=target/aarch64-recording
+rm -rf "$REC" && mkdir -p "$REC/frames"
+for i in 0 1 2; do cp samples/data/astronaut.jpg "$REC/frames/f$i.jpg"; done
+qemu-aarch64 -L /usr/aarch64-linux-gnu "target/$T/qemu/monotrack" track "$REC/frames" \
+  --record "$REC/phone.mtrec" --out "$REC/phone.jsonl" 2> "$REC/track.log"
+set +e
+target/debug/monotrack replay "$REC/phone.mtrec" --out "$REC/host.jsonl" 2> "$REC/replay.log"
+rc=$?
+set -e
+cat "$REC/replay.log"
+grep -q '^monotrack: 3 of 3 frames identical' "$REC/replay.log" && [ "$rc" -eq 0 ] ||
+  { echo "the aarch64 recording did not replay identically"; exit 1; }
