@@ -17,6 +17,8 @@ import io.monotrack.GazeSource
 import io.monotrack.ShapeUnits
 import io.monotrack.ActionUnits
 import io.monotrack.EyeOpenness
+import io.monotrack.FaceQuality
+import io.monotrack.PoseUncertainty
 import org.junit.jupiter.api.Assertions.assertEquals
 import org.junit.jupiter.api.Assertions.assertNotNull
 import org.junit.jupiter.api.Assertions.assertNull
@@ -41,6 +43,8 @@ private fun face(landmarks: List<Point2>, gaze: Gaze) = Face(
     gestures = Gestures(0.7f, 0.1f, 0.2f, 0.2f, 0.3f, 0.5f),
     gaze = gaze,
     pose = pose(IDENTITY, Vec3(0.0, 0.0, 500.0)),
+    uncertainty = PoseUncertainty(1.0, 1.0, 1.0, Vec3(1.0, 1.0, 5.0)),
+    quality = FaceQuality(0.9f, emptyList()),
     transform = null,
     shapeUnits = ShapeUnits(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
     actionUnits = ActionUnits(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
