@@ -902,15 +902,24 @@ mod tests {
         assert_eq!(f["shape_units"].as_object().unwrap().len(), N_SHAPE);
         assert_eq!(f["action_units"].as_object().unwrap().len(), N_ANIM);
         assert!(f["fit_rms_px"].as_f64().unwrap() < 0.5);
-        assert_eq!(f["uncertainty"]["rotation_deg"].as_array().unwrap().len(), 3);
-        assert_eq!(f["uncertainty"]["translation_mm"].as_array().unwrap().len(), 3);
+        assert_eq!(
+            f["uncertainty"]["rotation_deg"].as_array().unwrap().len(),
+            3
+        );
+        assert_eq!(
+            f["uncertainty"]["translation_mm"].as_array().unwrap().len(),
+            3
+        );
         assert!(f["quality"]["score"].is_number());
         assert_eq!(f["quality"]["reasons"], json!([]));
         assert_eq!(v["reasons"], json!([]));
         let mut poor = r.clone();
         poor.reasons.insert(QualityReason::Dark);
         poor.reasons.insert(QualityReason::NoFace);
-        poor.faces[0].quality.reasons.insert(QualityReason::PartlyOutside);
+        poor.faces[0]
+            .quality
+            .reasons
+            .insert(QualityReason::PartlyOutside);
         poor.faces[0].quality.reasons.insert(QualityReason::Turned);
         let v = frame_json(&poor, None);
         assert_eq!(v["reasons"], json!(["dark", "no_face"]));
