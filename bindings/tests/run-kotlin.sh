@@ -79,22 +79,9 @@ passed=${passed:-0}; failed=${failed:-0}
 [ "$rc" -ne 0 ] && [ "$failed" -eq 0 ] && failed=1
 
 echo "== monotrack replay of the recordings the JVM tests made"
-for name in kotlin-video kotlin-live kotlin-small; do
-  set +e
-  "$MONOTRACK" replay "$RECORDINGS/$name.mtrec" --out "$RECORDINGS/$name.jsonl" \
-    > "$RECORDINGS/$name.log" 2>&1
-  replay_rc=$?
-  set -e
-  identical=$(grep -E '^monotrack: [0-9]+ of [0-9]+ frames identical' "$RECORDINGS/$name.log" | tail -1 || true)
-  echo "$name.mtrec: ${identical#monotrack: }"
-  # Every frame identical, and at least one frame.
-  if [ "$replay_rc" -eq 0 ] && [[ "$identical" =~ ^monotrack:\ ([1-9][0-9]*)\ of\ ([0-9]+)\ frames ]] &&
-     [ "${BASH_REMATCH[1]}" = "${BASH_REMATCH[2]}" ]; then
-    passed=$((passed + 1))
-  else
-    cat "$RECORDINGS/$name.log"; failed=$((failed + 1))
-  fi
-done
+# shellcheck source=replay-recordings.sh
+source "$(dirname "${BASH_SOURCE[0]}")/replay-recordings.sh"
+replay_recordings kotlin-video kotlin-live kotlin-small
 [ "$passed" -eq 0 ] && [ "$failed" -eq 0 ] && failed=1
 echo "kotlin: $passed passed, $failed failed"
 [ "$failed" -eq 0 ]
