@@ -9,9 +9,10 @@
 # core's unit tests (every kernel against its portable reference, the M3 and detector graphs),
 # the M3 golden cases against the Python reference and against the recorded x86-64 outputs, the
 # tracker on a synthetic clip with the shipped models (quality bounds), the fit tests, the FFI
-# input fuzz test; then a recording made by the aarch64 CLI (`monotrack track --record`, the NEON
-# path) must replay on this host (`monotrack replay`, which picks the portable path) with every
-# frame identical.
+# input fuzz test, record and replay; then the recording that record_replay's test made here (the
+# NEON path) must replay on this host with `monotrack replay` (which picks the portable path) with
+# every frame identical. That host CLI is $MONOTRACK_HOST_CLI where set (CI passes the one its
+# test build made), else built here.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 T=aarch64-unknown-linux-gnu
@@ -30,22 +31,24 @@ echo "== aarch64 under $(qemu-aarch64 --version | head -n 1)"
 # 360 frames or more are reported as ignored with that reason; track_synthetic (oracle
 # landmarks: NCC, flow filter and fit, portable code whose kernels the unit tests cover) runs on
 # the host only. One cargo call, so that every crate is built once with one feature set.
-MONOTRACK_EMULATED=1 cargo test --profile qemu --no-fail-fast --target "$T" \
+REC=$PWD/target/aarch64-recording
+rm -rf "$REC" && mkdir -p "$REC"
+MONOTRACK_EMULATED=1 MONOTRACK_RECORDING_OUT="$REC" cargo test --profile qemu --no-fail-fast --target "$T" \
   -p monotrack-core -p monotrack-tests -p monotrack-ffi --lib \
-  --test m3_golden --test track_models --test fit_synthetic --test fit_real --test fuzz_inputs
+  --test m3_golden --test track_models --test fit_synthetic --test fit_real --test fuzz_inputs \
+  --test record_replay
 
 echo "== a recording made on aarch64 replays bit for bit on this host's portable path"
-cargo build -q --profile qemu --target "$T" -p monotrack-cli
-cargo build -q -p monotrack-cli
-REC=target/aarch64-recording
-rm -rf "$REC" && mkdir -p "$REC/frames"
-for i in 0 1 2; do cp samples/data/astronaut.jpg "$REC/frames/f$i.jpg"; done
-qemu-aarch64 -L /usr/aarch64-linux-gnu "target/$T/qemu/monotrack" track "$REC/frames" \
-  --record "$REC/phone.mtrec" --out "$REC/phone.jsonl" 2> "$REC/track.log"
+host=${MONOTRACK_HOST_CLI:-}
+if [ -z "$host" ] || [ ! -x "$host" ]; then
+  cargo build -q -p monotrack-cli
+  host=target/debug/monotrack
+fi
+[ -f "$REC/record_replay.mtrec" ] || { echo "record_replay wrote no recording"; exit 1; }
 set +e
-target/debug/monotrack replay "$REC/phone.mtrec" --out "$REC/host.jsonl" 2> "$REC/replay.log"
+"$host" replay "$REC/record_replay.mtrec" --out "$REC/host.jsonl" 2> "$REC/replay.log"
 rc=$?
 set -e
 cat "$REC/replay.log"
-grep -q '^monotrack: 3 of 3 frames identical' "$REC/replay.log" && [ "$rc" -eq 0 ] ||
+grep -q '^monotrack: 8 of 8 frames identical' "$REC/replay.log" && [ "$rc" -eq 0 ] ||
   { echo "the aarch64 recording did not replay identically"; exit 1; }

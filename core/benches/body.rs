@@ -3,6 +3,8 @@
 //! (DIRECT-L, then COBYLA over the twelve lengths, then the pose), all on one frame: a walking-like
 //! model pose of a body 8 % larger than the mean, seen by a HumanEva-like camera 4 m away, with
 //! fixed ±1 px noise on the 2D joints.
+// Inputs made with the platform's maths library are fine here (core/clippy.toml).
+#![allow(clippy::disallowed_methods)]
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use monotrack_core::body::skeleton::{N_POSE, P_LARM, P_LLEG, P_RARM, P_RLEG, log_so3};

@@ -2,6 +2,8 @@
 //! networks and merge), one thread, in both modes (default and mirror average), and level 1 alone
 //! (the tracker's face check); and the ultra-light mode's gradient detector. The image is a synthetic 640×480 pattern with a 200 px face box:
 //! every stage's cost is independent of the pixel values (fixed-size warps, filters and networks).
+// Inputs made with the platform's maths library are fine here (core/clippy.toml).
+#![allow(clippy::disallowed_methods)]
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use monotrack_core::image::{GrayImage, Rect};

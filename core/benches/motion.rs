@@ -1,6 +1,8 @@
 //! Measures a motion comparison of 10 s at 30 fps: a 300-frame reference against a 320-frame
 //! trial (an arm swing, the trial slower and with the elbow bent more), twelve weighted features
 //! over three phases.
+// Inputs made with the platform's maths library are fine here (core/clippy.toml).
+#![allow(clippy::disallowed_methods)]
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use monotrack_core::body::{Joint, N_JOINTS};

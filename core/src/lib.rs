@@ -11,6 +11,9 @@
 //! [`image`] → `detect` → `landmarks` → `track` → [`model`] / [`fit`] → results; and apart from
 //! faces, `body` and `motion`. [`record`] writes what a tracker was given to a file and replays it.
 
+// Tests compare with the platform's maths library (core::math, core/clippy.toml).
+#![cfg_attr(test, allow(clippy::disallowed_methods))]
+
 pub mod bench;
 pub mod body;
 pub mod camera;
@@ -21,6 +24,7 @@ pub mod gaze;
 pub mod image;
 pub mod kernels;
 pub mod landmarks;
+pub mod math;
 pub mod metrics;
 pub mod model;
 pub mod motion;

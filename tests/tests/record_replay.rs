@@ -130,6 +130,11 @@ fn a_recording_replays_bit_for_bit() {
     let summary = switch.stop().unwrap();
     assert!(matches!(switch.stop(), Err(Error::InvalidState(_))));
     let bytes = memory.bytes();
+    // tests/aarch64.sh replays this recording, made on the phone's kernels under qemu, with the
+    // host's `monotrack replay` on the portable path: every frame must be identical there too.
+    if let Some(dir) = std::env::var_os("MONOTRACK_RECORDING_OUT") {
+        std::fs::write(PathBuf::from(dir).join("record_replay.mtrec"), &bytes).unwrap();
+    }
     assert_eq!(summary.frames, 8);
     assert_eq!(summary.bytes, bytes.len() as u64);
     assert!(!summary.truncated);

@@ -6,6 +6,7 @@
 use crate::error::{Error, Result};
 use crate::image::{FrameDesc, GrayImage, PixelFormat};
 use crate::kernels::plane::Orientation;
+use crate::math::Libm;
 
 /// Grey level of the background and of the blank frames.
 pub const BACKGROUND: u8 = 96;
@@ -28,12 +29,12 @@ pub fn render(
         return;
     }
     let tf = t as f64;
-    let scale = 1.0 + 0.12 * (tf * std::f64::consts::TAU / 90.0).sin();
-    let angle = (12.0f64).to_radians() * (tf * std::f64::consts::TAU / 120.0).sin();
-    let cx = width as f64 / 2.0 + 90.0 * (tf * std::f64::consts::TAU / 100.0).sin();
-    let cy = height as f64 / 2.0 + 40.0 * (tf * std::f64::consts::TAU / 70.0).sin();
+    let scale = 1.0 + 0.12 * (tf * std::f64::consts::TAU / 90.0).msin();
+    let angle = (12.0f64).to_radians() * (tf * std::f64::consts::TAU / 120.0).msin();
+    let cx = width as f64 / 2.0 + 90.0 * (tf * std::f64::consts::TAU / 100.0).msin();
+    let cy = height as f64 / 2.0 + 40.0 * (tf * std::f64::consts::TAU / 70.0).msin();
     let (sw, sh) = (src.width() as f64, src.height() as f64);
-    let (ca, sa) = (angle.cos() / scale, angle.sin() / scale);
+    let (ca, sa) = (angle.mcos() / scale, angle.msin() / scale);
     let data = out.data_mut();
     for y in 0..height {
         for x in 0..width {

@@ -13,6 +13,7 @@
 //! side), z up (towards the camera's side of the floor), y completing a right-handed frame (towards
 //! corners 2 and 3, or away from them when the corners run clockwise seen from above).
 
+use crate::math::Libm;
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 use super::optim::{MAX_RESIDUALS, NumericLeastSquares, Residuals};
@@ -330,8 +331,8 @@ impl CornerProblem<'_> {
         c.rotation = exp_so3(Vector3::new(x[1], x[2], x[3])) * self.cam.rotation;
         c.translation = self.cam.translation + Vector3::new(x[4], x[5], x[6]);
         if self.with_focal {
-            c.intrinsics.fx = self.cam.intrinsics.fx * x[0].exp();
-            c.intrinsics.fy = self.cam.intrinsics.fy * x[0].exp();
+            c.intrinsics.fx = self.cam.intrinsics.fx * x[0].mexp();
+            c.intrinsics.fy = self.cam.intrinsics.fy * x[0].mexp();
         }
         c
     }
@@ -408,7 +409,7 @@ mod tests {
     fn truth() -> BodyCamera {
         // Camera axes in world coordinates: x right = world x, z forward = towards +y and down.
         let tilt = 20f64.to_radians();
-        let z = Vector3::new(0.0, tilt.cos(), -tilt.sin());
+        let z = Vector3::new(0.0, tilt.mcos(), -tilt.msin());
         let x = Vector3::new(1.0, 0.0, 0.0);
         let y = z.cross(&x);
         let r = Matrix3::from_rows(&[x.transpose(), y.transpose(), z.transpose()]);

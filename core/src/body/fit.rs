@@ -7,6 +7,7 @@
 //! two converted to pixels at the joint's depth — and the pose prior's whitened residuals times
 //! [`BodyFitConfig::prior_weight_px`]. It is reported per observed joint (px²).
 
+use crate::math::Libm;
 use nalgebra::{Matrix3, SVector, Vector3};
 use std::cell::RefCell;
 
@@ -898,13 +899,13 @@ impl DimensionEstimator {
         if self.separate_dimensions && scale_rep.value > self.cobyla.stop_value {
             // Re-seed the warm starts at the chosen scale.
             objective(&scaled);
-            let lo = vec![(1.0 - self.part_range).ln(); N_DIMS];
-            let hi = vec![(1.0 + self.part_range).ln(); N_DIMS];
+            let lo = vec![(1.0 - self.part_range).mln(); N_DIMS];
+            let hi = vec![(1.0 + self.part_range).mln(); N_DIMS];
             let x0 = vec![0.0; N_DIMS];
             let to_dims = |x: &[f64]| {
                 let mut d = scaled;
                 for (l, v) in d.lengths.iter_mut().zip(x) {
-                    *l *= v.exp();
+                    *l *= v.mexp();
                 }
                 d
             };
@@ -954,7 +955,7 @@ mod tests {
     /// A HumanEva-like camera: 4 m from the subject, 1.5 m high, looking slightly down.
     fn camera() -> BodyCamera {
         let tilt = 10f64.to_radians();
-        let z = Vector3::new(0.0, tilt.cos(), -tilt.sin());
+        let z = Vector3::new(0.0, tilt.mcos(), -tilt.msin());
         let x = Vector3::new(1.0, 0.0, 0.0);
         let y = z.cross(&x);
         let r = Matrix3::from_rows(&[x.transpose(), y.transpose(), z.transpose()]);

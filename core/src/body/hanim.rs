@@ -31,6 +31,7 @@
 //! side parameters are the left side's mirrored (a mirror in the sagittal plane negates the limb
 //! swing components about y and z and the limb twists), and limits are given for the left side.
 
+use crate::math::Libm;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 use nalgebra::SVector;
@@ -796,7 +797,7 @@ fn set_swing_twist_y(
     let sw = ik::swing_between(&y, &(local * y).normalize());
     let t_m = exp_so3(sw).transpose() * local;
     (p[params[0]], p[params[1]]) = swing_limit.clamp_swing(sw.x, sw.z);
-    p[params[2]] = t_m[(0, 2)].atan2(t_m[(0, 0)]).clamp(twist.0, twist.1);
+    p[params[2]] = t_m[(0, 2)].matan2(t_m[(0, 0)]).clamp(twist.0, twist.1);
 }
 
 #[cfg(test)]

@@ -9,6 +9,7 @@
 //! Also here: joint angles from joint positions, the inverse of [`super::skeleton::Skeleton::forward`]
 //! for one limb, which turns the chosen candidate into the pose vector.
 
+use crate::math::Libm;
 use nalgebra::{Matrix3, Vector3};
 
 use super::skeleton::{exp_so3, hinge_excess, limits};
@@ -123,7 +124,7 @@ pub(crate) fn swing_between(rest: &Vector3<f64>, u: &Vector3<f64>) -> Vector3<f6
     let axis = rest.cross(u);
     let s = axis.norm();
     let c = rest.dot(u).clamp(-1.0, 1.0);
-    let angle = s.atan2(c);
+    let angle = s.matan2(c);
     if s < 1e-12 {
         if c > 0.0 {
             return Vector3::zeros();
@@ -168,11 +169,11 @@ pub fn arm_angles(
     let w = swing_between(&rest, &u);
     let s = exp_so3(w);
     let ws = s.transpose() * (chest.transpose() * lower).normalize();
-    let theta = (sgn * ws.x).clamp(-1.0, 1.0).acos();
+    let theta = (sgn * ws.x).clamp(-1.0, 1.0).macos();
     let phi = if theta < STRAIGHT_LIMB {
         0.0
     } else {
-        (-ws.y).atan2(ws.z)
+        (-ws.y).matan2(ws.z)
     };
     // twist τ = sgn·φ; the alternative flips the hinge.
     let cand = [
@@ -205,11 +206,11 @@ pub fn leg_angles(
     let w = swing_between(&rest, &u);
     let s = exp_so3(w);
     let ws = s.transpose() * (pelvis.transpose() * lower).normalize();
-    let theta = (-ws.y).clamp(-1.0, 1.0).acos();
+    let theta = (-ws.y).clamp(-1.0, 1.0).macos();
     let tau = if theta < STRAIGHT_LIMB {
         0.0
     } else {
-        (-ws.x).atan2(-ws.z)
+        (-ws.x).matan2(-ws.z)
     };
     let cand = [(tau, theta), (wrap(tau + std::f64::consts::PI), -theta)];
     let m = if left { 1.0 } else { -1.0 };

@@ -15,6 +15,7 @@
 //! sagittal plane: a mirror negates the right arm's swing components and twist and the right
 //! leg's abduction swing and twist (rotation vectors are pseudo-vectors).
 
+use crate::math::Libm;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 use super::N_JOINTS;
@@ -307,14 +308,14 @@ pub struct Skeleton {
 /// Rotation by angle `t` about x.
 #[inline]
 pub(crate) fn rot_x(t: f64) -> Matrix3<f64> {
-    let (s, c) = t.sin_cos();
+    let (s, c) = t.msin_cos();
     Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c)
 }
 
 /// Rotation by angle `t` about y.
 #[inline]
 pub(crate) fn rot_y(t: f64) -> Matrix3<f64> {
-    let (s, c) = t.sin_cos();
+    let (s, c) = t.msin_cos();
     Matrix3::new(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c)
 }
 

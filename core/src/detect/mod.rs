@@ -19,6 +19,7 @@
 mod resample;
 
 use crate::image::{GrayImage, Rect};
+use crate::math::Libm;
 use crate::nn::FullyConvNet;
 use crate::{Error, Result};
 use resample::AreaResampler;
@@ -359,12 +360,12 @@ fn check_desc(desc: &ModelDesc) -> Result<usize> {
 
 #[inline]
 fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
+    1.0 / (1.0 + (-x).mexp())
 }
 
 #[inline]
 fn logit(p: f32) -> f32 {
-    (p / (1.0 - p)).ln()
+    (p / (1.0 - p)).mln()
 }
 
 /// Appends the detections of one head (`[5, gh, gw]` row-major) whose logit is at least `logit_thr`
@@ -407,8 +408,8 @@ fn decode_head(
             let i = y * gw + x;
             let cx = (x as f32 + data[plane + i] + 0.5) * stride;
             let cy = (y as f32 + data[2 * plane + i] + 0.5) * stride;
-            let bw = data[3 * plane + i].clamp(-10.0, 10.0).exp() * stride;
-            let bh = data[4 * plane + i].clamp(-10.0, 10.0).exp() * stride;
+            let bw = data[3 * plane + i].clamp(-10.0, 10.0).mexp() * stride;
+            let bh = data[4 * plane + i].clamp(-10.0, 10.0).mexp() * stride;
             if !(cx >= 0.0 && cx < content[0] && cy >= 0.0 && cy < content[1]) {
                 continue;
             }
@@ -535,8 +536,8 @@ mod tests {
         d[i - 1] = 1.0;
         d[plane + i] = 0.25;
         d[2 * plane + i] = -0.5;
-        d[3 * plane + i] = 2.0f32.ln();
-        d[4 * plane + i] = 3.0f32.ln();
+        d[3 * plane + i] = 2.0f32.mln();
+        d[4 * plane + i] = 3.0f32.mln();
         let mut out = Vec::new();
         decode_head(&d, gh, gw, 8.0, 0.0, [2.0, 2.0], [24.0, 16.0], &mut out);
         assert_eq!(out.len(), 1);

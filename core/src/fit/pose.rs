@@ -9,6 +9,7 @@
 //! is the head frame; everything that places model points (projection, vertices, eye centres)
 //! uses the model frame.
 
+use crate::math::Libm;
 use nalgebra::{Matrix3, Vector3};
 
 /// The head frame's pitch relative to the face model's frame, degrees: the head frame is the
@@ -49,27 +50,27 @@ impl Default for Pose {
 
 /// Rx(a), Ry(b), Rz(c) for the CONTRACT's Euler convention.
 fn rx(a: f64) -> Matrix3<f64> {
-    let (s, c) = a.sin_cos();
+    let (s, c) = a.msin_cos();
     Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c)
 }
 fn ry(a: f64) -> Matrix3<f64> {
-    let (s, c) = a.sin_cos();
+    let (s, c) = a.msin_cos();
     Matrix3::new(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c)
 }
 fn rz(a: f64) -> Matrix3<f64> {
-    let (s, c) = a.sin_cos();
+    let (s, c) = a.msin_cos();
     Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
 }
 fn drx(a: f64) -> Matrix3<f64> {
-    let (s, c) = a.sin_cos();
+    let (s, c) = a.msin_cos();
     Matrix3::new(0.0, 0.0, 0.0, 0.0, -s, -c, 0.0, c, -s)
 }
 fn dry(a: f64) -> Matrix3<f64> {
-    let (s, c) = a.sin_cos();
+    let (s, c) = a.msin_cos();
     Matrix3::new(-s, 0.0, c, 0.0, 0.0, 0.0, -c, 0.0, -s)
 }
 fn drz(a: f64) -> Matrix3<f64> {
-    let (s, c) = a.sin_cos();
+    let (s, c) = a.msin_cos();
     Matrix3::new(-s, -c, 0.0, c, -s, 0.0, 0.0, 0.0, 0.0)
 }
 
@@ -89,14 +90,14 @@ pub fn rotation_and_derivatives(th: &Vector3<f64>) -> (Matrix3<f64>, [Matrix3<f6
 /// Angles θ = (pitch, yaw, roll) in radians with R = Rz·Ry·Rx; yaw in [-90°, 90°].
 pub fn angles_from_rotation(r: &Matrix3<f64>) -> Vector3<f64> {
     // R[2][0] = -sin(yaw); R[2][1] = cos(yaw) sin(pitch); R[1][0] = sin(roll) cos(yaw).
-    let yaw = (-r[(2, 0)]).clamp(-1.0, 1.0).asin();
-    if yaw.cos().abs() > 1e-9 {
-        let pitch = r[(2, 1)].atan2(r[(2, 2)]);
-        let roll = r[(1, 0)].atan2(r[(0, 0)]);
+    let yaw = (-r[(2, 0)]).clamp(-1.0, 1.0).masin();
+    if yaw.mcos().abs() > 1e-9 {
+        let pitch = r[(2, 1)].matan2(r[(2, 2)]);
+        let roll = r[(1, 0)].matan2(r[(0, 0)]);
         Vector3::new(pitch, yaw, roll)
     } else {
         // Gimbal lock: only pitch - roll (or pitch + roll) is defined; put it all in pitch.
-        let pitch = (-r[(1, 2)]).atan2(r[(1, 1)]);
+        let pitch = (-r[(1, 2)]).matan2(r[(1, 1)]);
         Vector3::new(pitch, yaw, 0.0)
     }
 }
@@ -191,7 +192,7 @@ pub fn opengl_transform(m: &[f64; 16]) -> [f64; 16] {
 pub fn rotation_angle_deg(r: &Matrix3<f64>) -> f64 {
     ((r.trace() - 1.0) / 2.0)
         .clamp(-1.0, 1.0)
-        .acos()
+        .macos()
         .to_degrees()
 }
 

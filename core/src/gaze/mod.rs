@@ -17,6 +17,7 @@
 use crate::error::{Error, Result};
 use crate::fit::FaceFit;
 use crate::landmarks::FaceLandmarks;
+use crate::math::Libm;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -315,12 +316,12 @@ pub fn locate(targets: &[Target], ray: &GazeRay) -> Option<TargetHit> {
 /// (yaw, pitch) of a direction, radians: yaw about y (positive towards +x), pitch about x
 /// (positive towards +y), both 0 for a ray towards the camera (−z).
 fn angles(d: &Vector3<f64>) -> [f64; 2] {
-    [d.x.atan2(-d.z), d.y.atan2(d.x.hypot(d.z))]
+    [d.x.matan2(-d.z), d.y.matan2(d.x.mhypot(d.z))]
 }
 
 fn from_angles(a: [f64; 2]) -> Vector3<f64> {
-    let (sy, cy) = a[0].sin_cos();
-    let (sp, cp) = a[1].sin_cos();
+    let (sy, cy) = a[0].msin_cos();
+    let (sp, cp) = a[1].msin_cos();
     Vector3::new(cp * sy, sp, -cp * cy)
 }
 
@@ -479,7 +480,7 @@ impl GazeFilter {
     /// The filtered direction given the previous filtered one.
     pub fn apply(&self, previous: Option<&Vector3<f64>>, current: &Vector3<f64>) -> Vector3<f64> {
         match previous {
-            Some(p) if p.angle(current).to_degrees() <= self.saccade_deg => {
+            Some(p) if crate::math::angle(p, current).to_degrees() <= self.saccade_deg => {
                 (p * (1.0 - self.alpha) + current * self.alpha).normalize()
             }
             _ => *current,
@@ -571,13 +572,13 @@ impl HeadCorrection {
             // Eye-in-head angles: 0 straight ahead (the head frame's −z), yaw towards +x.
             let h = r.transpose() * ray.direction;
             let a = [
-                h.x.atan2(-h.z) + shift[0],
-                h.y.atan2(h.x.hypot(h.z)) + shift[1],
+                h.x.matan2(-h.z) + shift[0],
+                h.y.matan2(h.x.mhypot(h.z)) + shift[1],
             ];
             let back = Vector3::new(
-                a[1].cos() * a[0].sin(),
-                a[1].sin(),
-                -a[1].cos() * a[0].cos(),
+                a[1].mcos() * a[0].msin(),
+                a[1].msin(),
+                -a[1].mcos() * a[0].mcos(),
             );
             GazeRay {
                 origin: ray.origin,
@@ -692,7 +693,7 @@ pub fn point_of_gaze(
 pub fn eye_openness(points: &[[f32; 2]; 68]) -> f64 {
     let d = |a: usize, b: usize| {
         let (p, q) = (points[a], points[b]);
-        f64::from(p[0] - q[0]).hypot(f64::from(p[1] - q[1]))
+        f64::from(p[0] - q[0]).mhypot(f64::from(p[1] - q[1]))
     };
     let ratio = |e: usize| {
         let width = d(e, e + 3);
@@ -751,7 +752,7 @@ pub fn point_of_gaze_from_rays(
         eyes,
         source,
         confidence,
-        head_to_gaze_deg: head.angle(&direction).to_degrees(),
+        head_to_gaze_deg: crate::math::angle(&head, &direction).to_degrees(),
         hit: locate(targets, &ray),
     }
 }

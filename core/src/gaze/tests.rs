@@ -1,4 +1,5 @@
 use super::*;
+use crate::math::Libm;
 
 fn ray(o: [f64; 3], d: [f64; 3]) -> GazeRay {
     GazeRay {
@@ -151,7 +152,7 @@ impl Noise {
     }
     fn normal(&mut self) -> f64 {
         let (a, b) = (self.uniform().max(1e-12), self.uniform());
-        (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+        (-2.0 * a.mln()).sqrt() * (std::f64::consts::TAU * b).mcos()
     }
 }
 
@@ -400,7 +401,7 @@ fn the_head_correction_shifts_eye_angles_and_weights_the_near_eye() {
     assert_eq!(off.apply(&raw, &fit), raw);
     let eye_yaw = |d: &Vector3<f64>| {
         let h = fit.pose.rotation.transpose() * d;
-        h.x.atan2(-h.z).to_degrees()
+        h.x.matan2(-h.z).to_degrees()
     };
     let k = HeadCorrection {
         gain_yaw: -0.5,
@@ -492,7 +493,7 @@ fn the_reported_target_is_where_the_reported_ray_lands() {
             let mut corners: Vec<[f64; 3]> = (0..sides)
                 .map(|j| {
                     let t = spin + std::f64::consts::TAU * j as f64 / sides as f64;
-                    (centre + a * (ra * t.cos()) + b * (rb * t.sin())).into()
+                    (centre + a * (ra * t.mcos()) + b * (rb * t.msin())).into()
                 })
                 .collect();
             if k % 3 == 0 {

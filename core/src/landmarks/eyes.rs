@@ -7,6 +7,7 @@
 //! corner; p2, p3 the upper lid; p5, p6 the lower), EAR = (|p2 − p6| + |p3 − p5|) / (2 |p1 − p4|).
 
 use super::N_POINTS;
+use crate::math::Libm;
 
 /// The eye aspect ratio at which [`eye_openness`] reads 0.5.
 ///
@@ -39,7 +40,7 @@ pub struct EyeOpenness {
 /// Each eye's aspect ratio (EAR, module docs): the subject's right eye, then the left. An eye
 /// whose corners coincide has ratio 0.
 pub fn eye_aspect_ratios(points: &[[f32; 2]; N_POINTS]) -> [f32; 2] {
-    let d = |a: usize, b: usize| (points[a][0] - points[b][0]).hypot(points[a][1] - points[b][1]);
+    let d = |a: usize, b: usize| (points[a][0] - points[b][0]).mhypot(points[a][1] - points[b][1]);
     EYE_START.map(|e| {
         let width = d(e, e + 3);
         if width > 0.0 {
@@ -52,7 +53,7 @@ pub fn eye_aspect_ratios(points: &[[f32; 2]; N_POINTS]) -> [f32; 2] {
 
 /// An eye aspect ratio as openness: the logistic of [`EYE_OPEN_CENTRE`] and [`EYE_OPEN_SLOPE`].
 pub fn openness_from_ear(ear: f32) -> f32 {
-    1.0 / (1.0 + (-EYE_OPEN_SLOPE * (ear - EYE_OPEN_CENTRE)).exp())
+    1.0 / (1.0 + (-EYE_OPEN_SLOPE * (ear - EYE_OPEN_CENTRE)).mexp())
 }
 
 /// Openness of both of the subject's eyes from the 68 landmarks (image pixels, any similarity

@@ -12,6 +12,7 @@
 //! [`Bilateral`] keeps the tables, the padding and the buffers.
 
 use crate::kernels::bilateral::{Filter, RowSums};
+use crate::math::Libm;
 
 /// `cv::bilateralFilter(src, dst, d, sigma_color, sigma_space, BORDER_REFLECT_101)` for 8-bit
 /// gray images, with its tables precomputed and its padded buffer reused.
@@ -50,7 +51,7 @@ impl Bilateral {
         let mut color_weight = [0f32; 256];
         for (i, w) in color_weight.iter_mut().enumerate() {
             // int·float in float, then float exp, as OpenCV's scalar table loop.
-            *w = ((i * i) as f32 * gc).exp();
+            *w = ((i * i) as f32 * gc).mexp();
         }
         let r = radius as isize;
         let mut taps = Vec::new();
@@ -61,7 +62,7 @@ impl Bilateral {
                 if dist > radius as f64 {
                     continue;
                 }
-                space_weight.push((dist * dist * f64::from(gs)).exp() as f32);
+                space_weight.push((dist * dist * f64::from(gs)).mexp() as f32);
                 taps.push((i, j));
             }
         }

@@ -40,6 +40,7 @@ use super::warp::{Affine, sample};
 use super::{FaceLandmarks, N_POINTS};
 use crate::error::{Error, Result};
 use crate::image::{GrayImage, Rect};
+use crate::math::Libm;
 
 /// Points the gradient detector gives.
 pub const N_GRADIENT: usize = 32;
@@ -445,7 +446,7 @@ impl Frame {
     /// face's points fill the corners less than a rectangle does, so half that shrink is taken.
     /// (The settling of the roll starts from this frame; [`Frame::fitted`] sizes the final one.)
     fn of_box(face: &Rect, roll: f32) -> Self {
-        let (c, s) = (roll.cos().abs(), roll.sin().abs());
+        let (c, s) = (roll.mcos().abs(), roll.msin().abs());
         let det = c * c - s * s;
         let (w, h) = if det > 0.3 {
             let w = ((face.w * c - face.h * s) / det).max(0.5 * face.w);
@@ -472,7 +473,7 @@ impl Frame {
         if !self.from_box {
             return self;
         }
-        let (c, s) = (self.roll.cos(), self.roll.sin());
+        let (c, s) = (self.roll.mcos(), self.roll.msin());
         let (mut w, mut h) = (face.w, face.h);
         for _ in 0..2 {
             let (mut x0, mut x1, mut y0, mut y1) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
@@ -496,7 +497,7 @@ impl Frame {
     fn of_eyes(r: [f32; 2], l: [f32; 2]) -> Self {
         let (mr, ml) = (mean_eye(0), mean_eye(1));
         let (dx, dy) = (l[0] - r[0], l[1] - r[1]);
-        let roll = dy.atan2(dx);
+        let roll = dy.matan2(dx);
         let w = (dx * dx + dy * dy).sqrt() / (ml[0] - mr[0]);
         let h = w;
         // From the eyes' midpoint to the box centre, in the face's turned frame.
@@ -504,7 +505,7 @@ impl Frame {
             (0.5 - 0.5 * (mr[0] + ml[0])) * w,
             (0.5 - 0.5 * (mr[1] + ml[1])) * h,
         );
-        let (c, s) = (roll.cos(), roll.sin());
+        let (c, s) = (roll.mcos(), roll.msin());
         Self {
             centre: [
                 0.5 * (r[0] + l[0]) + c * ou - s * ov,
@@ -797,10 +798,10 @@ impl GradientDetector {
             let map = self.sample_rows(image, &frame, EYE_ROWS)?;
             self.eyes(pts, conf, false);
             let (r, l) = (eye_centre(pts, 0), eye_centre(pts, 1));
-            let delta = (l[1] - r[1]).atan2(l[0] - r[0]);
+            let delta = (l[1] - r[1]).matan2(l[0] - r[0]);
             // Eyes much nearer or further apart than the frame's scale expects are not a pair.
             let expected = (mean_eye(1)[0] - mean_eye(0)[0]) * SCALE as f32;
-            let ratio = (l[0] - r[0]).hypot(l[1] - r[1]) / expected;
+            let ratio = (l[0] - r[0]).mhypot(l[1] - r[1]) / expected;
             let paired = (0.8..1.25).contains(&ratio);
             score = conf[14].min(conf[20])
                 - delta.abs() / 45f32.to_radians()
@@ -846,7 +847,7 @@ impl GradientDetector {
         frame: &Frame,
         rows: (usize, usize),
     ) -> Result<Affine> {
-        let (c, s) = (frame.roll.cos() as f64, frame.roll.sin() as f64);
+        let (c, s) = (frame.roll.mcos() as f64, frame.roll.msin() as f64);
         let k = 1.0 / SCALE as f64;
         let (bw, bh) = (frame.w as f64, frame.h as f64);
         let [cx, cy] = frame.centre;
@@ -945,7 +946,7 @@ impl GradientDetector {
         let mut weights = [0f32; PATCH_W];
         for (x, w) in weights.iter_mut().enumerate().take(r.x1).skip(r.x0) {
             let d = (x as f32 + 0.5 - cx) / sx;
-            *w = (-0.5 * d * d).exp();
+            *w = (-0.5 * d * d).mexp();
         }
         for y in r.y0..r.y1 {
             let row = y * PATCH_W;
@@ -965,7 +966,7 @@ impl GradientDetector {
         }
         for y in r.y0..r.y1 {
             let d = (y as f32 + 0.5 - cy) / sy;
-            let w = (-0.5 * d * d).exp();
+            let w = (-0.5 * d * d).mexp();
             for x in r.x0..r.x1 {
                 self.proj[x] += w * self.value(what, y * PATCH_W + x);
             }
@@ -1220,7 +1221,7 @@ impl GradientDetector {
                 let at = |xx: usize, yy: usize| f32::from(self.patch[yy * PATCH_W + xx]);
                 let gx = 0.5 * (at(x + 1, y) - at(x - 1, y));
                 let gy = 0.5 * (at(x, y + 1) - at(x, y - 1));
-                let m = gx.hypot(gy);
+                let m = gx.mhypot(gy);
                 sum += m;
                 sum2 += m * m;
                 self.grads.push([x as f32 + 0.5, y as f32 + 0.5, gx, gy, m]);
@@ -1249,7 +1250,7 @@ impl GradientDetector {
             }
             let dark = 1.0 - f32::from(self.patch[y * PATCH_W + x]) / 255.0;
             let (ex, ey) = ((cx - expect[0]) / sx, (cy - expect[1]) / sy);
-            acc * dark * (-0.5 * (ex * ex + ey * ey)).exp()
+            acc * dark * (-0.5 * (ex * ex + ey * ey)).mexp()
         };
         // Every second pixel, then the best one's neighbours: the objective is smooth at a
         // pixel's scale, and this is a quarter of the work.

@@ -7,6 +7,7 @@ use super::warp::{Affine, sample};
 use super::{BROW_GESTURES, FaceLandmarks, MIRROR68, MOUTH_GESTURES, N_POINTS, YAW_CLASSES_DEG};
 use crate::error::{Error, Result};
 use crate::image::{GrayImage, Rect};
+use crate::math::Libm;
 use crate::metrics::outer_eye_distance;
 use crate::nn::Net;
 use serde::Deserialize;
@@ -689,7 +690,7 @@ fn softmax(logits: &[f32], out: &mut [f32]) {
     let m = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
     let mut sum = 0.0;
     for (o, &l) in out.iter_mut().zip(logits) {
-        *o = (l - m).exp();
+        *o = (l - m).mexp();
         sum += *o;
     }
     for o in out.iter_mut() {
@@ -941,7 +942,7 @@ impl M3 {
         }
         Ok(Level1Out {
             yaw,
-            face_prob: 1.0 / (1.0 + (-logit).exp()),
+            face_prob: 1.0 / (1.0 + (-logit).mexp()),
         })
     }
 
@@ -1455,7 +1456,7 @@ mod tests {
                 assert_ne!(a, b, "{i}");
                 // A correction, not a replacement: under a tenth of the eye-corner distance.
                 assert!(
-                    f64::from((a[0] - b[0]).hypot(a[1] - b[1])) < 0.1 * iod,
+                    f64::from((a[0] - b[0]).mhypot(a[1] - b[1])) < 0.1 * iod,
                     "{i}"
                 );
             } else {

@@ -9,6 +9,7 @@
 use super::N_POINTS;
 use super::warp::Affine;
 use crate::error::{Error, Result};
+use crate::math::Libm;
 use serde::Deserialize;
 
 /// The frame's reference points: the outer eye corners, and where the frame puts them.
@@ -258,7 +259,7 @@ fn tangent(pts: &[[f64; 2]; N_POINTS], indices: &[usize], k: usize) -> [f64; 2] 
         _ => (indices[k - 1], indices[k + 1]),
     };
     let t = [pts[b][0] - pts[a][0], pts[b][1] - pts[a][1]];
-    let len = t[0].hypot(t[1]);
+    let len = t[0].mhypot(t[1]);
     if len > 0.0 {
         [t[0] / len, t[1] / len]
     } else {

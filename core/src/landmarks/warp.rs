@@ -15,6 +15,7 @@
 use crate::error::{Error, Result};
 use crate::image::GrayImage;
 use crate::kernels::warp::{AXIS_MAX_SIDE, ClampedMap, sample_axis_aligned};
+use crate::math::Libm;
 
 /// A 2×3 affine map from patch coordinates (u, v) to image coordinates (x, y):
 /// `x = m[0]·u + m[1]·v + m[2]`, `y = m[3]·u + m[4]·v + m[5]`.
@@ -49,7 +50,7 @@ impl Affine {
         }
         let k = side / size as f64;
         let half = 0.5 * size as f64;
-        let (c, s) = (roll.cos(), roll.sin());
+        let (c, s) = (roll.mcos(), roll.msin());
         Self {
             m: [
                 k * c,
@@ -256,7 +257,7 @@ mod tests {
     /// A rotated map of scale `scale` and angle `angle` putting the `w`×`h` patch's centre at
     /// (cx, cy).
     fn rotated(angle: f64, scale: f64, w: usize, h: usize, cx: f64, cy: f64) -> [f64; 6] {
-        let (c, s) = (scale * angle.cos(), scale * angle.sin());
+        let (c, s) = (scale * angle.mcos(), scale * angle.msin());
         let (hw, hh) = (0.5 * w as f64, 0.5 * h as f64);
         [c, -s, cx - c * hw + s * hh, s, c, cy - s * hw - c * hh]
     }
@@ -278,7 +279,7 @@ mod tests {
             let (c, s) = if axis {
                 (scale, 0.0)
             } else {
-                (scale * angle.cos(), scale * angle.sin())
+                (scale * angle.mcos(), scale * angle.msin())
             };
             let m = [
                 c,

@@ -3,6 +3,7 @@
 use super::filter::SavitzkyGolay;
 use super::{Pose3, dot, norm, sub};
 use crate::body::Joint;
+use crate::math::Libm;
 
 /// A feature of one joint over time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -76,7 +77,7 @@ impl Feature {
 fn angle_deg(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     let n = norm(a) * norm(b);
     if n > 1e-12 {
-        (dot(a, b) / n).clamp(-1.0, 1.0).acos().to_degrees()
+        (dot(a, b) / n).clamp(-1.0, 1.0).macos().to_degrees()
     } else {
         0.0
     }
@@ -127,7 +128,7 @@ fn abduction(joint: Joint, p: &Pose3) -> f64 {
     if n > 1e-12 {
         (outward * dot(&lateral, &limb) / n)
             .clamp(-1.0, 1.0)
-            .asin()
+            .masin()
             .to_degrees()
     } else {
         0.0

@@ -2,6 +2,7 @@
 
 use super::Pose3;
 use crate::body::N_JOINTS;
+use crate::math::Libm;
 use nalgebra::DMatrix;
 
 /// Savitzky–Golay filter coefficients: a polynomial of `order` fitted by least squares to each
@@ -122,7 +123,7 @@ pub(crate) fn ssim(x: &[f64], y: &[f64], window: usize, range: f64, weights: [f6
         let l = (2.0 * ma * mb + c1) / (ma * ma + mb * mb + c1);
         let c = (2.0 * sa * sb + c2) / (va + vb + c2);
         let st = (cov + c3) / (sa * sb + c3);
-        let term = |v: f64, w: f64| v.clamp(0.0, 1.0).powf(w);
+        let term = |v: f64, w: f64| v.clamp(0.0, 1.0).mpowf(w);
         total += term(l, weights[0]) * term(c, weights[1]) * term(st, weights[2]);
     }
     total / count as f64

@@ -1,5 +1,6 @@
 use super::filter::{SavitzkyGolay, ssim};
 use super::*;
+use crate::math::Libm;
 
 /// A golf-like swing: the right arm swings forward and back in the sagittal plane with its elbow
 /// bending, the left knee flexes; `phase(t)` in 0..1 drives it, `bend` adds to the right elbow.
@@ -7,9 +8,9 @@ fn pose(phase: f64, bend: f64, offset: [f64; 3], size: f64) -> Pose3 {
     use Joint::*;
     let s = |v: [f64; 3]| add(&scale(&v, size), &offset);
     let mut p = [[0.0; 3]; N_JOINTS];
-    let th = (60.0 * (std::f64::consts::TAU * phase).sin()).to_radians();
-    let el = (35.0 + 30.0 * (std::f64::consts::TAU * phase).cos() + bend).to_radians();
-    let kn = (20.0 + 20.0 * (std::f64::consts::TAU * phase).sin()).to_radians();
+    let th = (60.0 * (std::f64::consts::TAU * phase).msin()).to_radians();
+    let el = (35.0 + 30.0 * (std::f64::consts::TAU * phase).mcos() + bend).to_radians();
+    let kn = (20.0 + 20.0 * (std::f64::consts::TAU * phase).msin()).to_radians();
     p[Pelvis.index()] = s([0.0, 0.0, 900.0]);
     p[Thorax.index()] = s([0.0, 0.0, 1400.0]);
     p[Head.index()] = s([0.0, 20.0, 1620.0]);
@@ -17,14 +18,14 @@ fn pose(phase: f64, bend: f64, offset: [f64; 3], size: f64) -> Pose3 {
     p[LElbow.index()] = s([200.0, 0.0, 1100.0]);
     p[LWrist.index()] = s([210.0, 60.0, 860.0]);
     p[RShoulder.index()] = s([-180.0, 0.0, 1380.0]);
-    let upper = [0.0, th.sin(), -th.cos()];
-    let fore = [0.0, (th + el).sin(), -(th + el).cos()];
+    let upper = [0.0, th.msin(), -th.mcos()];
+    let fore = [0.0, (th + el).msin(), -(th + el).mcos()];
     p[RElbow.index()] = add(&p[RShoulder.index()], &scale(&upper, 290.0 * size));
     p[RWrist.index()] = add(&p[RElbow.index()], &scale(&fore, 250.0 * size));
     p[LHip.index()] = s([100.0, 0.0, 900.0]);
     p[LKnee.index()] = add(
         &p[LHip.index()],
-        &scale(&[0.0, kn.sin(), -kn.cos()], 420.0 * size),
+        &scale(&[0.0, kn.msin(), -kn.mcos()], 420.0 * size),
     );
     p[LAnkle.index()] = add(&p[LKnee.index()], &scale(&[0.0, 0.0, -1.0], 400.0 * size));
     p[RHip.index()] = s([-100.0, 0.0, 900.0]);
@@ -80,7 +81,7 @@ fn savitzky_golay_is_exact_on_cubics_to_the_ends() {
 #[test]
 fn ssim_is_one_for_equal_series_and_falls_with_differences() {
     let x: Vec<f64> = (0..40)
-        .map(|i| (f64::from(i) * 0.3).sin() * 30.0 + 90.0)
+        .map(|i| (f64::from(i) * 0.3).msin() * 30.0 + 90.0)
         .collect();
     let w = [0.5, 0.4, 0.1];
     assert!((ssim(&x, &x, 9, 60.0, w) - 1.0).abs() < 1e-12);
@@ -95,7 +96,7 @@ fn ssim_is_one_for_equal_series_and_falls_with_differences() {
 fn a_warped_shifted_bigger_copy_scores_high_and_the_warp_is_recovered() {
     let r = swing(90, |t| t, 0.0, [0.0; 3], 1.0);
     // Slower start, faster end; a person 15 % bigger, elsewhere; 12 idle frames before.
-    let warp = |t: f64| t.powf(1.3);
+    let warp = |t: f64| t.mpowf(1.3);
     let mut t = vec![pose(0.0, 0.0, [500.0, -300.0, 0.0], 1.15); 12];
     t.extend(swing(100, warp, 0.0, [500.0, -300.0, 0.0], 1.15));
     let rep = compare(&r, &t, &weights(), &MotionConfig::default()).unwrap();
@@ -103,7 +104,7 @@ fn a_warped_shifted_bigger_copy_scores_high_and_the_warp_is_recovered() {
     // Path error: each reference frame's matched trial frames against the true correspondence.
     let truth = |i: usize| {
         let phase = i as f64 / 89.0;
-        12.0 + phase.powf(1.0 / 1.3) * 99.0
+        12.0 + phase.mpowf(1.0 / 1.3) * 99.0
     };
     let err: Vec<f64> = rep
         .path

@@ -40,6 +40,7 @@ use crate::gaze::{
 use crate::image::{Frame, FrameDesc, GrayImage, Rect};
 use crate::landmarks::warp::{Affine, sample};
 use crate::landmarks::{FaceLandmarks, N_POINTS};
+use crate::math::Libm;
 use crate::model::{FaceModel, N_LANDMARKS};
 use flow::{FlowFilter, LkConfig, Pyramid};
 use nalgebra::Vector3;
@@ -819,7 +820,7 @@ impl LostFace {
         let [cx, cy] = r.center();
         let reach = (LOST_NEAR_FACES + LOST_DRIFT_FACES * self.frames as f32) * self.size;
         let ratio = r.w.max(r.h) / self.size;
-        (cx - self.centre[0]).hypot(cy - self.centre[1]) <= reach && (0.5..=2.0).contains(&ratio)
+        (cx - self.centre[0]).mhypot(cy - self.centre[1]) <= reach && (0.5..=2.0).contains(&ratio)
     }
 }
 
@@ -883,7 +884,7 @@ const WHOLE_FRAME_WINDOW: usize = 384;
 /// The roll of `l`'s eye line (outer corners 36 and 45), radians.
 fn eye_roll(l: &FaceLandmarks) -> f32 {
     let (r, e) = (l.points[36], l.points[45]);
-    (e[1] - r[1]).atan2(e[0] - r[0])
+    (e[1] - r[1]).matan2(e[0] - r[0])
 }
 
 /// The face tracker: detector + landmark estimator + NCC tracking + flow filter + MSBP, generic
@@ -1093,7 +1094,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             })?;
         let miss = |rays: &[GazeRay; 2]| {
             let o = (rays[0].origin + rays[1].origin) / 2.0;
-            (rays[0].direction + rays[1].direction).angle(&(p - o))
+            crate::math::angle(&(rays[0].direction + rays[1].direction), &(p - o))
         };
         let rays = frame.rays[..frame.faces]
             .iter()
@@ -1240,7 +1241,7 @@ impl<D: RegionDetector, L: LandmarkEstimator> FaceTracker<D, L> {
             return Ok(());
         };
         let k = f64::from(k);
-        let (c, s) = (f64::from(turn.cos()), f64::from(turn.sin()));
+        let (c, s) = (f64::from(turn.mcos()), f64::from(turn.msin()));
         let half = side as f64 / 2.0;
         let [cx, cy] = centre.map(f64::from);
         // Window pixel → image pixel: scaled by k, turned by the roll, centred on the face.

@@ -3,6 +3,7 @@
 //! and lighter than the skin, turned in roll up to ±30°.
 
 use super::*;
+use crate::math::Libm;
 
 /// A synthetic face: where its features are, in box units of its upright tight box.
 struct Face {
@@ -93,14 +94,14 @@ struct Scene {
 
 impl Scene {
     fn to_image(&self, p: [f32; 2]) -> [f32; 2] {
-        let (c, s) = (self.roll.to_radians().cos(), self.roll.to_radians().sin());
+        let (c, s) = (self.roll.to_radians().mcos(), self.roll.to_radians().msin());
         let (u, v) = ((p[0] - 0.5) * self.side, (p[1] - 0.5) * self.side);
         let centre = [self.bx + 0.5 * self.side, self.by + 0.5 * self.side];
         [centre[0] + c * u - s * v, centre[1] + s * u + c * v]
     }
 
     fn to_box(&self, q: [f32; 2]) -> [f32; 2] {
-        let (c, s) = (self.roll.to_radians().cos(), self.roll.to_radians().sin());
+        let (c, s) = (self.roll.to_radians().mcos(), self.roll.to_radians().msin());
         let centre = [self.bx + 0.5 * self.side, self.by + 0.5 * self.side];
         let (x, y) = (q[0] - centre[0], q[1] - centre[1]);
         [
@@ -139,7 +140,7 @@ fn errors(scene: &Scene, got: &GradientPoints) -> (Vec<(usize, f32)>, f32) {
         if let Some(t) = Face::truth(i) {
             let t = scene.to_image(t);
             let g = got.points[i];
-            feats.push((i, ((g[0] - t[0]).hypot(g[1] - t[1])) / iod));
+            feats.push((i, ((g[0] - t[0]).mhypot(g[1] - t[1])) / iod));
         }
     }
     let mut contour = 0f32;
