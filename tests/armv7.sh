@@ -17,4 +17,4 @@ export CARGO_TARGET_ARMV7_UNKNOWN_LINUX_GNUEABIHF_RUNNER="qemu-arm -L /usr/arm-l
 export CC_armv7_unknown_linux_gnueabihf=arm-linux-gnueabihf-gcc
 export AR_armv7_unknown_linux_gnueabihf=arm-linux-gnueabihf-ar
 echo "== armv7 under $(qemu-arm --version | head -n 1)"
-cargo test --profile qemu --target "$T" -p monotrack-core --lib -- image:: kernels:: camera::
+cargo test --profile qemu-armv7 --target "$T" -p monotrack-core --lib -- image:: kernels:: camera::

@@ -124,19 +124,60 @@ fn cost(faces: &[monotrack_tests::synth::FaceSample]) -> (f64, f64) {
     (face_us, frame_us)
 }
 
+/// `--cost-only`: measures what judging quality costs and writes it into the metrics file's
+/// `cost`, leaving the fire rates as they are. Run it in the bench profile with
+/// `MONOTRACK_KERNELS=portable` for the figure MODEL_CARD gives (quality has no kernel of its own:
+/// the path is named so the figure sits beside the frame's on that path).
+fn write_cost(path: &std::path::Path, faces: &[monotrack_tests::synth::FaceSample]) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut metrics: Value = serde_json::from_str(&text).unwrap();
+    // The lower of three runs: the machine's other load only adds.
+    let (mut face_us, mut frame_us) = (f64::MAX, f64::MAX);
+    for _ in 0..3 {
+        let (f, fr) = cost(faces);
+        face_us = face_us.min(f);
+        frame_us = frame_us.min(fr);
+    }
+    let profile = if cfg!(debug_assertions) {
+        "test"
+    } else {
+        "bench"
+    };
+    println!("cost: {face_us:.2} µs per face, {frame_us:.2} µs per frame ({profile} profile)");
+    metrics["cost"] = json!({
+        "face_us": round(face_us, 3),
+        "frame_us": round(frame_us, 3),
+        "profile": profile,
+        "cpu": monotrack_core::kernels::cpu_name(),
+        "path": monotrack_core::kernels::kernel_path().as_str(),
+        "command": format!("MONOTRACK_KERNELS={} cargo run --profile {profile} -p monotrack-tests --example quality_eval -- --cost-only", monotrack_core::kernels::kernel_path().as_str()),
+    });
+    metrics.as_object_mut().unwrap().remove("cost_us");
+    std::fs::write(path, serde_json::to_string_pretty(&metrics).unwrap() + "\n")
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    println!("wrote {}", path.display());
+}
+
 fn main() {
     let mut out = "metrics/quality_eval.json".to_string();
     let mut clips: Option<usize> = None;
+    let mut cost_only = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--out" => out = args.next().expect("--out FILE"),
             "--clips" => clips = Some(args.next().expect("--clips N").parse().expect("N")),
+            "--cost-only" => cost_only = true,
             _ => panic!("unknown argument {a}"),
         }
     }
     let data = shared_data();
     let faces = load_validation_faces(&data, usize::MAX, 100.0).unwrap();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    if cost_only {
+        write_cost(&root.join(&out), &faces);
+        return;
+    }
     let clips = clips.unwrap_or(faces.len());
     println!("{} validation faces, {clips} clips per fault", faces.len());
     println!("| fault | frames | with a face | fires | mean score | every reason's count |");
@@ -182,9 +223,11 @@ fn main() {
         "faults": per_fault,
         "turned": {"faces_past_thresholds": n_turned, "found": found, "fired": fired,
                    "frontal_faces": n_frontal, "frontal_fired": frontal_fired},
-        "cost_us": {"face": round(face_us, 3), "frame": round(frame_us, 3)},
+        "cost": {"face_us": round(face_us, 3), "frame_us": round(frame_us, 3),
+                 "profile": if cfg!(debug_assertions) { "test" } else { "bench" },
+                 "cpu": monotrack_core::kernels::cpu_name(),
+                 "path": monotrack_core::kernels::kernel_path().as_str()},
     });
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let path = root.join(&out);
     std::fs::write(
         &path,

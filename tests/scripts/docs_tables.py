@@ -581,6 +581,20 @@ def _(data):
     return out
 
 
+@table("card_quality_cost", "core/models/MODEL_CARD.md", "metrics/quality_eval.json", "metrics/bench_phone_path.json")
+def _(data):
+    c = data.json("metrics/quality_eval.json")["cost"]
+    runs = [r for r in data.json("metrics/bench_phone_path.json") if r["path"] == c["path"]]
+    lo = min(r["tracked"]["total"]["median_us"] for r in runs)
+    hi = max(r["tracked"]["total"]["median_us"] for r in runs)
+    out = header("judging quality", "µs", f"beside a tracked frame's {num(lo, 0)}–{num(hi, 0)} µs (`monotrack bench`, same path)",
+                 "measured")
+    for key, label in [("face_us", "one face"), ("frame_us", "the frame's own reasons")]:
+        out.append(row(label, num(c[key], 1), f"{num(100 * c[key] / lo, 1)} %",
+                       f"{c['profile']} profile, {c['path']} path, {c['cpu']}"))
+    return out
+
+
 @table("card_uncertainty", "core/models/MODEL_CARD.md", "core/models/m3/uncertainty_metrics.json")
 def _(data):
     u = data.json("core/models/m3/uncertainty_metrics.json")
@@ -991,6 +1005,16 @@ def _(data):
         row("with `../shared/data` (every test runs), " + w["includes"],
             f"{mmss(w['total_s'])}, {mmss(w['building_s'])} of it building", t["machine"]),
     ]
+
+
+@table("ci_cost", "README.md", "metrics/ci_steps.json")
+def _(data):
+    c = data.json("metrics/ci_steps.json")
+    out = header("`.ci/run` step", "minutes")
+    for st in c["steps"]:
+        out.append(row(st["step"], num(st["minutes"], 1)))
+    out.append(row(f"**total** ({c['machine']})", f"**{num(c['total_minutes'], 1)}**"))
+    return out
 
 
 @table("results", "README.md", "metrics/bench_phone_path.json", "metrics/bench_peers.json", "metrics/track_eval.json",
