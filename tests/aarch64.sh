@@ -44,11 +44,11 @@ if [ -z "$host" ] || [ ! -x "$host" ]; then
   cargo build -q -p monotrack-cli
   host=target/debug/monotrack
 fi
-[ -f "$REC/record_replay.mtrec" ] || { echo "record_replay wrote no recording"; exit 1; }
-set +e
-"$host" replay "$REC/record_replay.mtrec" --out "$REC/host.jsonl" 2> "$REC/replay.log"
-rc=$?
-set -e
-cat "$REC/replay.log"
-grep -q '^monotrack: 8 of 8 frames identical' "$REC/replay.log" && [ "$rc" -eq 0 ] ||
+# The replay check the Kotlin and Swift runs use: every frame identical, at least one frame.
+# shellcheck source=../bindings/tests/replay-recordings.sh
+source bindings/tests/replay-recordings.sh
+MONOTRACK=$host RECORDINGS=$REC passed=0 failed=0
+replay_recordings record_replay
+[ "$failed" -eq 0 ] && [ "$passed" -eq 1 ] &&
+  grep -q '^monotrack: 8 of 8 frames identical' "$REC/record_replay.log" ||
   { echo "the aarch64 recording did not replay identically"; exit 1; }

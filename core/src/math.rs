@@ -44,107 +44,67 @@ pub trait Libm: Copy {
     fn mcbrt(self) -> Self;
 }
 
-impl Libm for f64 {
-    fn msin(self) -> Self {
-        libm::sin(self)
-    }
-    fn mcos(self) -> Self {
-        libm::cos(self)
-    }
-    fn msin_cos(self) -> (Self, Self) {
-        libm::sincos(self)
-    }
-    fn mtan(self) -> Self {
-        libm::tan(self)
-    }
-    fn masin(self) -> Self {
-        libm::asin(self)
-    }
-    fn macos(self) -> Self {
-        libm::acos(self)
-    }
-    fn matan(self) -> Self {
-        libm::atan(self)
-    }
-    fn matan2(self, x: Self) -> Self {
-        libm::atan2(self, x)
-    }
-    fn mexp(self) -> Self {
-        libm::exp(self)
-    }
-    fn mln(self) -> Self {
-        libm::log(self)
-    }
-    fn mlog10(self) -> Self {
-        libm::log10(self)
-    }
-    fn mlog2(self) -> Self {
-        libm::log2(self)
-    }
-    fn mpowf(self, e: Self) -> Self {
-        libm::pow(self, e)
-    }
-    fn mhypot(self, y: Self) -> Self {
-        libm::hypot(self, y)
-    }
-    fn mtanh(self) -> Self {
-        libm::tanh(self)
-    }
-    fn mcbrt(self) -> Self {
-        libm::cbrt(self)
-    }
+/// Implements [`Libm`] for one float type from the `libm` functions of that type, named in the
+/// trait's order.
+macro_rules! libm_forms {
+    ($t:ty: $sin:ident $cos:ident $sin_cos:ident $tan:ident $asin:ident $acos:ident $atan:ident
+     $atan2:ident $exp:ident $ln:ident $log10:ident $log2:ident $powf:ident $hypot:ident
+     $tanh:ident $cbrt:ident) => {
+        impl Libm for $t {
+            fn msin(self) -> Self {
+                libm::$sin(self)
+            }
+            fn mcos(self) -> Self {
+                libm::$cos(self)
+            }
+            fn msin_cos(self) -> (Self, Self) {
+                libm::$sin_cos(self)
+            }
+            fn mtan(self) -> Self {
+                libm::$tan(self)
+            }
+            fn masin(self) -> Self {
+                libm::$asin(self)
+            }
+            fn macos(self) -> Self {
+                libm::$acos(self)
+            }
+            fn matan(self) -> Self {
+                libm::$atan(self)
+            }
+            fn matan2(self, x: Self) -> Self {
+                libm::$atan2(self, x)
+            }
+            fn mexp(self) -> Self {
+                libm::$exp(self)
+            }
+            fn mln(self) -> Self {
+                libm::$ln(self)
+            }
+            fn mlog10(self) -> Self {
+                libm::$log10(self)
+            }
+            fn mlog2(self) -> Self {
+                libm::$log2(self)
+            }
+            fn mpowf(self, e: Self) -> Self {
+                libm::$powf(self, e)
+            }
+            fn mhypot(self, y: Self) -> Self {
+                libm::$hypot(self, y)
+            }
+            fn mtanh(self) -> Self {
+                libm::$tanh(self)
+            }
+            fn mcbrt(self) -> Self {
+                libm::$cbrt(self)
+            }
+        }
+    };
 }
 
-impl Libm for f32 {
-    fn msin(self) -> Self {
-        libm::sinf(self)
-    }
-    fn mcos(self) -> Self {
-        libm::cosf(self)
-    }
-    fn msin_cos(self) -> (Self, Self) {
-        libm::sincosf(self)
-    }
-    fn mtan(self) -> Self {
-        libm::tanf(self)
-    }
-    fn masin(self) -> Self {
-        libm::asinf(self)
-    }
-    fn macos(self) -> Self {
-        libm::acosf(self)
-    }
-    fn matan(self) -> Self {
-        libm::atanf(self)
-    }
-    fn matan2(self, x: Self) -> Self {
-        libm::atan2f(self, x)
-    }
-    fn mexp(self) -> Self {
-        libm::expf(self)
-    }
-    fn mln(self) -> Self {
-        libm::logf(self)
-    }
-    fn mlog10(self) -> Self {
-        libm::log10f(self)
-    }
-    fn mlog2(self) -> Self {
-        libm::log2f(self)
-    }
-    fn mpowf(self, e: Self) -> Self {
-        libm::powf(self, e)
-    }
-    fn mhypot(self, y: Self) -> Self {
-        libm::hypotf(self, y)
-    }
-    fn mtanh(self) -> Self {
-        libm::tanhf(self)
-    }
-    fn mcbrt(self) -> Self {
-        libm::cbrtf(self)
-    }
-}
+libm_forms!(f64: sin cos sincos tan asin acos atan atan2 exp log log10 log2 pow hypot tanh cbrt);
+libm_forms!(f32: sinf cosf sincosf tanf asinf acosf atanf atan2f expf logf log10f log2f powf hypotf tanhf cbrtf);
 
 /// The angle between two vectors, radians: nalgebra's `angle` takes the platform's `acos`.
 pub fn angle(a: &nalgebra::Vector3<f64>, b: &nalgebra::Vector3<f64>) -> f64 {

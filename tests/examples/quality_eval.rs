@@ -124,6 +124,25 @@ fn cost(faces: &[monotrack_tests::synth::FaceSample]) -> (f64, f64) {
     (face_us, frame_us)
 }
 
+/// The metrics file's `cost`: the two figures with the profile, CPU and kernel path they were
+/// measured with, and the command that measures them alone.
+fn cost_entry(face_us: f64, frame_us: f64) -> Value {
+    let profile = if cfg!(debug_assertions) {
+        "test"
+    } else {
+        "bench"
+    };
+    let path = monotrack_core::kernels::kernel_path().as_str();
+    json!({
+        "face_us": round(face_us, 3),
+        "frame_us": round(frame_us, 3),
+        "profile": profile,
+        "cpu": monotrack_core::kernels::cpu_name(),
+        "path": path,
+        "command": format!("MONOTRACK_KERNELS={path} cargo run --profile {profile} -p monotrack-tests --example quality_eval -- --cost-only"),
+    })
+}
+
 /// `--cost-only`: measures what judging quality costs and writes it into the metrics file's
 /// `cost`, leaving the fire rates as they are. Run it in the bench profile with
 /// `MONOTRACK_KERNELS=portable` for the figure MODEL_CARD gives (quality has no kernel of its own:
@@ -138,21 +157,12 @@ fn write_cost(path: &std::path::Path, faces: &[monotrack_tests::synth::FaceSampl
         face_us = face_us.min(f);
         frame_us = frame_us.min(fr);
     }
-    let profile = if cfg!(debug_assertions) {
-        "test"
-    } else {
-        "bench"
-    };
-    println!("cost: {face_us:.2} µs per face, {frame_us:.2} µs per frame ({profile} profile)");
-    metrics["cost"] = json!({
-        "face_us": round(face_us, 3),
-        "frame_us": round(frame_us, 3),
-        "profile": profile,
-        "cpu": monotrack_core::kernels::cpu_name(),
-        "path": monotrack_core::kernels::kernel_path().as_str(),
-        "command": format!("MONOTRACK_KERNELS={} cargo run --profile {profile} -p monotrack-tests --example quality_eval -- --cost-only", monotrack_core::kernels::kernel_path().as_str()),
-    });
-    metrics.as_object_mut().unwrap().remove("cost_us");
+    let cost = cost_entry(face_us, frame_us);
+    println!(
+        "cost: {face_us:.2} µs per face, {frame_us:.2} µs per frame ({})",
+        cost["profile"]
+    );
+    metrics["cost"] = cost;
     std::fs::write(path, serde_json::to_string_pretty(&metrics).unwrap() + "\n")
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     println!("wrote {}", path.display());
@@ -223,10 +233,7 @@ fn main() {
         "faults": per_fault,
         "turned": {"faces_past_thresholds": n_turned, "found": found, "fired": fired,
                    "frontal_faces": n_frontal, "frontal_fired": frontal_fired},
-        "cost": {"face_us": round(face_us, 3), "frame_us": round(frame_us, 3),
-                 "profile": if cfg!(debug_assertions) { "test" } else { "bench" },
-                 "cpu": monotrack_core::kernels::cpu_name(),
-                 "path": monotrack_core::kernels::kernel_path().as_str()},
+        "cost": cost_entry(face_us, frame_us),
     });
     let path = root.join(&out);
     std::fs::write(
